@@ -1,0 +1,152 @@
+"""The ``toftwin`` command line.
+
+Exit codes: 0 success, 2 invalid input (the message names the field and the allowed range),
+1 anything else.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from sim_core.errors import InvalidInputError
+
+app = typer.Typer(
+    help="toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+bench_app = typer.Typer(help="Benchmarks that print figures.", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+
+err_console = Console(stderr=True)
+console = Console()
+
+
+def _fail_invalid(exc: InvalidInputError) -> None:
+    err_console.print(f"[bold red]error:[/] {exc}")
+    raise typer.Exit(code=2)
+
+
+@app.command()
+def simulate(
+    scene: Annotated[Path, typer.Argument(help="Scene file (YAML or JSON).")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    spp: Annotated[int | None, typer.Option(help="Samples per pixel (1-65536).")] = None,
+    max_bounces: Annotated[
+        int | None, typer.Option("--max-bounces", help="Surface interactions per path (1-16).")
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed (>= 0).")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="direct or path (default: the scene's).")
+    ] = None,
+    ideal: Annotated[bool, typer.Option("--ideal", help="Ideal sensor: no noise.")] = False,
+    threads: Annotated[
+        int | None, typer.Option(help="Embree threads (default: all cores).")
+    ] = None,
+    turntable_deg: Annotated[
+        float | None, typer.Option("--turntable-deg", help="Override the turntable angle [deg].")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
+    from sim_core.pipeline import save_frame
+    from sim_core.pipeline import simulate as run_simulation
+    from sim_core.render import RenderSettings
+    from sim_core.scene import build_scene
+    from sim_core.scene_spec import load_scene_spec
+
+    try:
+        spec = load_scene_spec(scene)
+        r = spec.render
+        settings = RenderSettings(
+            integrator=_choice("--integrator", integrator or r.integrator, ("direct", "path")),
+            spp=_bounded("--spp", spp if spp is not None else r.spp, 1, 65536),
+            max_bounces=_bounded(
+                "--max-bounces", max_bounces if max_bounces is not None else r.max_bounces, 1, 16
+            ),
+            seed=_bounded("--seed", seed if seed is not None else r.seed, 0, 2**63 - 1),
+            russian_roulette_from_bounce=r.russian_roulette_from_bounce,
+            threads=None if threads is None else _bounded("--threads", threads, 1, 256),
+        )
+        built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg)
+    except InvalidInputError as exc:
+        _fail_invalid(exc)
+        return
+    # Nothing is written to --out before the scene and settings are known to be valid.
+    with _progress(quiet) as progress:
+        task = progress.add_task("rendering", total=settings.spp)
+        frame = run_simulation(
+            built, settings, progress=lambda done, total: progress.update(task, completed=done)
+        )
+    frame.ideal = True if ideal else frame.ideal
+    save_frame(out, frame, scene_name=spec.name)
+    t = frame.timings_s
+    console.print(
+        f"wrote {out}/frame.npz ({frame.image.valid.sum()} valid pixels) in {t['total']:.2f} s, "
+        f"{frame.rays_traced / max(t['render'], 1e-9) / 1e6:.2f} Mrays/s, "
+        f"{100 * frame.embree_seconds / max(t['render'], 1e-9):.0f} % in Embree"
+    )
+
+
+def _bounded(name: str, value: int, lo: int, hi: int) -> int:
+    if not lo <= value <= hi:
+        raise InvalidInputError(name, f"{value} is outside [{lo}, {hi}]")
+    return value
+
+
+def _choice(name: str, value: str, allowed: tuple[str, ...]) -> str:
+    if value not in allowed:
+        raise InvalidInputError(name, f"'{value}' is not one of {list(allowed)}")
+    return value
+
+
+def _progress(quiet: bool) -> Progress:
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} spp"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        disable=quiet or not err_console.is_terminal,
+        transient=True,
+    )
+
+
+@bench_app.command("render")
+def bench_render(
+    scenes: Annotated[
+        list[Path] | None, typer.Argument(help="Scene files (default: the bundled examples).")
+    ] = None,
+    spp: Annotated[list[int] | None, typer.Option(help="Samples per pixel to try.")] = None,
+    bounces: Annotated[list[int] | None, typer.Option(help="Bounce counts to try.")] = None,
+    threads: Annotated[int | None, typer.Option(help="Embree threads.")] = None,
+) -> None:
+    """Seconds per frame, rays per second and the share of time inside Embree."""
+    from service.bench_render import run_render_benchmark
+
+    try:
+        run_render_benchmark(
+            scenes or None, spp or [16, 64, 256], bounces or [1, 2, 3], threads, console
+        )
+    except InvalidInputError as exc:
+        _fail_invalid(exc)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    try:
+        app()
+    except InvalidInputError as exc:  # pragma: no cover - commands catch their own
+        err_console.print(f"[bold red]error:[/] {exc}")
+        sys.exit(2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""Light sources: the camera's modulated point source and collimated ambient sources.
+
+The active source follows the seed's eq. 18 (I_L = P_L / Omega_L, modulated) and the peer
+paper's eq. 1 (an optional vendor table of relative intensity against the angle from the
+source's axis). Ambient sources (sun, solar simulator, Earth and Moon albedo) are collimated:
+they add to the DC part only (seed section 2.3.1, after eq. 21).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PointLight:
+    """Isotropic or tabulated modulated point source.
+
+    Attributes
+    ----------
+    position_m : (3,) float64
+        World position.
+    axis : (3,) float64
+        Unit main direction of the source (the camera's optical axis by default).
+    power_w : float
+        Radiant power [W] (the DC part; the modulated part has the same amplitude).
+    profile_angle_rad, profile_relative : (k,) float64 or None
+        Relative radiant intensity against the angle from ``axis``; linear interpolation,
+        zero beyond the last angle. None means isotropic.
+    """
+
+    position_m: np.ndarray
+    axis: np.ndarray
+    power_w: float
+    profile_angle_rad: np.ndarray | None = None
+    profile_relative: np.ndarray | None = None
+    _scale_w_sr: float = field(init=False, repr=False, default=0.0)
+
+    def __post_init__(self) -> None:
+        if self.profile_angle_rad is None:
+            scale = self.power_w / (4.0 * np.pi)
+        else:
+            # Normalise the table so the source emits exactly power_w:
+            # P = 2*pi * integral I(theta) sin(theta) dtheta.
+            theta = np.linspace(0.0, np.pi, 4097)
+            rel = np.interp(theta, self.profile_angle_rad, self.profile_relative, right=0.0)
+            solid = 2.0 * np.pi * np.trapezoid(rel * np.sin(theta), theta)
+            scale = self.power_w / solid if solid > 0.0 else 0.0
+        object.__setattr__(self, "_scale_w_sr", float(scale))
+
+    def intensity_w_sr(self, direction_from_light: np.ndarray) -> np.ndarray:
+        """Radiant intensity [W/sr] towards unit directions ``(n, 3)`` leaving the source."""
+        if self.profile_angle_rad is None:
+            return np.full(direction_from_light.shape[0], self._scale_w_sr)
+        cos_a = np.clip(direction_from_light @ self.axis, -1.0, 1.0)  # arccos needs [-1, 1]
+        angle = np.arccos(cos_a)
+        rel = np.interp(angle, self.profile_angle_rad, self.profile_relative, right=0.0)
+        return self._scale_w_sr * rel
+
+
+@dataclass(frozen=True)
+class CollimatedLight:
+    """A collimated ambient source: the Sun, a solar simulator, Earth or Moon albedo.
+
+    Attributes
+    ----------
+    name : str
+        "sun", "solar_simulator", "earth" or "moon".
+    direction : (3,) float64
+        Unit propagation direction of the light (from the source towards the scene).
+    irradiance_w_m2 : float
+        In-band irradiance on a surface perpendicular to the beam [W/m^2].
+    footprint_centre_m : (3,) float64 or None
+        A point on the beam axis; with ``footprint_size_m`` the beam is a square (rectangular)
+        prism around that axis and points outside it get no light.
+    footprint_size_m : (float, float) or None
+        Width and height of the beam cross-section [m].
+    footprint_u, footprint_v : (3,) float64
+        Unit vectors spanning the beam cross-section (width along u, height along v).
+    """
+
+    name: str
+    direction: np.ndarray
+    irradiance_w_m2: float
+    footprint_centre_m: np.ndarray | None = None
+    footprint_size_m: tuple[float, float] | None = None
+    footprint_u: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    footprint_v: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+
+    def in_beam(self, points_m: np.ndarray) -> np.ndarray:
+        """Boolean mask of ``(n, 3)`` points inside the beam's cross-section."""
+        if self.footprint_centre_m is None or self.footprint_size_m is None:
+            return np.ones(points_m.shape[0], dtype=bool)
+        rel = points_m - self.footprint_centre_m
+        a = np.abs(rel @ self.footprint_u)
+        b = np.abs(rel @ self.footprint_v)
+        return (a <= 0.5 * self.footprint_size_m[0]) & (b <= 0.5 * self.footprint_size_m[1])
+
+
+def beam_cross_section_basis(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors perpendicular to ``direction``: u horizontal-ish, v completing it.
+
+    u is perpendicular to both the beam and world z where possible, so a square beam's edges
+    stay aligned with the floor for a beam that is not vertical.
+    """
+    d = np.asarray(direction, dtype=np.float64)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(ref, d)
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    return u, v

@@ -1,0 +1,338 @@
+"""A posed scene in the world frame, built from a validated :class:`SceneSpec`.
+
+The rig state (turntable angle, solar-simulator level) may override the spec, so the service can
+simulate exactly the pose the lab has just measured.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sim_core import geometry
+from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics, look_at
+from sim_core.constants import ONE_SUN_W_M2
+from sim_core.errors import InvalidInputError, SceneError
+from sim_core.lights import CollimatedLight, PointLight, beam_cross_section_basis
+from sim_core.materials import PRESETS, Material, make_material
+from sim_core.radiometry import (
+    earth_albedo_irradiance_w_m2,
+    moon_albedo_irradiance_w_m2,
+    solar_in_band_irradiance_w_m2,
+)
+from sim_core.scene_spec import MaterialSpec, ObjectSpec, SceneSpec
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything the renderer needs, in the world frame (metres).
+
+    Attributes
+    ----------
+    camera : Camera
+    light : PointLight
+        The camera's modulated source.
+    ambient : tuple of CollimatedLight
+    triangles_m : (n, 3, 3) float64
+    normals : (n, 3) float64
+        Unit face normals (right-hand rule of the corner order).
+    material_index : (n,) int32
+        Index into ``materials`` per triangle.
+    object_index : (n,) int32
+        Index into ``object_names`` per triangle.
+    materials : tuple of Material
+    object_names : tuple of str
+    scene_hash : str
+        SHA-256 over the spec, the mesh files' bytes and the rig state.
+    """
+
+    camera: Camera
+    light: PointLight
+    ambient: tuple[CollimatedLight, ...]
+    triangles_m: np.ndarray = field(repr=False)
+    normals: np.ndarray = field(repr=False)
+    material_index: np.ndarray = field(repr=False)
+    object_index: np.ndarray = field(repr=False)
+    materials: tuple[Material, ...]
+    object_names: tuple[str, ...]
+    scene_hash: str
+
+    @property
+    def n_triangles(self) -> int:
+        return int(self.triangles_m.shape[0])
+
+    def bounds_m(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounds of the geometry; the camera position if there is none."""
+        if self.n_triangles == 0:
+            p = self.camera.position_m
+            return p, p
+        pts = self.triangles_m.reshape(-1, 3)
+        return pts.min(axis=0), pts.max(axis=0)
+
+
+def _unit(v, field_name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(a)
+    if not np.isfinite(n) or n < 1e-12:
+        raise InvalidInputError(field_name, f"vector {a.tolist()} has zero length")
+    return a / n
+
+
+def build_camera(spec: SceneSpec) -> Camera:
+    """Camera from its preset, the spec's overrides and pose."""
+    cs = spec.camera
+    p = dict(CAMERA_PRESETS[cs.preset])
+    dist = cs.distortion
+    intr = Intrinsics(
+        width_px=cs.width_px or p["width_px"],
+        height_px=cs.height_px or p["height_px"],
+        fx_px=cs.fx_px or p["fx_px"],
+        fy_px=cs.fy_px or p["fy_px"],
+        cx_px=p["cx_px"] if cs.cx_px is None else cs.cx_px,
+        cy_px=p["cy_px"] if cs.cy_px is None else cs.cy_px,
+        distortion=(dist.k1, dist.k2, dist.p1, dist.p2, dist.k3) if dist else (0.0,) * 5,
+    )
+    if (cs.width_px or cs.height_px) and cs.cx_px is None and cs.cy_px is None:
+        # A resized sensor keeps its principal point at the image centre.
+        intr = Intrinsics(
+            intr.width_px, intr.height_px, intr.fx_px, intr.fy_px,
+            (intr.width_px - 1) / 2.0, (intr.height_px - 1) / 2.0,
+            intr.distortion,
+        )
+    if cs.modulation_frequencies_hz is not None:
+        freqs = tuple(cs.modulation_frequencies_hz)
+    elif cs.mode == "dual":
+        freqs = tuple(p["dual_frequency_hz"])
+    else:
+        freqs = tuple(p["modulation_frequencies_hz"])
+    pose = cs.pose
+    if hasattr(pose, "world_from_camera"):
+        m = np.asarray(pose.world_from_camera, dtype=np.float64)
+        r = m[:3, :3]
+        if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+            raise SceneError(
+                "camera.pose.world_from_camera",
+                "the upper-left 3x3 block must be a rotation (orthonormal, det = +1)",
+            )
+        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0]):
+            raise SceneError("camera.pose.world_from_camera", "the last row must be [0, 0, 0, 1]")
+    else:
+        m = look_at(pose.position_m, pose.look_at_m, pose.up)
+    return Camera(
+        intrinsics=intr,
+        world_from_camera=m,
+        modulation_frequencies_hz=freqs,
+        wavelength_m=cs.wavelength_m or p["wavelength_m"],
+        filter_band_m=tuple(p["filter_band_m"]),
+        aperture_diameter_m=cs.aperture_diameter_m or p["aperture_diameter_m"],
+        exposure_s=cs.exposure_s or p["exposure_s"],
+        preset=cs.preset,
+    )
+
+
+def build_light(spec: SceneSpec, camera: Camera) -> PointLight:
+    """The camera's point source, placed at the camera centre plus its offset."""
+    ill = spec.illumination
+    pos = camera.world_from_camera[:3, :3] @ np.asarray(ill.offset_m) + camera.position_m
+    axis = camera.world_from_camera[:3, 2].copy()
+    if ill.angular_profile is None:
+        return PointLight(position_m=pos, axis=axis, power_w=ill.power_w)
+    table = np.asarray(ill.angular_profile, dtype=np.float64)
+    return PointLight(
+        position_m=pos,
+        axis=axis,
+        power_w=ill.power_w,
+        profile_angle_rad=np.radians(table[:, 0]),
+        profile_relative=table[:, 1],
+    )
+
+
+def build_ambient(
+    spec: SceneSpec, camera: Camera, solar_suns: float | None = None
+) -> tuple[CollimatedLight, ...]:
+    """Collimated ambient sources with in-band irradiance for the camera's filter.
+
+    ``solar_suns`` overrides the solar simulator's level; 0 means its shutter is closed.
+    """
+    amb = spec.ambient
+    out: list[CollimatedLight] = []
+    band = camera.filter_band_m
+    if amb.solar_simulator is not None and (solar_suns is None or solar_suns > 0.0):
+        ss = amb.solar_simulator
+        suns = ss.irradiance_suns if solar_suns is None else solar_suns
+        if not 0.8 <= suns <= 1.2:
+            raise InvalidInputError(
+                "solar_suns", f"solar level {suns} sun is outside the simulator's range [0.8, 1.2]"
+            )
+        d = _unit(ss.direction, "ambient.solar_simulator.direction")
+        u, v = beam_cross_section_basis(d)
+        out.append(
+            CollimatedLight(
+                name="solar_simulator",
+                direction=d,
+                irradiance_w_m2=suns * ONE_SUN_W_M2 * ss.in_band_fraction,
+                footprint_centre_m=np.asarray(ss.beam_centre_m, dtype=np.float64),
+                footprint_size_m=tuple(ss.footprint_m),
+                footprint_u=u,
+                footprint_v=v,
+            )
+        )
+    sun_e = None
+    if amb.sun is not None:
+        sun_e = solar_in_band_irradiance_w_m2(band, amb.sun.distance_m, amb.sun.temperature_k)
+        out.append(
+            CollimatedLight("sun", _unit(amb.sun.direction, "ambient.sun.direction"), sun_e)
+        )
+    if amb.earth is not None or amb.moon is not None:
+        # Earth and Moon reflect the Sun at 1 AU unless a sun block sets another distance.
+        e_s = sun_e if sun_e is not None else solar_in_band_irradiance_w_m2(band)
+        if amb.earth is not None:
+            e = earth_albedo_irradiance_w_m2(
+                e_s, np.radians(amb.earth.sun_angle_deg), amb.earth.altitude_m, amb.earth.albedo
+            )
+            out.append(
+                CollimatedLight("earth", _unit(amb.earth.direction, "ambient.earth.direction"), e)
+            )
+        if amb.moon is not None:
+            e = moon_albedo_irradiance_w_m2(
+                e_s, np.radians(amb.moon.sun_angle_deg), amb.moon.distance_m, amb.moon.albedo
+            )
+            out.append(
+                CollimatedLight("moon", _unit(amb.moon.direction, "ambient.moon.direction"), e)
+            )
+    return tuple(out)
+
+
+def build_material(m: MaterialSpec | str, field_name: str) -> Material:
+    """Material from a preset name or a kind with parameters; errors name the field."""
+    try:
+        if isinstance(m, str):
+            kind, params = _preset(m)
+        elif m.preset is not None:
+            kind, base = _preset(m.preset)
+            params = {**base, **m.params}
+        else:
+            kind, params = m.kind, dict(m.params)
+        return make_material(kind, **params)
+    except InvalidInputError as exc:
+        raise SceneError(f"{field_name}.{exc.field}", str(exc).split(": ", 1)[-1]) from None
+    except TypeError as exc:
+        raise SceneError(field_name, f"invalid material parameters: {exc}") from None
+
+
+def _preset(name: str) -> tuple[str, dict]:
+    if name not in PRESETS:
+        raise InvalidInputError(
+            "preset", f"unknown material preset '{name}'; allowed: {sorted(PRESETS)}"
+        )
+    kind, params = PRESETS[name]
+    return kind, dict(params)
+
+
+def _object_triangles(obj: ObjectSpec, base_dir: Path, field_name: str) -> np.ndarray:
+    mesh = obj.mesh
+    if mesh.kind == "box":
+        tris = geometry.box_triangles(mesh.size_m)
+    elif mesh.kind == "rectangle":
+        tris = geometry.rectangle_triangles(mesh.size_m)
+    elif mesh.kind == "sphere":
+        tris = geometry.sphere_triangles(mesh.radius_m, mesh.subdivisions)
+    else:
+        path = Path(mesh.path)
+        if not path.is_absolute():
+            path = base_dir / path
+        tris = geometry.load_mesh_file(path, f"{field_name}.mesh.path") * mesh.scale
+    tris = geometry.validate_triangles(tris, f"{field_name}.mesh")
+    m = np.eye(4)
+    m[:3, :3] = geometry.rotation_matrix_xyz_deg(obj.pose.rotation_deg)
+    m[:3, 3] = obj.pose.position_m
+    return geometry.transform_triangles(tris, m)
+
+
+def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
+    h = hashlib.sha256(spec.model_dump_json().encode())
+    for obj in spec.objects:
+        if obj.mesh.kind == "file":
+            p = Path(obj.mesh.path)
+            p = p if p.is_absolute() else base_dir / p
+            h.update(p.read_bytes())
+    h.update(repr(sorted(rig.items())).encode())
+    return h.hexdigest()
+
+
+def build_scene(
+    spec: SceneSpec,
+    base_dir: str | Path = ".",
+    turntable_deg: float | None = None,
+    solar_suns: float | None = None,
+) -> Scene:
+    """Pose a scene: load meshes, apply object poses and the turntable, build lights.
+
+    Parameters
+    ----------
+    spec : SceneSpec
+        A validated scene.
+    base_dir : path
+        Directory that relative mesh paths are resolved against (the scene file's folder).
+    turntable_deg : float, optional
+        Overrides ``spec.turntable.angle_deg`` (the rig's measured angle) [deg].
+    solar_suns : float, optional
+        Overrides the solar simulator level [sun]; 0 closes its shutter.
+
+    Raises
+    ------
+    SceneError
+        For anything invalid, naming the field.
+    """
+    base = Path(base_dir)
+    camera = build_camera(spec)
+    light = build_light(spec, camera)
+    ambient = build_ambient(spec, camera, solar_suns)
+    materials: list[Material] = []
+    tris_all, mat_all, obj_all = [], [], []
+    angle = spec.turntable.angle_deg if spec.turntable else 0.0
+    if turntable_deg is not None:
+        if not np.isfinite(turntable_deg) or abs(turntable_deg) > 360.0:
+            raise InvalidInputError(
+                "turntable_deg", f"{turntable_deg} is outside [-360, 360] degrees"
+            )
+        angle = float(turntable_deg)
+    for i, obj in enumerate(spec.objects):
+        fname = f"objects[{i}]"
+        tris = _object_triangles(obj, base, fname)
+        if obj.on_turntable:
+            if spec.turntable is None:
+                raise SceneError(f"{fname}.on_turntable", "is true but the scene has no turntable")
+            tt = spec.turntable
+            r = geometry.axis_angle_matrix(tt.axis_direction, np.radians(angle))
+            c = np.asarray(tt.axis_point_m, dtype=np.float64)
+            m = np.eye(4)
+            m[:3, :3] = r
+            m[:3, 3] = c - r @ c
+            tris = geometry.transform_triangles(tris, m)
+        materials.append(build_material(obj.material, f"{fname}.material"))
+        tris_all.append(tris)
+        mat_all.append(np.full(tris.shape[0], i, dtype=np.int32))
+        obj_all.append(np.full(tris.shape[0], i, dtype=np.int32))
+    if tris_all:
+        tris = np.concatenate(tris_all)
+        mat_idx, obj_idx = np.concatenate(mat_all), np.concatenate(obj_all)
+    else:
+        tris = np.zeros((0, 3, 3))
+        mat_idx = obj_idx = np.zeros(0, dtype=np.int32)
+    rig = {"turntable_deg": angle, "solar_suns": solar_suns}
+    return Scene(
+        camera=camera,
+        light=light,
+        ambient=ambient,
+        triangles_m=tris,
+        normals=geometry.face_normals(tris) if len(tris) else np.zeros((0, 3)),
+        material_index=mat_idx,
+        object_index=obj_idx,
+        materials=tuple(materials),
+        object_names=tuple(o.name for o in spec.objects),
+        scene_hash=_hash_inputs(spec, base, rig),
+    )

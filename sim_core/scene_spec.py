@@ -1,0 +1,304 @@
+"""The scene file format: pydantic models, loading from YAML or JSON, friendly errors.
+
+Every field, its unit and its default is documented in ``docs/scene-format.md``; unknown
+fields are errors. Loading a file only validates it; :func:`sim_core.scene.build_scene` turns a
+spec into a posed :class:`~sim_core.scene.Scene`.
+"""
+
+from __future__ import annotations
+
+import json
+from itertools import pairwise
+from pathlib import Path
+from typing import Annotated, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from sim_core.errors import SceneError
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+PositiveLength = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# --- camera ---------------------------------------------------------------------------------
+class PoseLookAt(_Strict):
+    """Camera pose by position, look-at point and world up vector."""
+
+    position_m: Vec3
+    look_at_m: Vec3
+    up: Vec3 = (0.0, 0.0, 1.0)
+
+
+class PoseMatrix(_Strict):
+    """Camera pose as a 4x4 camera-to-world matrix (rows)."""
+
+    world_from_camera: tuple[
+        tuple[Finite, Finite, Finite, Finite],
+        tuple[Finite, Finite, Finite, Finite],
+        tuple[Finite, Finite, Finite, Finite],
+        tuple[Finite, Finite, Finite, Finite],
+    ]
+
+
+class Distortion(_Strict):
+    """OpenCV radial-tangential distortion coefficients."""
+
+    k1: Finite = 0.0
+    k2: Finite = 0.0
+    p1: Finite = 0.0
+    p2: Finite = 0.0
+    k3: Finite = 0.0
+
+
+class CameraSpec(_Strict):
+    """Camera preset, pose and overrides of the preset's values."""
+
+    preset: Literal["pmd-camboard-pico-flexx"] = "pmd-camboard-pico-flexx"
+    pose: PoseLookAt | PoseMatrix
+    mode: Literal["single", "dual"] = "single"
+    modulation_frequencies_hz: (
+        list[Annotated[float, Field(gt=1e5, le=1e9, allow_inf_nan=False)]] | None
+    ) = Field(None, min_length=1, max_length=4)
+    width_px: Annotated[int, Field(ge=1, le=4096)] | None = None
+    height_px: Annotated[int, Field(ge=1, le=4096)] | None = None
+    fx_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] | None = None
+    fy_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] | None = None
+    cx_px: Finite | None = None
+    cy_px: Finite | None = None
+    distortion: Distortion | None = None
+    exposure_s: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
+    aperture_diameter_m: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
+    wavelength_m: Annotated[float, Field(gt=1e-7, lt=1e-5, allow_inf_nan=False)] | None = None
+
+
+# --- illumination ---------------------------------------------------------------------------
+class Illumination(_Strict):
+    """The camera's own modulated light source."""
+
+    power_w: Annotated[float, Field(ge=0.0, le=1000.0, allow_inf_nan=False)] = 0.2
+    offset_m: Vec3 = (0.0, 0.0, 0.0)
+    angular_profile: list[tuple[Finite, Finite]] | None = Field(None, min_length=2)
+
+    @field_validator("angular_profile")
+    @classmethod
+    def _profile_is_a_table(cls, v):
+        if v is None:
+            return v
+        angles = [a for a, _ in v]
+        if any(a < 0.0 or a > 180.0 for a in angles):
+            raise ValueError("angles must lie in [0, 180] degrees")
+        if any(b <= a for a, b in pairwise(angles)):
+            raise ValueError("angles must be strictly increasing")
+        if any(r < 0.0 for _, r in v):
+            raise ValueError("relative intensities must be >= 0")
+        if not any(r > 0.0 for _, r in v):
+            raise ValueError("at least one relative intensity must be > 0")
+        return v
+
+
+# --- ambient --------------------------------------------------------------------------------
+class SolarSimulator(_Strict):
+    """A collimated solar-simulator beam with a square footprint (Oriel Sol3A 94123A)."""
+
+    direction: Vec3
+    irradiance_suns: Annotated[float, Field(ge=0.8, le=1.2, allow_inf_nan=False)] = 1.0
+    in_band_fraction: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.04
+    beam_centre_m: Vec3 = (0.0, 0.0, 0.0)
+    footprint_m: tuple[PositiveLength, PositiveLength] = (0.305, 0.305)
+
+
+class Sun(_Strict):
+    """Direct sunlight, in-band irradiance from the Planck integral (seed eq. 12)."""
+
+    direction: Vec3
+    distance_m: Annotated[float, Field(gt=1e9, le=1e14, allow_inf_nan=False)] = 1.495978707e11
+    temperature_k: Annotated[float, Field(gt=1000.0, le=20000.0, allow_inf_nan=False)] = 5900.0
+
+
+class EarthAlbedo(_Strict):
+    """Sunlight reflected by the Earth (seed eq. 13)."""
+
+    direction: Vec3
+    altitude_m: Annotated[float, Field(ge=1e5, le=1e9, allow_inf_nan=False)]
+    sun_angle_deg: Annotated[float, Field(ge=0.0, le=180.0, allow_inf_nan=False)]
+    albedo: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.35
+
+
+class MoonAlbedo(_Strict):
+    """Sunlight reflected by the Moon (seed eq. 14)."""
+
+    direction: Vec3
+    distance_m: Annotated[float, Field(ge=1.8e6, le=1e10, allow_inf_nan=False)]
+    sun_angle_deg: Annotated[float, Field(ge=0.0, le=180.0, allow_inf_nan=False)]
+    albedo: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.12
+
+
+class Ambient(_Strict):
+    """Ambient (unmodulated) light sources; all optional."""
+
+    solar_simulator: SolarSimulator | None = None
+    sun: Sun | None = None
+    earth: EarthAlbedo | None = None
+    moon: MoonAlbedo | None = None
+
+
+# --- objects --------------------------------------------------------------------------------
+class BoxMesh(_Strict):
+    kind: Literal["box"]
+    size_m: tuple[PositiveLength, PositiveLength, PositiveLength]
+
+
+class RectangleMesh(_Strict):
+    kind: Literal["rectangle"]
+    size_m: tuple[PositiveLength, PositiveLength]
+
+
+class SphereMesh(_Strict):
+    kind: Literal["sphere"]
+    radius_m: PositiveLength
+    subdivisions: Annotated[int, Field(ge=0, le=7)] = 4
+
+
+class FileMesh(_Strict):
+    kind: Literal["file"]
+    path: str
+    scale: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 1.0
+
+
+MeshSpec = Annotated[BoxMesh | RectangleMesh | SphereMesh | FileMesh, Field(discriminator="kind")]
+
+
+class MaterialSpec(_Strict):
+    """A material: a preset name, or a model ``kind`` with its parameters.
+
+    ``{preset: thermal-control-film}`` or ``{kind: lambertian, params: {albedo: 0.5}}``;
+    a preset may be adjusted with ``params``.
+    """
+
+    preset: str | None = None
+    kind: str | None = None
+    params: dict[str, Finite | str] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _preset_or_kind(self):
+        if (self.preset is None) == (self.kind is None):
+            raise ValueError("give exactly one of 'preset' or 'kind'")
+        return self
+
+
+class ObjectPose(_Strict):
+    """Object placement: rotation (extrinsic x, y, z, degrees) then translation."""
+
+    position_m: Vec3 = (0.0, 0.0, 0.0)
+    rotation_deg: Vec3 = (0.0, 0.0, 0.0)
+
+
+class ObjectSpec(_Strict):
+    name: Annotated[str, Field(min_length=1, max_length=100)]
+    mesh: MeshSpec
+    material: MaterialSpec | str
+    pose: ObjectPose = ObjectPose()
+    on_turntable: bool = False
+
+
+class Turntable(_Strict):
+    """Rotation stage; its angle rotates every object marked ``on_turntable``."""
+
+    axis_point_m: Vec3 = (0.0, 0.0, 0.0)
+    axis_direction: Vec3 = (0.0, 0.0, 1.0)
+    angle_deg: Annotated[float, Field(ge=-360.0, le=360.0, allow_inf_nan=False)] = 0.0
+
+    @field_validator("axis_direction")
+    @classmethod
+    def _axis_nonzero(cls, v):
+        if sum(c * c for c in v) < 1e-18:
+            raise ValueError("axis_direction has zero length")
+        return v
+
+
+class RenderSpec(_Strict):
+    """Integrator settings."""
+
+    integrator: Literal["direct", "path"] = "path"
+    spp: Annotated[int, Field(ge=1, le=65536)] = 16
+    max_bounces: Annotated[int, Field(ge=1, le=16)] = 3
+    seed: Annotated[int, Field(ge=0, le=2**63 - 1)] = 0
+    russian_roulette_from_bounce: Annotated[int, Field(ge=2, le=64)] = 3
+
+
+class SceneSpec(_Strict):
+    """A complete scene file."""
+
+    name: Annotated[str, Field(min_length=1, max_length=200)] = "scene"
+    description: str = ""
+    camera: CameraSpec
+    illumination: Illumination = Illumination()
+    ambient: Ambient = Ambient()
+    objects: list[ObjectSpec] = Field(default_factory=list, max_length=10000)
+    turntable: Turntable | None = None
+    render: RenderSpec = RenderSpec()
+
+    @model_validator(mode="after")
+    def _unique_names(self):
+        names = [o.name for o in self.objects]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"object names must be unique; repeated: {sorted(dup)}")
+        return self
+
+
+def _format_loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "scene"
+
+
+def scene_error_from_validation(exc: ValidationError) -> SceneError:
+    """One :class:`SceneError` naming every invalid field of a pydantic validation error."""
+    parts = []
+    first = None
+    for err in exc.errors():
+        # Drop the union-member tags pydantic inserts (e.g. 'PoseLookAt', 'box') from the path.
+        loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p[:1].isupper()))
+        field = _format_loc(loc)
+        first = first or field
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown field (see docs/scene-format.md for the allowed fields)"
+        elif "input" in err and err["type"] not in ("missing",):
+            msg = f"{msg} (got {err['input']!r})"
+        parts.append(f"{field}: {msg}")
+    return SceneError(first or "scene", "; ".join(parts[:8]))
+
+
+def parse_scene_spec(data: dict) -> SceneSpec:
+    """Validate a scene given as a dict; raises :class:`SceneError`."""
+    if not isinstance(data, dict):
+        raise SceneError("scene", f"a scene must be a mapping, got {type(data).__name__}")
+    try:
+        return SceneSpec.model_validate(data)
+    except ValidationError as exc:
+        raise scene_error_from_validation(exc) from None
+
+
+def load_scene_spec(path: str | Path) -> SceneSpec:
+    """Read and validate a YAML (``.yaml``/``.yml``) or JSON scene file."""
+    p = Path(path)
+    if not p.is_file():
+        raise SceneError("scene", f"scene file '{p}' does not exist")
+    text = p.read_text(encoding="utf-8")
+    try:
+        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+        raise SceneError("scene", f"scene file '{p}' is not valid YAML/JSON: {exc}") from None
+    return parse_scene_spec(data)
