@@ -79,11 +79,15 @@ def simulate(
         _fail_invalid(exc)
         return
     # Nothing is written to --out before the scene and settings are known to be valid.
-    with _progress(quiet) as progress:
-        task = progress.add_task("rendering", total=settings.spp)
-        frame = run_simulation(
-            built, settings, progress=lambda done, total: progress.update(task, completed=done)
-        )
+    try:
+        with _progress(quiet) as progress:
+            task = progress.add_task("rendering", total=settings.spp)
+            frame = run_simulation(
+                built, settings, progress=lambda done, total: progress.update(task, completed=done)
+            )
+    except InvalidInputError as exc:
+        _fail_invalid(exc)
+        return
     frame.ideal = True if ideal else frame.ideal
     save_frame(out, frame, scene_name=spec.name)
     t = frame.timings_s
@@ -117,6 +121,29 @@ def _progress(quiet: bool) -> Progress:
         disable=quiet or not err_console.is_terminal,
         transient=True,
     )
+
+
+@app.command()
+def preview(
+    frame_dir: Annotated[Path, typer.Argument(help="A directory holding frame.npz.")],
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write.")],
+    scale: Annotated[int, typer.Option(help="Pixel magnification (1-8).")] = 2,
+) -> None:
+    """Grey and depth side by side (depth colour-coded near -> far) as one PNG."""
+    from sim_core.frame_io import read_frame
+    from sim_core.preview import side_by_side
+
+    try:
+        arrays, _ = read_frame(frame_dir)
+        image = side_by_side(arrays, _bounded("--scale", scale, 1, 8))
+    except FileNotFoundError as exc:
+        err_console.print(f"[bold red]error:[/] {exc}")
+        raise typer.Exit(code=2) from None
+    except InvalidInputError as exc:
+        _fail_invalid(exc)
+        return
+    image.save(out)
+    console.print(f"wrote {out}")
 
 
 @bench_app.command("render")

@@ -18,6 +18,7 @@ from sim_core import frame_io
 from sim_core.camera import pixel_centre_grid, pixel_to_camera_direction
 from sim_core.render import LightField, RenderSettings, render
 from sim_core.scene import Scene
+from sim_core.scene_checks import assert_camera_outside_closed_meshes
 from sim_core.tof import ToFImage, reconstruct
 from sim_core.tracing import RayTracer
 
@@ -59,7 +60,15 @@ def simulate(
 ) -> SimulatedFrame:
     """Render a scene and reconstruct the ideal ToF image."""
     t0 = time.perf_counter()
-    result = render(scene, settings, tracer=tracer, progress=progress)
+    own_tracer = tracer is None
+    if tracer is None:
+        tracer = RayTracer(scene.triangles_m, scene.camera.position_m, threads=settings.threads)
+    try:
+        assert_camera_outside_closed_meshes(scene, tracer)
+        result = render(scene, settings, tracer=tracer, progress=progress)
+    finally:
+        if own_tracer:
+            tracer.close()
     lf = result.light_field
     timings = {"render": result.seconds, **{f"render.{k}": v for k, v in result.timings_s.items()}}
     t1 = time.perf_counter()

@@ -171,6 +171,7 @@ class FileMesh(_Strict):
     scale: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 1.0
 
 
+_MESH_KINDS = ("box", "rectangle", "sphere", "file")
 MeshSpec = Annotated[BoxMesh | RectangleMesh | SphereMesh | FileMesh, Field(discriminator="kind")]
 
 
@@ -268,17 +269,26 @@ def scene_error_from_validation(exc: ValidationError) -> SceneError:
     parts = []
     first = None
     for err in exc.errors():
-        # Drop the union-member tags pydantic inserts (e.g. 'PoseLookAt', 'box') from the path.
-        loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p[:1].isupper()))
-        field = _format_loc(loc)
+        # Drop the union-member tags pydantic inserts (e.g. 'PoseLookAt', or the mesh kind
+        # 'box' of the discriminated union) from the path.
+        loc = []
+        for part in err["loc"]:
+            if isinstance(part, str) and (
+                part[:1].isupper() or (loc and loc[-1] == "mesh" and part in _MESH_KINDS)
+            ):
+                continue
+            loc.append(part)
+        field = _format_loc(tuple(loc))
         first = first or field
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown field (see docs/scene-format.md for the allowed fields)"
         elif "input" in err and err["type"] not in ("missing",):
             msg = f"{msg} (got {err['input']!r})"
-        parts.append(f"{field}: {msg}")
-    return SceneError(first or "scene", "; ".join(parts[:8]))
+        parts.append((field, msg))
+    # The first field leads the message (SceneError prefixes it); the others follow by name.
+    text = "; ".join([parts[0][1]] + [f"{f}: {m}" for f, m in parts[1:8]])
+    return SceneError(first or "scene", text)
 
 
 def parse_scene_spec(data: dict) -> SceneSpec:
