@@ -14,11 +14,16 @@ Contract
   factor. Zero wherever ``wi`` or ``wo`` lies at or below the horizon (z <= 0). Never negative,
   never NaN or inf, for any unit input (grazing, exactly tangent, coincident directions).
 - ``pdf_local(wi, wo) -> (n,) float64``: the solid-angle density [1/sr] with which
-  ``sample_local`` returns ``wi`` given ``wo``. Finite and >= 0.
+  ``sample_local`` returns ``wi`` given ``wo``. Finite and >= 0; zero wherever ``wi`` or ``wo``
+  lies at or below the horizon. Probability mass a sampler sends below the horizon (e.g. a
+  specular lobe at grazing view) is returned as invalid samples, so ``pdf_local`` integrates
+  over the hemisphere to the probability of a valid sample (at most 1). It is positive wherever
+  ``eval_local`` is (up to float64 underflow), so the sampling estimator misses no energy.
 - ``sample_local(wo, u) -> BSDFSample``: ``u`` is ``(n, 3) float64`` of uniform numbers in
   [0, 1) (the third one selects a lobe where there are several). Returns the sampled ``wi``,
   its ``pdf`` and ``weight = f(wi, wo) * cos_theta_i / pdf`` (0 where the sample is invalid,
-  e.g. below the horizon or pdf == 0). ``weight`` is finite and >= 0.
+  e.g. below the horizon or pdf == 0). ``weight`` is finite and >= 0, and
+  ``pdf == pdf_local(wi, wo)`` exactly.
 - ``albedo_bound``: an upper bound of the directional albedo
   ``a(wo) = integral f(wi, wo) cos_theta_i dwi`` over all ``wo``; at most 1 for every physical
   material. Tests check ``a(wo) <= 1`` numerically.

@@ -1,0 +1,46 @@
+"""Reflectance models (BRDFs) of the simulator.
+
+The contract every model fulfils is stated in :mod:`sim_core.materials.base`; the shared
+formulas live in :mod:`sim_core.materials.microfacet`.
+
+Models
+------
+- :class:`SeedMicrofacet` (``"seed-microfacet"``): Torrance–Sparrow + Lambert, seed paper
+  eqs. (9)-(10).
+- :class:`CookTorrance` (``"cook-torrance"``): Cook–Torrance with dielectric Fresnel, NLOS
+  relay-wall paper eqs. (8)-(12).
+- :class:`Lambertian` (``"lambertian"``).
+- :class:`Hapke` (``"hapke"``): regolith reflectance, SLIM paper eq. (11).
+
+Build them directly, with ``make_material(kind, **params)``, or by preset name with
+``material_preset(name)``; ``PRESETS`` lists the presets as ``name -> (kind, params)``.
+"""
+
+from sim_core.materials.base import (
+    BSDFSample,
+    Material,
+    frame_from_normal,
+    to_local,
+    to_world,
+)
+from sim_core.materials.cook_torrance import CookTorrance
+from sim_core.materials.hapke import Hapke
+from sim_core.materials.lambertian import Lambertian
+from sim_core.materials.presets import MATERIAL_KINDS, PRESETS, make_material, material_preset
+from sim_core.materials.seed_microfacet import SeedMicrofacet
+
+__all__ = [
+    "MATERIAL_KINDS",
+    "PRESETS",
+    "BSDFSample",
+    "CookTorrance",
+    "Hapke",
+    "Lambertian",
+    "Material",
+    "SeedMicrofacet",
+    "frame_from_normal",
+    "make_material",
+    "material_preset",
+    "to_local",
+    "to_world",
+]
