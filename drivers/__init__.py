@@ -1,1 +1,60 @@
-"""drivers package."""
+"""Device drivers of the rig, each a small Protocol, a pyserial implementation and a simulator.
+
+- Turntable: a rotation stage on a Newport SMC100CC controller, RS-232
+  (:class:`TurntableProtocol`, :class:`Turntable`).
+- Solar simulator: an Oriel arc-lamp supply (69907 family) and a 68945 exposure controller
+  (shutter), two RS-232 ports (:class:`SolarSimulatorProtocol`, :class:`SolarSimulator`).
+- The ToF camera (USB) comes later.
+
+The byte-level simulators live in :mod:`drivers.sim`; ``python -m drivers.sim.pty_server KIND``
+serves one on a pseudo-terminal. Protocol details and sources: ``docs/devices.md``.
+"""
+
+from drivers.errors import (
+    CalibrationError,
+    DeviceDisconnectedError,
+    DeviceError,
+    DeviceInputError,
+    DeviceTimeoutError,
+    GarbledReplyError,
+    InterlockError,
+    LampFaultError,
+    LimitError,
+    ProtocolError,
+    SolarSimulatorError,
+    TurntableError,
+)
+from drivers.solar_simulator import (
+    SUNS_RANGE,
+    SolarSimulator,
+    SolarSimulatorProtocol,
+    SolarStatus,
+    SunsCalibration,
+)
+from drivers.transport import SerialSettings, SerialTransport
+from drivers.turntable import ControllerStatus, Turntable, TurntableProtocol
+
+__all__ = [
+    "SUNS_RANGE",
+    "CalibrationError",
+    "ControllerStatus",
+    "DeviceDisconnectedError",
+    "DeviceError",
+    "DeviceInputError",
+    "DeviceTimeoutError",
+    "GarbledReplyError",
+    "InterlockError",
+    "LampFaultError",
+    "LimitError",
+    "ProtocolError",
+    "SerialSettings",
+    "SerialTransport",
+    "SolarSimulator",
+    "SolarSimulatorError",
+    "SolarSimulatorProtocol",
+    "SolarStatus",
+    "SunsCalibration",
+    "Turntable",
+    "TurntableError",
+    "TurntableProtocol",
+]

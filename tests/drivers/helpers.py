@@ -1,0 +1,90 @@
+"""Shared helpers of the driver tests: fast port settings and a scripted peer on a real pty.
+
+:class:`ScriptedPeer` is the far end of an ``os.openpty()`` pair: it records the exact bytes a
+driver writes and answers with scripted bytes (taken from the manuals' examples), for the
+message-exchange tests. No code of ours is mocked: the driver under test does real pty I/O.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import select
+import threading
+import time
+import tty
+
+from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS
+from drivers.transport import SerialSettings
+from drivers.turntable import SMC100_SETTINGS
+
+#: Fast port settings for tests against simulators: short timeouts, quick reconnects.
+FAST_SMC100 = dataclasses.replace(
+    SMC100_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0
+)
+FAST_LAMP = dataclasses.replace(LAMP_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0)
+FAST_SHUTTER = dataclasses.replace(
+    SHUTTER_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0
+)
+
+
+class ScriptedPeer:
+    """The device end of a real pty pair, answering a fixed script.
+
+    ``script`` is a list of ``(expected_bytes, reply_bytes_or_None)``. A background thread reads
+    exactly ``len(expected)`` bytes for each step, records them in :attr:`received`, then writes
+    the reply. :meth:`check` asserts that everything received equals what was expected.
+    """
+
+    def __init__(self, script: list[tuple[bytes, bytes | None]], step_timeout_s: float = 3.0):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.path = os.ttyname(self.slave)
+        self.script = script
+        self.received: list[bytes] = []
+        self.step_timeout_s = step_timeout_s
+        self.error: str | None = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _read_exactly(self, n: int) -> bytes:
+        data = bytearray()
+        deadline = time.monotonic() + self.step_timeout_s
+        while len(data) < n:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            ready, _, _ = select.select([self.master], [], [], remaining)
+            if ready:
+                data.extend(os.read(self.master, n - len(data)))
+        return bytes(data)
+
+    def _run(self) -> None:
+        try:
+            for expected, reply in self.script:
+                got = self._read_exactly(len(expected))
+                self.received.append(got)
+                if got != expected:
+                    self.error = f"expected {expected!r}, got {got!r}"
+                    return
+                if reply is not None:
+                    os.write(self.master, reply)
+        except OSError as exc:  # the test closed the pty before the script ended
+            self.error = f"pty closed during the script: {exc}"
+
+    def check(self) -> None:
+        """Wait for the script to finish and assert every exchange matched."""
+        self._thread.join(timeout=self.step_timeout_s)
+        assert self.error is None, self.error
+        assert self.received == [expected for expected, _ in self.script]
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+def settings_for(kind: str) -> SerialSettings:
+    """The fast test settings of a device kind."""
+    return {"smc100": FAST_SMC100, "lamp": FAST_LAMP, "shutter": FAST_SHUTTER}[kind]
