@@ -45,7 +45,17 @@ def simulate(
     integrator: Annotated[
         str | None, typer.Option(help="direct or path (default: the scene's).")
     ] = None,
-    ideal: Annotated[bool, typer.Option("--ideal", help="Ideal sensor: no noise.")] = False,
+    ideal: Annotated[
+        bool, typer.Option("--ideal", help="Ideal sensor: no noise, SBI or ADC.")
+    ] = False,
+    effects: Annotated[
+        str, typer.Option(help="auto: simulate only what the scene calls for; all: everything.")
+    ] = "auto",
+    explain: Annotated[bool, typer.Option("--explain", help="Print the effect plan.")] = False,
+    effect_tolerance_mm: Annotated[
+        float | None,
+        typer.Option("--effect-tolerance-mm", help="Range change below which an effect is off."),
+    ] = None,
     threads: Annotated[
         int | None, typer.Option(help="Embree threads (default: all cores).")
     ] = None,
@@ -74,6 +84,11 @@ def simulate(
             russian_roulette_from_bounce=r.russian_roulette_from_bounce,
             threads=None if threads is None else _bounded("--threads", threads, 1, 256),
         )
+        _choice("--effects", effects, ("auto", "all"))
+        if effect_tolerance_mm is not None and not 0.0 < effect_tolerance_mm <= 1e4:
+            raise InvalidInputError(
+                "--effect-tolerance-mm", f"{effect_tolerance_mm} is outside (0, 10000] mm"
+            )
         built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg)
     except InvalidInputError as exc:
         _fail_invalid(exc)
@@ -83,12 +98,15 @@ def simulate(
         with _progress(quiet) as progress:
             task = progress.add_task("rendering", total=settings.spp)
             frame = run_simulation(
-                built, settings, progress=lambda done, total: progress.update(task, completed=done)
+                built, settings, effects=effects, ideal=ideal,
+                tolerance_mm=effect_tolerance_mm,
+                progress=lambda done, total: progress.update(task, completed=done),
             )
     except InvalidInputError as exc:
         _fail_invalid(exc)
         return
-    frame.ideal = True if ideal else frame.ideal
+    if explain:
+        console.print(frame.plan.explain(), markup=False, highlight=False)
     save_frame(out, frame, scene_name=spec.name)
     t = frame.timings_s
     console.print(
@@ -164,6 +182,17 @@ def bench_render(
         )
     except InvalidInputError as exc:
         _fail_invalid(exc)
+
+
+@bench_app.command("ground-test")
+def bench_ground_test(
+    spp: Annotated[int, typer.Option(help="Samples per pixel.")] = 64,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """Seed Fig. 14: grey and depth statistics with and without solar simulator and SBI."""
+    from service.bench_ground import run_ground_test
+
+    run_ground_test(_bounded("--spp", spp, 1, 65536), seed, console)
 
 
 def main() -> None:

@@ -1,9 +1,17 @@
-"""Optics between the scene and the sensor: radiance to irradiance on a pixel (seed eq. 32).
+"""Optics between the scene and the sensor: the MTF chain (seed eq. 33) and radiance to
+irradiance on a pixel (seed eq. 32).
 
-The MTF chain of seed eq. 33 joins this module with the imaging-chain work.
+The MTFs act on the linear light quantities (the DC images and each complex phasor image)
+before the sensor, so that at an edge the phasors of near and far surfaces mix and produce
+flying pixels, as on a real camera. Each component is a transfer function on the frequency grid
+of the padded image, in cycles per pixel; the image is padded by reflection before the FFT so
+nothing wraps around the border.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,3 +47,124 @@ def pixel_irradiance_w_m2(
         raise ValueError(f"f_number = {f_number} must be > 0")
     c = cos_off_axis(camera)
     return radiance_w_m2_sr * (transmittance * np.pi / 4.0 / f_number**2) * c**4
+
+
+@dataclass(frozen=True)
+class Diffraction:
+    """Diffraction-limited circular aperture: OTF 2/pi (acos x - x sqrt(1 - x^2)), x = nu/nu_c.
+
+    nu_c = 1 / (lambda F#) cycles per metre on the sensor, i.e. pitch / (lambda F#) per pixel.
+    """
+
+    wavelength_m: float
+    f_number: float
+    pixel_pitch_m: float
+
+    name = "diffraction"
+
+    def transfer(self, fx: np.ndarray, fy: np.ndarray) -> np.ndarray:
+        cutoff = self.pixel_pitch_m / (self.wavelength_m * self.f_number)
+        x = np.minimum(np.hypot(fx, fy) / cutoff, 1.0)  # beyond the cutoff the OTF is 0
+        return (2.0 / np.pi) * (np.arccos(x) - x * np.sqrt(1.0 - x * x))
+
+
+@dataclass(frozen=True)
+class PixelAperture:
+    """Square light-sensitive area of side pitch * sqrt(fill factor): separable sinc."""
+
+    fill_factor: float
+
+    name = "pixel_aperture"
+
+    def transfer(self, fx: np.ndarray, fy: np.ndarray) -> np.ndarray:
+        w = math.sqrt(self.fill_factor)
+        return np.sinc(fx * w) * np.sinc(fy * w)
+
+
+@dataclass(frozen=True)
+class Electronics:
+    """First-order low-pass along the readout direction (image rows, x): 1 / sqrt(1 + (f/fc)^2).
+
+    ``cutoff_cycles_per_px`` is the -3 dB frequency along x.
+    """
+
+    cutoff_cycles_per_px: float
+
+    name = "electronics"
+
+    def transfer(self, fx: np.ndarray, fy: np.ndarray) -> np.ndarray:
+        return 1.0 / np.sqrt(1.0 + (fx / self.cutoff_cycles_per_px) ** 2) + 0.0 * fy
+
+
+@dataclass(frozen=True)
+class LinearMotion:
+    """Uniform linear motion of ``length_px`` during the exposure at ``direction_deg`` (from +x
+    towards +y): a box blur along that direction, transfer sinc(nu_along * length)."""
+
+    length_px: float
+    direction_deg: float = 0.0
+
+    name = "motion"
+
+    def transfer(self, fx: np.ndarray, fy: np.ndarray) -> np.ndarray:
+        a = math.radians(self.direction_deg)
+        return np.sinc((fx * math.cos(a) + fy * math.sin(a)) * self.length_px)
+
+
+@dataclass(frozen=True)
+class Vibration:
+    """Random platform vibration, Gaussian of ``sigma_px``: exp(-2 pi^2 sigma^2 nu^2)."""
+
+    sigma_px: float
+
+    name = "vibration"
+
+    def transfer(self, fx: np.ndarray, fy: np.ndarray) -> np.ndarray:
+        return np.exp(-2.0 * np.pi**2 * self.sigma_px**2 * (fx * fx + fy * fy))
+
+
+MTFComponent = Diffraction | PixelAperture | Electronics | LinearMotion | Vibration
+
+
+def max_deviation_from_identity(component: MTFComponent) -> float:
+    """Largest |1 - H| up to the Nyquist frequency (0.5 cycles/pixel) on both axes."""
+    f = np.linspace(-0.5, 0.5, 65)
+    fx, fy = np.meshgrid(f, f)
+    return float(np.max(np.abs(1.0 - component.transfer(fx, fy))))
+
+
+def padding_px(components: list[MTFComponent]) -> int:
+    """Border wide enough for the point-spread functions of the components [px]."""
+    pad = 8
+    for c in components:
+        if isinstance(c, LinearMotion):
+            pad = max(pad, math.ceil(abs(c.length_px)) + 4)
+        elif isinstance(c, Vibration):
+            pad = max(pad, math.ceil(4.0 * c.sigma_px) + 4)
+        elif isinstance(c, Electronics):
+            pad = max(pad, math.ceil(3.0 / max(c.cutoff_cycles_per_px, 1e-3)))
+    return min(pad, 256)
+
+
+def apply_mtf(image: np.ndarray, components: list[MTFComponent]) -> np.ndarray:
+    """Filter a (..., H, W) real or complex image with the product of the components (eq. 33).
+
+    The image is padded by reflection (so no light wraps around and the border is not darkened
+    by zeros), transformed, multiplied by the transfer functions, transformed back and cropped.
+    With no components the image is returned unchanged.
+    """
+    if not components:
+        return image
+    pad = padding_px(components)
+    h, w = image.shape[-2:]
+    widths = [(0, 0)] * (image.ndim - 2) + [(pad, pad), (pad, pad)]
+    padded = np.pad(image, widths, mode="reflect" if min(h, w) > pad else "edge")
+    hp, wp = padded.shape[-2:]
+    fy = np.fft.fftfreq(hp)[:, None]
+    fx = np.fft.fftfreq(wp)[None, :]
+    transfer = np.ones((hp, wp))
+    for c in components:
+        transfer = transfer * c.transfer(fx, fy)
+    out = np.fft.ifft2(np.fft.fft2(padded) * transfer)
+    out = out[..., pad : pad + h, pad : pad + w]
+    return out if np.iscomplexobj(image) else out.real

@@ -1,11 +1,15 @@
-"""From a posed scene to a frame: render, (later: optics, sensor), reconstruct, save.
+"""From a posed scene to a frame: plan, render, optics, sensor, reconstruct, save.
 
-Until the imaging chain lands, frames come from an ideal sensor: depth from the phase of the
-rendered phasor, grey from its magnitude, no noise.
+    plan_effects -> render (LightField) -> MTF chain (seed eq. 33) -> PMD pixel (RawFrame)
+    -> reconstruction (ToFImage, seed eqs. 4-7)
+
+With ``ideal=True`` the sensor is ideal: no noise, SBI or ADC; depth comes from the phase of
+the (filtered) rendered phasor and grey from its magnitude.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from importlib import metadata
@@ -15,12 +19,18 @@ from typing import Any
 import numpy as np
 
 from sim_core import frame_io
-from sim_core.camera import pixel_centre_grid, pixel_to_camera_direction
+from sim_core.optics import apply_mtf, cos_off_axis
+from sim_core.plan import EffectPlan, plan_effects
+from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.render import LightField, RenderSettings, render
 from sim_core.scene import Scene
 from sim_core.scene_checks import assert_camera_outside_closed_meshes
+from sim_core.sensor import expose, mean_electrons
 from sim_core.tof import ToFImage, reconstruct
 from sim_core.tracing import RayTracer
+
+#: stream of the sensor-noise generator, so noise never shares numbers with the renderer
+NOISE_STREAM = 0x5E45
 
 
 def package_version() -> str:
@@ -41,55 +51,92 @@ class SimulatedFrame:
     timings_s: dict[str, float]
     rays_traced: int
     embree_seconds: float
+    plan: EffectPlan
+    raw: RawFrame | None = None
     ideal: bool = True
+    grey_full_scale: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 
 def z_over_range(scene: Scene) -> np.ndarray:
     """Cosine between each pixel-centre ray and the optical axis, (H, W)."""
-    intr = scene.camera.intrinsics
-    u, v = pixel_centre_grid(intr)
-    return pixel_to_camera_direction(intr, u, v)[:, 2].reshape(intr.shape)
+    return cos_off_axis(scene.camera)
 
 
 def simulate(
     scene: Scene,
     settings: RenderSettings,
+    effects: str = "auto",
+    ideal: bool = False,
+    tolerance_mm: float | None = None,
     tracer: RayTracer | None = None,
     progress=None,
 ) -> SimulatedFrame:
-    """Render a scene and reconstruct the ideal ToF image."""
+    """Simulate one frame of ``scene``; see the module docstring for the stages."""
     t0 = time.perf_counter()
+    timings: dict[str, float] = {}
     own_tracer = tracer is None
     if tracer is None:
         tracer = RayTracer(scene.triangles_m, scene.camera.position_m, threads=settings.threads)
     try:
         assert_camera_outside_closed_meshes(scene, tracer)
-        result = render(scene, settings, tracer=tracer, progress=progress)
+        t = time.perf_counter()
+        plan = plan_effects(scene, settings, effects, ideal, tolerance_mm, tracer)
+        timings["plan"] = time.perf_counter() - t
+        multipath = plan.enabled("multipath")
+        run = dataclasses.replace(
+            settings,
+            integrator=settings.integrator if multipath else "direct",
+            ambient=plan.enabled("ambient"),
+        )
+        result = render(scene, run, tracer=tracer, progress=progress)
     finally:
         if own_tracer:
             tracer.close()
     lf = result.light_field
-    timings = {"render": result.seconds, **{f"render.{k}": v for k, v in result.timings_s.items()}}
-    t1 = time.perf_counter()
-    amplitude = np.abs(lf.phasor[0])
-    image = reconstruct(
-        phasor=lf.phasor,
-        intensity=lf.dc_active + lf.dc_ambient,
-        frequencies_hz=lf.frequencies_hz,
-        z_over_range=z_over_range(scene),
-        valid=amplitude > 0.0,
-    )
-    timings["reconstruct"] = time.perf_counter() - t1
+    timings["render"] = result.seconds
+    timings.update({f"render.{k}": v for k, v in result.timings_s.items()})
+
+    t = time.perf_counter()
+    comps = plan.mtf_components(scene)
+    # Ringing of the MTF can leave tiny negative radiance next to a bright edge: clamp DC.
+    dc_active = np.maximum(apply_mtf(lf.dc_active, comps), 0.0)
+    dc_ambient = np.maximum(apply_mtf(lf.dc_ambient, comps), 0.0)
+    phasor = apply_mtf(lf.phasor, comps)
+    timings["optics"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    raw = None
+    grey_full_scale = None
+    if ideal:
+        image = reconstruct(
+            phasor=phasor, intensity=dc_active + dc_ambient, frequencies_hz=lf.frequencies_hz,
+            z_over_range=z_over_range(scene), valid=np.abs(phasor[0]) > 0.0,
+        )
+    else:
+        sensor = dataclasses.replace(scene.sensor, sbi_enabled=plan.enabled("sbi"))
+        e = mean_electrons(dc_active, dc_ambient, phasor, scene.camera, sensor)
+        rng = (np.random.default_rng([settings.seed, NOISE_STREAM])
+               if plan.enabled("noise") else None)
+        raw = expose(e, scene.camera, sensor, rng, meta={"seed": settings.seed})
+        timings["sensor"] = time.perf_counter() - t
+        t = time.perf_counter()
+        image = reconstruct_raw(raw, z_over_range(scene))
+        grey_full_scale = float(2 ** (sensor.adc_bits - 1))
+    timings["reconstruct"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return SimulatedFrame(
         image=image,
         light_field=lf,
-        settings=settings,
+        settings=run,
         scene_hash=scene.scene_hash,
         timings_s=timings,
         rays_traced=result.rays_traced,
         embree_seconds=result.embree_seconds,
+        plan=plan,
+        raw=raw,
+        ideal=ideal,
+        grey_full_scale=grey_full_scale,
     )
 
 
@@ -97,8 +144,10 @@ def simulate(
 ARRAY_UNITS = {
     "range_m": "m, radial; NaN where not valid",
     "depth_z_m": "m, along the optical axis; NaN where not valid",
-    "amplitude": "W m^-2 sr^-1 (ideal sensor: |phasor| of the first frequency)",
-    "intensity": "W m^-2 sr^-1 (ideal sensor: dc_active + dc_ambient)",
+    "amplitude": "DN, seed eq. 5 (ideal sensor: W m^-2 sr^-1, |phasor| of the first frequency)",
+    "intensity": "DN, mean tap sum, seed eq. 6 (ideal sensor: W m^-2 sr^-1, DC)",
+    "grey_8bit": "uint8 grey image in the camera tools' convention (see grey_full_scale)",
+    "depth_mm": "uint16 radial range in millimetres, 0 where not valid",
     "phase_rad": "rad in [0, 2 pi), first frequency",
     "phase_all_rad": "rad in [0, 2 pi), (n_f, H, W)",
     "valid": "bool",
@@ -116,7 +165,10 @@ ARRAY_UNITS = {
 def frame_arrays(frame: SimulatedFrame) -> dict[str, np.ndarray]:
     """The arrays of ``frame.npz``."""
     im, lf = frame.image, frame.light_field
+    grey, _ = frame_io.grey_preview_8bit(im.amplitude, im.valid, frame.grey_full_scale)
     return {
+        "grey_8bit": grey,
+        "depth_mm": frame_io.depth_preview_mm(im.range_m),
         "range_m": im.range_m,
         "depth_z_m": im.depth_z_m,
         "amplitude": im.amplitude,
@@ -139,10 +191,15 @@ def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "")
     """Write ``frame.npz``, ``frame.json``, ``depth.png`` and ``grey.png`` into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    frame_io.write_npz(out / "frame.npz", frame_arrays(frame))
-    grey, full_scale = frame_io.grey_preview_8bit(frame.image.amplitude, frame.image.valid)
-    frame_io.write_png(out / "depth.png", frame_io.depth_preview_mm(frame.image.range_m))
-    frame_io.write_png(out / "grey.png", grey)
+    arrays = frame_arrays(frame)
+    frame_io.write_npz(out / "frame.npz", arrays)
+    if frame.raw is not None:
+        frame.raw.save(out / "raw.npz")
+    _, full_scale = frame_io.grey_preview_8bit(
+        frame.image.amplitude, frame.image.valid, frame.grey_full_scale
+    )
+    frame_io.write_png(out / "depth.png", arrays["depth_mm"])
+    frame_io.write_png(out / "grey.png", arrays["grey_8bit"])
     s = frame.settings
     meta = {
         "scene_name": scene_name,
@@ -165,6 +222,8 @@ def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "")
         "frequencies_hz": frame.light_field.frequencies_hz.tolist(),
         "grey_preview_full_scale": full_scale,
         "arrays": ARRAY_UNITS,
+        "effect_plan": frame.plan.to_dict(),
+        "sensor": None if frame.raw is None else frame.raw.meta.get("sensor"),
         **frame.extra,
     }
     frame_io.write_json(out / "frame.json", meta)

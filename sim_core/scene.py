@@ -23,7 +23,8 @@ from sim_core.radiometry import (
     moon_albedo_irradiance_w_m2,
     solar_in_band_irradiance_w_m2,
 )
-from sim_core.scene_spec import MaterialSpec, ObjectSpec, SceneSpec
+from sim_core.scene_spec import MaterialSpec, ObjectSpec, OpticsSpec, SceneSpec
+from sim_core.sensor import SensorParams
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,8 @@ class Scene:
     materials: tuple[Material, ...]
     object_names: tuple[str, ...]
     scene_hash: str
+    sensor: SensorParams = field(default_factory=SensorParams)
+    optics: OpticsSpec = field(default_factory=OpticsSpec)
 
     @property
     def n_triangles(self) -> int:
@@ -335,4 +338,6 @@ def build_scene(
         materials=tuple(materials),
         object_names=tuple(o.name for o in spec.objects),
         scene_hash=_hash_inputs(spec, base, rig),
+        sensor=SensorParams(**spec.camera.sensor.model_dump(exclude_none=True)),
+        optics=spec.optics,
     )

@@ -56,6 +56,26 @@ class Distortion(_Strict):
     k3: Finite = 0.0
 
 
+class SensorOverrides(_Strict):
+    """Overrides of the PMD pixel parameters (defaults in docs/camera-presets.md)."""
+
+    pixel_pitch_m: Annotated[float, Field(gt=1e-7, le=1e-3, allow_inf_nan=False)] | None = None
+    fill_factor: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
+    quantum_efficiency: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
+    demodulation_contrast: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] | None = (
+        None
+    )
+    transmittance: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
+    full_well_e: Annotated[float, Field(ge=1.0, le=1e9, allow_inf_nan=False)] | None = None
+    read_noise_e: Annotated[float, Field(ge=0.0, le=1e5, allow_inf_nan=False)] | None = None
+    dark_current_e_s: Annotated[float, Field(ge=0.0, le=1e9, allow_inf_nan=False)] | None = None
+    adc_bits: Annotated[int, Field(ge=1, le=24)] | None = None
+    adc_gain_e_per_dn: Annotated[float, Field(ge=1e-3, le=1e6, allow_inf_nan=False)] | None = None
+    sbi_start_e: Annotated[float, Field(ge=1.0, le=1e9, allow_inf_nan=False)] | None = None
+    sbi_limit_e: Annotated[float, Field(ge=0.0, le=1e12, allow_inf_nan=False)] | None = None
+    sbi_enabled: bool | None = None
+
+
 class CameraSpec(_Strict):
     """Camera preset, pose and overrides of the preset's values."""
 
@@ -75,13 +95,14 @@ class CameraSpec(_Strict):
     exposure_s: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
     aperture_diameter_m: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
     wavelength_m: Annotated[float, Field(gt=1e-7, lt=1e-5, allow_inf_nan=False)] | None = None
+    sensor: SensorOverrides = SensorOverrides()
 
 
 # --- illumination ---------------------------------------------------------------------------
 class Illumination(_Strict):
     """The camera's own modulated light source."""
 
-    power_w: Annotated[float, Field(ge=0.0, le=1000.0, allow_inf_nan=False)] = 0.2
+    power_w: Annotated[float, Field(ge=0.0, le=1000.0, allow_inf_nan=False)] = 1.0
     offset_m: Vec3 = (0.0, 0.0, 0.0)
     angular_profile: list[tuple[Finite, Finite]] | None = Field(None, min_length=2)
 
@@ -223,6 +244,25 @@ class Turntable(_Strict):
         return v
 
 
+class MotionSpec(_Strict):
+    """Uniform linear image motion during the exposure."""
+
+    length_px: Annotated[float, Field(ge=0.0, le=200.0, allow_inf_nan=False)]
+    direction_deg: Finite = 0.0
+
+
+class OpticsSpec(_Strict):
+    """The MTF chain of seed eq. 33; each component optional."""
+
+    diffraction: bool = True
+    pixel_aperture: bool = True
+    electronics_cutoff_cycles_per_px: (
+        Annotated[float, Field(gt=0.0, le=100.0, allow_inf_nan=False)] | None
+    ) = None
+    motion: MotionSpec | None = None
+    vibration_sigma_px: Annotated[float, Field(ge=0.0, le=50.0, allow_inf_nan=False)] | None = None
+
+
 class RenderSpec(_Strict):
     """Integrator settings."""
 
@@ -243,6 +283,7 @@ class SceneSpec(_Strict):
     ambient: Ambient = Ambient()
     objects: list[ObjectSpec] = Field(default_factory=list, max_length=10000)
     turntable: Turntable | None = None
+    optics: OpticsSpec = OpticsSpec()
     render: RenderSpec = RenderSpec()
 
     @model_validator(mode="after")

@@ -136,6 +136,42 @@ class RayTracer:
         prim[hit] = pid[hit]
         return t, prim
 
+    def intersect32(self, o32: np.ndarray, d32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Closest hits of float32 render-frame rays, without conversions.
+
+        Returns ``tfar`` (float32, meaningless where missed) and ``prim`` (int32, -1 = miss).
+        """
+        m = o32.shape[0]
+        tfar = np.full(m, np.finfo(np.float32).max, dtype=np.float32)
+        pid = np.full(m, -1, dtype=np.int32)
+        if m == 0 or self.n_triangles == 0:
+            self.stats.rays += m
+            return tfar, pid
+
+        def work(a: int, b: int) -> None:
+            # embreex fills ``dists`` in place only for query="DISTANCE" (which returns no
+            # primitive ids); the full output dict is the one call that gives both.
+            res = self._scene.run(o32[a:b], d32[a:b], output=1)
+            tfar[a:b] = res["tfar"]
+            pid[a:b] = res["primID"]
+
+        self._dispatch(work, m)
+        return tfar, pid
+
+    def occluded32(self, o32: np.ndarray, d32: np.ndarray, tmax32: np.ndarray) -> np.ndarray:
+        """Occlusion of float32 render-frame segments; ``tmax32`` is overwritten."""
+        m = o32.shape[0]
+        if m == 0 or self.n_triangles == 0:
+            self.stats.rays += m
+            return np.zeros(m, dtype=bool)
+        out = np.empty(m, dtype=np.int32)
+
+        def work(a: int, b: int) -> None:
+            out[a:b] = self._scene.run(o32[a:b], d32[a:b], dists=tmax32[a:b], query="OCCLUDED")
+
+        self._dispatch(work, m)
+        return out == 0
+
     def occluded(
         self, origins_rel: np.ndarray, directions: np.ndarray, t_max_m: np.ndarray | float
     ) -> np.ndarray:

@@ -1,7 +1,11 @@
 """Reflectance models (BRDFs) of the simulator.
 
-The contract every model fulfils is stated in :mod:`sim_core.materials.base`; the shared
-formulas live in :mod:`sim_core.materials.microfacet`.
+The contract every model fulfils is stated in :mod:`sim_core.materials.base`. Every formula
+lives once, as a scalar numba kernel in :mod:`sim_core.materials.kernels` (``eval_brdf``,
+``pdf_brdf``, ``sample_brdf``, dispatching on ``Material.kernel_kind`` with the parameter vector
+``Material.kernel_params()``), which the renderer calls per ray and the numpy methods
+(``eval_local``, ``pdf_local``, ``sample_local``) call through batch wrappers; parameter
+validation and the sampling mixture live in :mod:`sim_core.materials.microfacet`.
 
 Models
 ------

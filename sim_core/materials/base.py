@@ -32,6 +32,14 @@ Consistency required of every implementation (and checked by the shared test har
 ``tests/sim_core/materials/harness.py``): the sampling estimator ``mean(weight)`` equals a
 quadrature of ``eval_local * cos_theta_i`` over the hemisphere, and ``pdf_local`` agrees with
 the histogram of ``sample_local`` (chi-square test).
+
+Compiled kernels
+----------------
+The formulas exist once, as scalar numba kernels in :mod:`sim_core.materials.kernels`, which
+the renderer calls per ray. A model states which kernel it is (``kernel_kind``, one of
+``kernels.KIND_*``) and its parameters (``kernel_params()``, a float64 vector of length
+``kernels.N_PARAMS``); ``eval_local``, ``pdf_local`` and ``sample_local`` are implemented here,
+once, by the kernels' batch wrappers, so the numpy API and the renderer cannot disagree.
 """
 
 from __future__ import annotations
@@ -40,6 +48,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
+
+from sim_core.materials import kernels
 
 
 @dataclass(frozen=True)
@@ -95,28 +105,83 @@ def to_world(w: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.n
     return w[:, 0:1] * t + w[:, 1:2] * b + w[:, 2:3] * n
 
 
+def _directions(w: np.ndarray, name: str) -> np.ndarray:
+    """``w`` as a C-contiguous float64 array of shape (n, 3), the layout the kernels take."""
+    w = np.ascontiguousarray(w, dtype=np.float64)
+    if w.ndim != 2 or w.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3), got {w.shape}")
+    return w
+
+
+def _pair(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    wi, wo = _directions(wi, "wi"), _directions(wo, "wo")
+    if wi.shape != wo.shape:
+        raise ValueError(f"wi and wo must have the same shape, got {wi.shape} and {wo.shape}")
+    return wi, wo
+
+
 class Material(ABC):
     """A reflectance model; see the module docstring for the contract."""
 
     #: short name used in scene files and error messages
     name: str = "material"
 
+    @property
     @abstractmethod
-    def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """BRDF value f_r [1/sr] without the cosine, shading frame."""
+    def kernel_kind(self) -> int:
+        """Model id of the compiled kernels, one of ``kernels.KIND_*``.
+
+        A class constant in every model (``kernel_kind: ClassVar[int] = KIND_...``).
+        """
 
     @abstractmethod
-    def pdf_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """Solid-angle pdf [1/sr] of ``sample_local`` returning ``wi``."""
+    def kernel_params(self) -> np.ndarray:
+        """The model's parameters as the kernels read them: shape ``(kernels.N_PARAMS,)``,
+        float64, unused entries 0.
 
-    @abstractmethod
-    def sample_local(self, wo: np.ndarray, u: np.ndarray) -> BSDFSample:
-        """Importance-sample ``wi`` for ``wo`` from uniforms ``u`` (n, 3)."""
+        Built by the ``kernels.*_params`` function of the model, which also folds in derived
+        constants (Beckmann width, lobe probabilities, normalisations) so that the kernels do
+        not recompute them per ray.
+        """
 
     @property
     @abstractmethod
     def albedo_bound(self) -> float:
         """Upper bound of the directional albedo over all ``wo`` (<= 1)."""
+
+    def _kernel(self) -> tuple[int, np.ndarray]:
+        p = np.ascontiguousarray(self.kernel_params(), dtype=np.float64)
+        if p.shape != (kernels.N_PARAMS,):  # the kernels index p without bounds checks
+            raise ValueError(
+                f"kernel_params() must have shape ({kernels.N_PARAMS},), not {p.shape}"
+            )
+        return int(self.kernel_kind), p
+
+    def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """BRDF value f_r [1/sr] without the cosine, shading frame; ``kernels.eval_brdf``."""
+        wi, wo = _pair(wi, wo)
+        return kernels.eval_batch(*self._kernel(), wi, wo)
+
+    def pdf_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Solid-angle pdf [1/sr] of ``sample_local`` returning ``wi``; ``kernels.pdf_brdf``."""
+        wi, wo = _pair(wi, wo)
+        return kernels.pdf_batch(*self._kernel(), wi, wo)
+
+    def sample_local(self, wo: np.ndarray, u: np.ndarray) -> BSDFSample:
+        """Importance-sample ``wi`` for ``wo`` from uniforms ``u`` (n, 3); ``kernels.sample_brdf``.
+
+        A subclass that overrides :meth:`eval_local` or :meth:`pdf_local` in Python (invisible to
+        the kernels, and to the renderer) gets its samples completed by :func:`finish_sample`
+        with its own methods, so that ``pdf == pdf_local(wi, wo)`` holds for it too.
+        """
+        wo, u = _directions(wo, "wo"), _directions(u, "u")
+        if u.shape != wo.shape:
+            raise ValueError(f"u must have the shape of wo, got {u.shape} and {wo.shape}")
+        wi, pdf, weight = kernels.sample_batch(*self._kernel(), wo, u)
+        cls = type(self)
+        if cls.eval_local is not Material.eval_local or cls.pdf_local is not Material.pdf_local:
+            return finish_sample(self, wi, wo)
+        return BSDFSample(wi=wi, pdf=pdf, weight=weight)
 
     # World-frame conveniences -------------------------------------------------------------
     def evaluate(self, wi: np.ndarray, wo: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -134,3 +199,16 @@ class Material(ABC):
         t, b = frame_from_normal(n)
         s = self.sample_local(to_local(wo, t, b, n), u)
         return BSDFSample(wi=to_world(s.wi, t, b, n), pdf=s.pdf, weight=s.weight)
+
+
+def finish_sample(material: Material, wi: np.ndarray, wo: np.ndarray) -> BSDFSample:
+    """Complete a batch of sampled ``wi`` into a :class:`BSDFSample` with the numpy methods.
+
+    ``pdf`` is computed with ``material.pdf_local`` and ``f`` with ``material.eval_local`` (so
+    that a subclass overriding them, e.g. a deliberately broken model in the tests, is honoured);
+    ``weight = f cos θi / pdf`` where ``pdf > 0`` and 0 elsewhere (``kernels.sample_weight``).
+    """
+    wi = np.ascontiguousarray(wi, dtype=np.float64)
+    pdf = np.ascontiguousarray(material.pdf_local(wi, wo), dtype=np.float64)
+    f = np.ascontiguousarray(material.eval_local(wi, wo), dtype=np.float64)
+    return BSDFSample(wi=wi, pdf=pdf, weight=kernels.weight_batch(f, wi, pdf))

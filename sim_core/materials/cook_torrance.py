@@ -8,13 +8,8 @@ from typing import ClassVar, Literal
 import numpy as np
 
 from sim_core.errors import InvalidInputError
-from sim_core.materials.microfacet import (
-    MicrofacetMixture,
-    check_parameter,
-    cos_theta,
-    fresnel_dielectric,
-    torrance_sparrow_dg,
-)
+from sim_core.materials.kernels import KIND_COOK_TORRANCE, cook_torrance_params
+from sim_core.materials.microfacet import MicrofacetMixture, check_parameter
 
 __all__ = ["FRESNEL_ANGLES", "CookTorrance"]
 
@@ -91,6 +86,11 @@ class CookTorrance(MicrofacetMixture):
     Only ``fresnel_angle="half"`` is reciprocal (``wi·h = wo·h``). The paper's default
     ``"incidence"`` evaluates ``F`` at ``θi`` only, so ``f(wi, wo) != f(wo, wi)`` whenever
     ``θi != θr``, ``ks > 0`` and ``n2 > 1``. Energy is conserved either way (``F <= 1``).
+
+    Kernel
+    ------
+    ``kernels.cook_torrance_eval``; parameters ``kernels.cook_torrance_params``
+    (``fresnel_angle`` encoded as 1.0 for ``"half"``, 0.0 for ``"incidence"``).
     """
 
     kd: float = 0.05
@@ -100,6 +100,7 @@ class CookTorrance(MicrofacetMixture):
     fresnel_angle: Literal["incidence", "half"] = "incidence"
 
     name: ClassVar[str] = _MODEL
+    kernel_kind: ClassVar[int] = KIND_COOK_TORRANCE
 
     def __post_init__(self) -> None:
         for field, lo, hi in (
@@ -138,12 +139,8 @@ class CookTorrance(MicrofacetMixture):
         """``kd + ks``: the V-cavity specular lobe reflects at most a fraction 1 (``F <= 1``)."""
         return min(self.kd + self.ks, 1.0)
 
-    def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        ci, co = cos_theta(wi), cos_theta(wo)
-        valid = (ci > 0.0) & (co > 0.0)
-        f = self.kd / np.pi
-        if self.ks > 0.0:
-            dg, cos_gamma = torrance_sparrow_dg(wi, wo, self.alpha)
-            cos_f = ci if self.fresnel_angle == "incidence" else cos_gamma
-            f = f + self.ks * dg * fresnel_dielectric(cos_f, self.n2)
-        return np.where(valid, f, 0.0)
+    def kernel_params(self) -> np.ndarray:
+        p_spec, p_diff = self.lobe_probabilities
+        return cook_torrance_params(
+            self.alpha, p_spec, p_diff, self.kd, self.ks, self.n2, self.fresnel_angle == "half"
+        )

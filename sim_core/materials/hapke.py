@@ -3,23 +3,15 @@
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
 from sim_core.errors import InvalidInputError
-from sim_core.materials.base import BSDFSample, Material
-from sim_core.materials.microfacet import (
-    COS_EPS,
-    check_parameter,
-    cos_theta,
-    cosine_hemisphere_pdf,
-    finish_sample,
-    safe_divide,
-    sample_cosine_hemisphere,
-)
+from sim_core.materials.base import Material
+from sim_core.materials.kernels import KIND_HAPKE, hapke_batch, hapke_params
+from sim_core.materials.microfacet import check_parameter
 
 __all__ = ["ALWAYS_ALLOWED_W", "Hapke", "hapke_brdf", "hapke_max_albedo", "hapke_max_w"]
 
@@ -44,27 +36,15 @@ def hapke_brdf(
 ) -> np.ndarray:
     """Hapke BRDF ``f = w / (4π) [P(g)(1 + B(g)) + H(μi) H(μo) - 1] / (μi + μo)`` [1/sr].
 
-    No horizon masking: callers pass ``μi, μo`` in [0, 1]. Symmetric in ``μi``, ``μo``.
+    No horizon masking: callers pass ``μi, μo`` in [0, 1] (``μo = 0`` is the grazing limit the
+    albedo quadrature needs). Symmetric in ``μi``, ``μo``. The arrays broadcast against each
+    other; the formula is the kernel ``kernels.hapke_f``.
     """
-    mu_i = np.clip(mu_i, 0.0, 1.0)
-    mu_o = np.clip(mu_o, 0.0, 1.0)
-    cos_g = np.clip(cos_g, -1.0, 1.0)  # |wi·wo| may exceed 1 by rounding: sqrt(1 - cos g) NaN
-    gamma = math.sqrt(max(1.0 - w, 0.0))  # w <= 1, the max only guards rounding
-
-    def chandrasekhar_h(x: np.ndarray) -> np.ndarray:
-        # Hapke (1981) approximation; denominator >= 1, no guard needed.
-        return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * gamma)
-
-    # B(g) = B0 / (1 + tan(g/2) / h) = B0 h / (h + tan(g/2)), tan(g/2) = sqrt((1-c)/(1+c)),
-    # written without tan so that g = π (tan = inf) gives 0 instead of inf/inf.
-    s_plus = np.sqrt(1.0 + cos_g)
-    s_minus = np.sqrt(1.0 - cos_g)
-    # The denominator vanishes only for h = 0 at g = 0 (0/0); h = 0 means "no surge": B = 0.
-    surge = safe_divide(b0 * h * s_plus, h * s_plus + s_minus)
-    phase = 1.0 + phase_b * cos_g  # >= 0 because |phase_b| <= 1
-    bracket = phase * (1.0 + surge) + chandrasekhar_h(mu_i) * chandrasekhar_h(mu_o) - 1.0
-    # 1/(μi + μo) diverges when both directions graze the horizon; COS_EPS keeps it finite.
-    return w / (4.0 * np.pi) * bracket / np.maximum(mu_i + mu_o, COS_EPS)
+    mu_i, mu_o, cos_g = np.broadcast_arrays(
+        *(np.asarray(x, dtype=np.float64) for x in (mu_i, mu_o, cos_g))
+    )
+    flat = [np.ascontiguousarray(x).ravel() for x in (mu_i, mu_o, cos_g)]
+    return hapke_batch(hapke_params(w, b0, h, phase_b), *flat).reshape(mu_i.shape)
 
 
 # Quadrature of the directional albedo a(μo) = ∫ f μi dωi: Gauss-Legendre in μi on [0, 1] and
@@ -87,16 +67,7 @@ def hapke_max_albedo(w: float, b0: float, h: float, phase_b: float) -> float:
     sin_i = np.sqrt(1.0 - mu_i * mu_i)
     sin_o = np.sqrt(1.0 - mu_o * mu_o)
     cos_g = mu_i * mu_o + sin_i * sin_o * np.cos(phi)
-    shape = np.broadcast_shapes(mu_i.shape, mu_o.shape, phi.shape)
-    f = hapke_brdf(
-        np.broadcast_to(mu_i, shape).ravel(),
-        np.broadcast_to(mu_o, shape).ravel(),
-        np.broadcast_to(cos_g, shape).ravel(),
-        w,
-        b0,
-        h,
-        phase_b,
-    ).reshape(shape)
+    f = hapke_brdf(mu_i, mu_o, cos_g, w, b0, h, phase_b)
     weights = (_MU_NODES * _MU_WEIGHTS)[None, :, None] * _PHI_WEIGHTS[None, None, :]
     return float(np.max(np.sum(f * weights, axis=(1, 2))))
 
@@ -169,7 +140,7 @@ class Hapke(Material):
         ``b = 0`` is isotropic scattering.
 
     The defaults are the paper's own fit (its Table 5, "this study", 4 Vesta:
-    ``B = 1.83, ω = 0.45, h = 0.53``).
+    ``B = 1.83, ω = 0.45, h = 0.53``), also available as the preset ``vesta-regolith``.
 
     Energy condition
     ----------------
@@ -190,6 +161,11 @@ class Hapke(Material):
     Reciprocity
     -----------
     Reciprocal: ``f`` is symmetric in ``μ0`` and ``μ`` and ``g`` is symmetric in ``wi``, ``wo``.
+
+    Kernel
+    ------
+    ``kernels.hapke_eval`` (``kernels.hapke_f`` with horizon masking) and ``kernels.cosine_pdf``;
+    parameters ``kernels.hapke_params``.
     """
 
     w: float = 0.45
@@ -198,6 +174,7 @@ class Hapke(Material):
     phase_b: float = 0.0
 
     name: ClassVar[str] = _MODEL
+    kernel_kind: ClassVar[int] = KIND_HAPKE
 
     def __post_init__(self) -> None:
         for field, lo, hi in (
@@ -226,15 +203,5 @@ class Hapke(Material):
         bound = hapke_max_albedo(self.w, self.b0, self.h, self.phase_b)
         return bound * (1.0 + _QUADRATURE_MARGIN)
 
-    def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        mu_i, mu_o = cos_theta(wi), cos_theta(wo)
-        valid = (mu_i > 0.0) & (mu_o > 0.0)
-        cos_g = np.einsum("ij,ij->i", wi, wo)
-        f = hapke_brdf(mu_i, mu_o, cos_g, self.w, self.b0, self.h, self.phase_b)
-        return np.where(valid, f, 0.0)
-
-    def pdf_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        return np.where(cos_theta(wo) > 0.0, cosine_hemisphere_pdf(wi), 0.0)
-
-    def sample_local(self, wo: np.ndarray, u: np.ndarray) -> BSDFSample:
-        return finish_sample(self, sample_cosine_hemisphere(u[:, 0], u[:, 1]), wo)
+    def kernel_params(self) -> np.ndarray:
+        return hapke_params(self.w, self.b0, self.h, self.phase_b)

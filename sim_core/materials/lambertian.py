@@ -7,14 +7,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from sim_core.materials.base import BSDFSample, Material
-from sim_core.materials.microfacet import (
-    check_parameter,
-    cos_theta,
-    cosine_hemisphere_pdf,
-    finish_sample,
-    sample_cosine_hemisphere,
-)
+from sim_core.materials.base import Material
+from sim_core.materials.kernels import KIND_LAMBERTIAN, lambertian_params
+from sim_core.materials.microfacet import check_parameter
 
 __all__ = ["Lambertian"]
 
@@ -43,11 +38,17 @@ class Lambertian(Material):
     Reciprocity
     -----------
     Reciprocal (constant).
+
+    Kernel
+    ------
+    ``kernels.lambertian_eval`` and ``kernels.cosine_pdf``; parameters
+    ``kernels.lambertian_params``.
     """
 
     albedo: float = 0.5
 
     name: ClassVar[str] = _MODEL
+    kernel_kind: ClassVar[int] = KIND_LAMBERTIAN
 
     def __post_init__(self) -> None:
         value = check_parameter("albedo", self.albedo, 0.0, 1.0, model=_MODEL)
@@ -57,12 +58,5 @@ class Lambertian(Material):
     def albedo_bound(self) -> float:
         return self.albedo
 
-    def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        valid = (cos_theta(wi) > 0.0) & (cos_theta(wo) > 0.0)
-        return np.where(valid, self.albedo / np.pi, 0.0)
-
-    def pdf_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        return np.where(cos_theta(wo) > 0.0, cosine_hemisphere_pdf(wi), 0.0)
-
-    def sample_local(self, wo: np.ndarray, u: np.ndarray) -> BSDFSample:
-        return finish_sample(self, sample_cosine_hemisphere(u[:, 0], u[:, 1]), wo)
+    def kernel_params(self) -> np.ndarray:
+        return lambertian_params(self.albedo)

@@ -14,10 +14,11 @@ Sources
   test (its Section 4). The paper gives no reflectance; 0.02 is an assumed value typical of
   black velvet-like absorbers.
 - ``white-diffuse`` (0.9), ``grey-diffuse`` (0.5): generic diffuse reference targets.
-- ``lunar-regolith``: the SLIM paper (J. Imaging 6, 84, 2020) gives no lunar parameters; its
-  only Hapke values are its own fit for the asteroid 4 Vesta (Table 5, "this study":
-  ``B = 1.83, ω = 0.45, h = 0.53``), used here as a stand-in for a regolith surface with
-  isotropic particles (``phase_b = 0``). Replace with a lunar fit when one is adopted.
+- ``vesta-regolith``: the regolith of the asteroid 4 Vesta, the SLIM paper's own Hapke fit
+  (J. Imaging 6, 84, 2020, Table 5, "this study": ``B = 1.83, ω = 0.45, h = 0.53``), with
+  isotropic particles (``phase_b = 0``; the paper fits no phase function). The paper gives no
+  lunar parameters; a lunar preset needs a lunar fit from another source. (This preset was
+  called ``lunar-regolith`` before, a misnomer for Vesta data.)
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ PRESETS: Mapping[str, tuple[str, Mapping[str, Any]]] = MappingProxyType(
         "black-flannel": ("lambertian", MappingProxyType({"albedo": 0.02})),
         "white-diffuse": ("lambertian", MappingProxyType({"albedo": 0.9})),
         "grey-diffuse": ("lambertian", MappingProxyType({"albedo": 0.5})),
-        "lunar-regolith": (
+        "vesta-regolith": (
             "hapke",
             MappingProxyType({"w": 0.45, "b0": 1.83, "h": 0.53, "phase_b": 0.0}),
         ),

@@ -9,13 +9,8 @@ from typing import ClassVar
 import numpy as np
 
 from sim_core.errors import InvalidInputError
-from sim_core.materials.microfacet import (
-    MicrofacetMixture,
-    check_parameter,
-    cos_theta,
-    fresnel_schlick_power,
-    torrance_sparrow_dg,
-)
+from sim_core.materials.kernels import KIND_SEED_MICROFACET, seed_microfacet_params
+from sim_core.materials.microfacet import MicrofacetMixture, check_parameter
 
 __all__ = ["SeedMicrofacet"]
 
@@ -85,6 +80,10 @@ class SeedMicrofacet(MicrofacetMixture):
     -----------
     Reciprocal: ``D``, ``G`` and the cosine product are symmetric in ``wi``, ``wo``, and
     ``cos γ = wi·h = wo·h`` is too.
+
+    Kernel
+    ------
+    ``kernels.seed_microfacet_eval``; parameters ``kernels.seed_microfacet_params``.
     """
 
     ks: float = 0.649
@@ -94,6 +93,7 @@ class SeedMicrofacet(MicrofacetMixture):
     f0: float = 0.775
 
     name: ClassVar[str] = _MODEL
+    kernel_kind: ClassVar[int] = KIND_SEED_MICROFACET
 
     def __post_init__(self) -> None:
         for field, lo, hi in (
@@ -127,11 +127,8 @@ class SeedMicrofacet(MicrofacetMixture):
         """``ks + kd``: the V-cavity specular lobe reflects at most a fraction 1 (``F <= 1``)."""
         return min(self.ks + self.kd, 1.0)
 
-    def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        ci, co = cos_theta(wi), cos_theta(wo)
-        valid = (ci > 0.0) & (co > 0.0)
-        dg, cos_gamma = torrance_sparrow_dg(wi, wo, self.alpha)
-        f = self.kd / np.pi
-        if self.ks > 0.0:
-            f = f + self.ks * dg * fresnel_schlick_power(cos_gamma, self.f0, self.fresnel_exponent)
-        return np.where(valid, f, 0.0)
+    def kernel_params(self) -> np.ndarray:
+        p_spec, p_diff = self.lobe_probabilities
+        return seed_microfacet_params(
+            self.alpha, p_spec, p_diff, self.kd, self.ks, self.f0, self.fresnel_exponent
+        )

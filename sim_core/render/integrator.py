@@ -33,9 +33,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim_core.camera import pixel_centre_grid, pixel_to_camera_direction
+from sim_core.camera import pixel_centre_grid
 from sim_core.constants import SPEED_OF_LIGHT_M_S
+from sim_core.materials.kernels import N_PARAMS
 from sim_core.render import kernels
+from sim_core.render.kernels import camera_rays
 from sim_core.render.lightfield import LightField
 from sim_core.scene import Scene
 from sim_core.tracing import RayTracer
@@ -142,29 +144,6 @@ class _Accumulator:
         return np.maximum(ss / n - mean * mean, 0.0) * (n / (n - 1))
 
 
-class _Wavefront:
-    """Alive paths of one wavefront (structure of arrays)."""
-
-    __slots__ = ("length_m", "mat", "n", "p", "pass_id", "pix", "throughput", "wo")
-
-    def __init__(self, pix, pass_id, p, n, wo, length_m, throughput, mat) -> None:
-        self.pix, self.pass_id, self.p, self.n = pix, pass_id, p, n
-        self.wo, self.length_m, self.throughput, self.mat = wo, length_m, throughput, mat
-
-
-def _material_groups(mat: np.ndarray, n_materials: int) -> list[tuple[int, np.ndarray | slice]]:
-    """(material, selection) pairs covering ``mat``; one slice when a single material is present."""
-    if mat.size == 0:
-        return []
-    counts = np.bincount(mat, minlength=n_materials)
-    present = np.flatnonzero(counts)
-    if present.size == 1:
-        return [(int(present[0]), slice(None))]
-    order = np.argsort(mat, kind="stable")
-    bounds = np.concatenate([[0], np.cumsum(counts)])
-    return [(int(m), order[bounds[m] : bounds[m + 1]]) for m in present]
-
-
 def render(
     scene: Scene,
     settings: RenderSettings,
@@ -246,57 +225,88 @@ def _phasor_cov(acc: _Accumulator, n: int) -> np.ndarray:
     return np.stack([var_re, var_im, cov], axis=1)
 
 
+def material_tables(materials) -> tuple[np.ndarray, np.ndarray]:
+    """Kernel ids (M,) int64 and parameter vectors (M, N_PARAMS) float64 of the materials."""
+    kinds = np.array([m.kernel_kind for m in materials], dtype=np.int64)
+    params = np.zeros((len(materials), N_PARAMS))
+    for i, m in enumerate(materials):
+        params[i] = m.kernel_params()
+    return kinds, params
+
+
 class _Context:
-    """Per-render constants shared by the stages."""
+    """Per-render constants shared by the stages, as the arrays the kernels take."""
 
     def __init__(self, scene: Scene, settings: RenderSettings, tracer: RayTracer, origin) -> None:
         self.scene = scene
         self.settings = settings
         self.tracer = tracer
-        self.origin = origin
+        self.origin = np.asarray(origin, dtype=np.float64)
         self.freqs = np.asarray(scene.camera.modulation_frequencies_hz, dtype=np.float64)
         self.n_f = self.freqs.size
         #: phase per metre of path, Psi of eq. 17 [rad/m]
         self.psi_rad_m = 2.0 * np.pi * self.freqs / SPEED_OF_LIGHT_M_S
-        self.light_rel = np.asarray(scene.light.position_m - origin, dtype=np.float64)
-        self.ambient = scene.ambient if settings.ambient else ()
-        self.n_materials = len(scene.materials)
         self.u_px, self.v_px = pixel_centre_grid(scene.camera.intrinsics)
         self.npix = self.u_px.size
-        self.rotation = scene.camera.rotation
+        self.rotation = np.ascontiguousarray(scene.camera.rotation)
+        intr = scene.camera.intrinsics
+        self.intr = intr
+        self.distortion = np.asarray(intr.distortion, dtype=np.float64)
         self.normals = np.ascontiguousarray(scene.normals, dtype=np.float64)
-
-    def trace(self, origins, directions, pix, pass_id, length_m, throughput) -> _Wavefront:
-        """Closest hits of a batch of rays, as the wavefront of paths that go on."""
-        t, prim = self.tracer.intersect(origins, directions)
-        hit = np.flatnonzero(prim >= 0)
-        p, n, wo = kernels.surface_points(
-            origins[hit], directions[hit], t[hit], prim[hit], self.normals
+        self.tri_mat = np.ascontiguousarray(scene.material_index, dtype=np.int64)
+        self.mat_kind, self.mat_params = material_tables(scene.materials)
+        light = scene.light
+        self.light_pos = np.asarray(light.position_m - self.origin, dtype=np.float64)
+        self.light_axis = np.asarray(light.axis, dtype=np.float64)
+        self.light_scale = float(light._scale_w_sr)
+        if light.profile_angle_rad is None:
+            self.prof_angle = np.zeros(0)
+            self.prof_rel = np.zeros(0)
+        else:
+            self.prof_angle = np.asarray(light.profile_angle_rad, dtype=np.float64)
+            self.prof_rel = np.asarray(light.profile_relative, dtype=np.float64)
+        amb = scene.ambient if settings.ambient else ()
+        n_a = len(amb)
+        self.n_ambient = n_a
+        self.amb_dir = np.array([a.direction for a in amb], dtype=np.float64).reshape(n_a, 3)
+        self.amb_irr = np.array([a.irradiance_w_m2 for a in amb], dtype=np.float64)
+        self.amb_footprint = np.array(
+            [a.footprint_centre_m is not None and a.footprint_size_m is not None for a in amb],
+            dtype=np.bool_,
         )
-        return _Wavefront(
-            pix[hit], pass_id[hit], p, n, wo, length_m[hit] + t[hit], throughput[hit],
-            self.scene.material_index[prim[hit]],
-        )
+        self.amb_centre = np.array(
+            [a.footprint_centre_m if f else np.zeros(3)
+             for a, f in zip(amb, self.amb_footprint, strict=True)],
+            dtype=np.float64,
+        ).reshape(n_a, 3)
+        self.amb_size = np.array(
+            [a.footprint_size_m if f else (0.0, 0.0)
+             for a, f in zip(amb, self.amb_footprint, strict=True)],
+            dtype=np.float64,
+        ).reshape(n_a, 2)
+        self.amb_u = np.array([a.footprint_u for a in amb], dtype=np.float64).reshape(n_a, 3)
+        self.amb_v = np.array([a.footprint_v for a in amb], dtype=np.float64).reshape(n_a, 3)
 
 
 def _ground_truth(ctx: _Context) -> dict:
-    h, w = ctx.scene.camera.intrinsics.shape
-    d_cam = pixel_to_camera_direction(ctx.scene.camera.intrinsics, ctx.u_px, ctx.v_px)
-    d = d_cam @ ctx.rotation.T
-    t, prim = ctx.tracer.intersect(np.zeros_like(d), d)
+    """Range, depth, normal and object through every pixel centre (no jitter)."""
+    h, w = ctx.intr.shape
+    d = camera_rays(
+        ctx.u_px, ctx.v_px, ctx.intr.fx_px, ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px,
+        ctx.distortion, ctx.rotation,
+    )
+    tfar, prim = ctx.tracer.intersect32(np.zeros_like(d, dtype=np.float32), d.astype(np.float32))
     hit = prim >= 0
-    rng = np.where(hit, t, np.nan)
-    normal = np.zeros((ctx.npix, 3))
-    if hit.any():
-        _, n, _ = kernels.surface_points(
-            np.zeros((int(hit.sum()), 3)), d[hit], t[hit], prim[hit], ctx.normals
-        )
-        normal[hit] = n
-    obj = np.full(ctx.npix, -1, dtype=np.int32)
-    obj[hit] = ctx.scene.object_index[prim[hit]]
+    rng = np.where(hit, tfar.astype(np.float64), np.nan)
+    normal = ctx.normals[np.where(hit, prim, 0)] * hit[:, None]
+    facing = np.einsum("ij,ij->i", normal, d) > 0.0
+    normal[facing] *= -1.0
+    obj = np.where(hit, ctx.scene.object_index[np.where(hit, prim, 0)], -1).astype(np.int32)
+    # z component of each unit direction in the camera frame: depth_z = range * z.
+    z_cam = d @ ctx.rotation[:, 2]
     return {
         "truth_range_m": rng.reshape(h, w),
-        "truth_depth_z_m": (rng * d_cam[:, 2]).reshape(h, w),
+        "truth_depth_z_m": (rng * z_cam).reshape(h, w),
         "truth_normal": normal.reshape(h, w, 3),
         "object_id": obj.reshape(h, w),
         "hit": hit.reshape(h, w),
@@ -307,124 +317,65 @@ def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
     """Trace one wavefront holding the sample passes ``passes`` and add it to ``acc``."""
     g = len(passes)
     npix = ctx.npix
-    rngs = [np.random.default_rng([ctx.settings.seed, s]) for s in passes]
-    jitter = np.concatenate([r.random((npix, 2)) for r in rngs]) - 0.5
-    if not ctx.settings.jitter:
-        jitter[:] = 0.0
-    u = np.tile(ctx.u_px, g) + jitter[:, 0]
-    v = np.tile(ctx.v_px, g) + jitter[:, 1]
-    intr = ctx.scene.camera.intrinsics
-    d = kernels.camera_rays(
-        u, v, intr.fx_px, intr.fy_px, intr.cx_px, intr.cy_px,
-        np.asarray(intr.distortion, dtype=np.float64), ctx.rotation,
-    )
+    st = ctx.settings
     m = g * npix
     out_active = np.zeros(m)
     out_ambient = np.zeros(m)
     out_re = np.zeros((ctx.n_f, m))
     out_im = np.zeros((ctx.n_f, m))
 
-    wf = ctx.trace(
-        np.zeros_like(d), d, np.tile(np.arange(npix), g), np.repeat(np.arange(g), npix),
-        np.zeros(m), np.ones(m),
+    d = kernels.primary_rays(
+        st.seed, passes.start, g, ctx.u_px, ctx.v_px, st.jitter, ctx.intr.fx_px,
+        ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px, ctx.distortion, ctx.rotation,
     )
-    bounces = ctx.settings.effective_bounces
-    for bounce in range(1, bounces + 1):
-        if wf.pix.size == 0:
+    o = np.zeros_like(d)
+    pix = np.tile(np.arange(npix, dtype=np.int64), g)
+    pass_local = np.repeat(np.arange(g, dtype=np.int64), npix)
+    length = np.zeros(m)
+    throughput = np.ones(m)
+
+    n_bounces = st.effective_bounces
+    for b in range(1, n_bounces + 1):
+        tfar, prim = ctx.tracer.intersect32(o, d)
+        hit = np.flatnonzero(prim >= 0)
+        if hit.size == 0:
             break
-        tb, bb, wo_l = kernels.shading_frames(wf.n, wf.wo)
-        groups = _material_groups(wf.mat, ctx.n_materials)
-        flat = wf.pass_id * npix + wf.pix
-        _next_event_active(ctx, wf, groups, tb, bb, wo_l, flat, out_active, out_re, out_im)
-        for light in ctx.ambient:
-            _next_event_ambient(ctx, light, wf, groups, tb, bb, wo_l, flat, out_ambient)
-        if bounce == bounces:
+        (flat, act, act_len, sh_o, sh_d, sh_t, amb, amb_o,
+         nxt_o, nxt_d, nxt_len, nxt_thr, alive) = kernels.bounce(
+            hit, o, d, tfar, prim, pix, pass_local, passes.start, length, throughput,
+            ctx.normals, ctx.tri_mat, ctx.mat_kind, ctx.mat_params,
+            ctx.light_pos, ctx.light_axis, ctx.light_scale, ctx.prof_angle, ctx.prof_rel,
+            MIN_LIGHT_DISTANCE_M, ctx.amb_dir, ctx.amb_irr, ctx.amb_centre, ctx.amb_u,
+            ctx.amb_v, ctx.amb_size, ctx.amb_footprint, ctx.origin, npix,
+            st.seed, b, st.russian_roulette_from_bounce, b < n_bounces,
+        )
+        sel = np.flatnonzero(act > 0.0)
+        if sel.size:
+            blocked = ctx.tracer.occluded32(sh_o[sel], sh_d[sel], sh_t[sel])
+            ok = sel[~blocked]
+            kernels.accumulate_modulated(
+                flat[ok], act[ok], act_len[ok], ctx.psi_rad_m, out_active, out_re, out_im
+            )
+        for a in range(ctx.n_ambient):
+            sel = np.flatnonzero(amb[a] > 0.0)
+            if sel.size == 0:
+                continue
+            dirs = np.empty((sel.size, 3), dtype=np.float32)
+            dirs[:] = -ctx.amb_dir[a]
+            tmax = np.full(sel.size, np.finfo(np.float32).max, dtype=np.float32)
+            blocked = ctx.tracer.occluded32(amb_o[a][sel], dirs, tmax)
+            ok = sel[~blocked]
+            kernels.accumulate(flat[ok], amb[a][ok], out_ambient)
+        if b == n_bounces:
             break
-        # One row of 4 uniforms per pixel and pass for this bounce: 3 for the BRDF, 1 for RR.
-        u_all = np.stack([r.random((npix, 4)) for r in rngs])
-        uu = u_all[wf.pass_id, wf.pix]
-        wf = _continue_paths(ctx, wf, groups, tb, bb, wo_l, uu, bounce)
+        keep = np.flatnonzero(alive)
+        src = hit[keep]
+        o, d = nxt_o[keep], nxt_d[keep]
+        pix, pass_local = pix[src], pass_local[src]
+        length, throughput = nxt_len[keep], nxt_thr[keep]
 
     gshape = (g, npix)
     acc.add(
         out_active.reshape(gshape), out_ambient.reshape(gshape),
         out_re.reshape(ctx.n_f, *gshape), out_im.reshape(ctx.n_f, *gshape),
-    )
-
-
-def _eval_selected(ctx: _Context, wf: _Wavefront, sel: np.ndarray, wi_l, wo_l) -> np.ndarray:
-    """BRDF values at the wavefront vertices ``sel`` for directions ``wi_l`` (one per entry)."""
-    f = np.zeros(sel.size)
-    mats = wf.mat[sel]
-    for m, part in _material_groups(mats, ctx.n_materials):
-        f[part] = ctx.scene.materials[m].eval_local(wi_l[part], wo_l[sel[part]])
-    return f
-
-
-def _next_event_active(ctx, wf, groups, tb, bb, wo_l, flat, out_active, out_re, out_im) -> None:
-    """Direct light from the camera's source at every vertex (seed eqs. 19-21)."""
-    wi, dist, cos_p, origin, t_max = kernels.point_light_setup(
-        wf.p, wf.n, ctx.light_rel, MIN_LIGHT_DISTANCE_M
-    )
-    sel = np.flatnonzero((cos_p > 0.0) & (wf.throughput > 0.0))
-    if sel.size == 0:
-        return
-    blocked = ctx.tracer.occluded(origin[sel], wi[sel], t_max[sel])
-    sel = sel[~blocked]
-    if sel.size == 0:
-        return
-    intensity = ctx.scene.light.intensity_w_sr(-wi[sel])
-    irradiance = intensity * cos_p[sel] / (dist[sel] * dist[sel])  # eq. 20 / peer eq. 1
-    wi_l = kernels.gather_local(wi[sel], sel, tb, bb, wf.n)
-    f = _eval_selected(ctx, wf, sel, wi_l, wo_l)
-    contrib = wf.throughput[sel] * f * irradiance  # eq. 21, times the path throughput
-    kernels.accumulate_modulated(
-        flat[sel], contrib, wf.length_m[sel] + dist[sel], ctx.psi_rad_m, out_active, out_re, out_im
-    )
-
-
-def _next_event_ambient(ctx, light, wf, groups, tb, bb, wo_l, flat, out_ambient) -> None:
-    """Unmodulated light from a collimated ambient source; DC only."""
-    to_light = -light.direction
-    cos_p = wf.n[:, 0] * to_light[0] + wf.n[:, 1] * to_light[1] + wf.n[:, 2] * to_light[2]
-    lit = (cos_p > 0.0) & (wf.throughput > 0.0)
-    if lit.any():
-        lit &= light.in_beam(wf.p + ctx.origin)
-    sel = np.flatnonzero(lit)
-    if sel.size == 0:
-        return
-    wi = np.broadcast_to(to_light, (sel.size, 3)).copy()
-    origins = kernels.offset_origins(wf.p[sel], wf.n[sel], wi)
-    blocked = ctx.tracer.occluded(origins, wi, np.inf)
-    sel, wi = sel[~blocked], wi[~blocked]
-    if sel.size == 0:
-        return
-    wi_l = kernels.gather_local(wi, sel, tb, bb, wf.n)
-    f = _eval_selected(ctx, wf, sel, wi_l, wo_l)
-    contrib = wf.throughput[sel] * f * (light.irradiance_w_m2 * cos_p[sel])
-    kernels.accumulate(flat[sel], contrib, out_ambient)
-
-
-def _continue_paths(ctx, wf, groups, tb, bb, wo_l, uu, bounce) -> _Wavefront:
-    """Sample the next direction by the BRDF, apply Russian roulette, trace the new rays."""
-    m = wf.pix.size
-    wi_l = np.zeros((m, 3))
-    weight = np.zeros(m)
-    for k, sel in groups:
-        s = ctx.scene.materials[k].sample_local(wo_l[sel], uu[sel, :3])
-        wi_l[sel] = s.wi
-        weight[sel] = s.weight
-    throughput = wf.throughput * weight
-    alive = throughput > 0.0
-    if bounce + 1 >= ctx.settings.russian_roulette_from_bounce:
-        # Survival probability follows the throughput; dividing by it keeps the estimate
-        # unbiased. The floor keeps 1/q bounded.
-        q = np.clip(throughput, 0.05, 1.0)
-        alive &= uu[:, 3] < q
-        throughput = throughput / q
-    idx = np.flatnonzero(alive)
-    wi = kernels.local_to_world(wi_l[idx], tb[idx], bb[idx], wf.n[idx])
-    origins = kernels.offset_origins(wf.p[idx], wf.n[idx], wi)
-    return ctx.trace(
-        origins, wi, wf.pix[idx], wf.pass_id[idx], wf.length_m[idx], throughput[idx]
     )

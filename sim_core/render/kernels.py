@@ -2,16 +2,57 @@
 
 Profiling the numpy version (line_profiler, corner scene, direct, 32 spp) showed about 1 us of
 numpy work per path against ~0.1 us inside Embree: every step allocated and re-read (m, 3)
-temporaries. These kernels fuse each step into one pass over the rays and run it on all cores
-(``prange``); each ray's result depends only on that ray, so the output is identical for any
-number of threads. Pixel accumulation is serial, in ray order, so sums are bit-reproducible.
+temporaries. These kernels fuse the work of a bounce into two passes over the rays (``shade``:
+hit geometry, BRDF and next-event estimation; ``scatter``: BRDF sampling and Russian roulette)
+and run them on all cores (``prange``); each ray's result depends only on that ray, so the
+output is identical for any number of threads. Pixel accumulation is serial, in ray order, so
+sums are bit-reproducible.
 """
 
 from __future__ import annotations
 
+import hashlib
+import math
+from pathlib import Path
+
 import numba
 import numpy as np
 from numba import njit, prange
+
+import sim_core.materials.kernels as _material_kernels
+import sim_core.render.rng as _rng
+from sim_core.materials.kernels import eval_brdf, sample_brdf
+from sim_core.render.rng import path_key, seed_key, uniform_pair
+
+
+def _drop_stale_cache() -> None:
+    """Delete this module's numba cache when a module it calls into has changed.
+
+    numba keys a cached kernel on its own file only: after an edit of the material kernels,
+    ``bounce`` would keep running the old, inlined BRDF code from ``__pycache__``. A stamp of
+    the dependencies' sources next to the cache detects that.
+    """
+    cache = Path(__file__).with_name("__pycache__")
+    digest = hashlib.sha256()
+    for mod in (_material_kernels, _rng):
+        digest.update(Path(mod.__file__).read_bytes())
+    stamp = cache / "kernels.deps.sha256"
+    want = digest.hexdigest()
+    try:
+        if stamp.read_text() == want:
+            return
+    except OSError:
+        pass
+    try:
+        cache.mkdir(exist_ok=True)
+        for f in cache.glob("kernels.*.nb[ic]"):
+            f.unlink(missing_ok=True)
+        stamp.write_text(want)
+    except OSError:  # a read-only install: numba then compiles in memory anyway
+        pass
+
+
+_drop_stale_cache()
 
 # The default OpenMP/TBB layers keep their threads spinning after a parallel region, which
 # starves the Embree worker threads and numpy between kernels (measured: 2x slower frames on
@@ -38,136 +79,6 @@ def _duff_frame(nx, ny, nz):
     a = -1.0 / (sign + nz)
     b = nx * ny * a
     return (1.0 + sign * nx * nx * a, sign * b, -sign * nx, b, sign + ny * ny * a, -ny)
-
-
-@njit(cache=True, parallel=True)
-def surface_points(o, d, t, prim, normals):
-    """Hit points ``o + t d`` and face normals flipped to face the incoming ray.
-
-    Returns p (m, 3), n (m, 3), wo = -d (m, 3).
-    """
-    m = t.shape[0]
-    p = np.empty((m, 3))
-    n = np.empty((m, 3))
-    wo = np.empty((m, 3))
-    for i in prange(m):
-        f = prim[i]
-        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
-        if nx * d[i, 0] + ny * d[i, 1] + nz * d[i, 2] > 0.0:
-            nx, ny, nz = -nx, -ny, -nz
-        for k in range(3):
-            p[i, k] = o[i, k] + t[i] * d[i, k]
-            wo[i, k] = -d[i, k]
-        n[i, 0], n[i, 1], n[i, 2] = nx, ny, nz
-    return p, n, wo
-
-
-@njit(cache=True, parallel=True)
-def shading_frames(n, wo):
-    """Tangent frames (t, b) around ``n`` and ``wo`` in those frames; all (m, 3)."""
-    m = n.shape[0]
-    tb = np.empty((m, 3))
-    bb = np.empty((m, 3))
-    wo_l = np.empty((m, 3))
-    for i in prange(m):
-        t0, t1, t2, b0, b1, b2 = _duff_frame(n[i, 0], n[i, 1], n[i, 2])
-        tb[i, 0], tb[i, 1], tb[i, 2] = t0, t1, t2
-        bb[i, 0], bb[i, 1], bb[i, 2] = b0, b1, b2
-        w0, w1, w2 = wo[i, 0], wo[i, 1], wo[i, 2]
-        wo_l[i, 0] = w0 * t0 + w1 * t1 + w2 * t2
-        wo_l[i, 1] = w0 * b0 + w1 * b1 + w2 * b2
-        wo_l[i, 2] = w0 * n[i, 0] + w1 * n[i, 1] + w2 * n[i, 2]
-    return tb, bb, wo_l
-
-
-@njit(cache=True, parallel=True)
-def gather_local(w, idx, tb, bb, n):
-    """Directions ``w[j]`` expressed in the frames of rows ``idx[j]``; (k, 3)."""
-    k = idx.shape[0]
-    out = np.empty((k, 3))
-    for j in prange(k):
-        i = idx[j]
-        w0, w1, w2 = w[j, 0], w[j, 1], w[j, 2]
-        out[j, 0] = w0 * tb[i, 0] + w1 * tb[i, 1] + w2 * tb[i, 2]
-        out[j, 1] = w0 * bb[i, 0] + w1 * bb[i, 1] + w2 * bb[i, 2]
-        out[j, 2] = w0 * n[i, 0] + w1 * n[i, 1] + w2 * n[i, 2]
-    return out
-
-
-@njit(cache=True, parallel=True)
-def local_to_world(w_l, tb, bb, n):
-    """Inverse of the shading-frame projection, renormalised; (m, 3)."""
-    m = w_l.shape[0]
-    out = np.empty((m, 3))
-    for i in prange(m):
-        x, y, z = w_l[i, 0], w_l[i, 1], w_l[i, 2]
-        s = 0.0
-        for k in range(3):
-            v = x * tb[i, k] + y * bb[i, k] + z * n[i, k]
-            out[i, k] = v
-            s += v * v
-        # The frames are orthonormal, so s is 1 up to rounding; 0 only for an invalid (zero)
-        # sample, which is left as it is (its weight is 0 and the path is dropped).
-        if s > 0.0:
-            inv = 1.0 / np.sqrt(s)
-            for k in range(3):
-                out[i, k] *= inv
-    return out
-
-
-@njit(cache=True, parallel=True)
-def point_light_setup(p, n, light_pos, min_distance_m):
-    """Geometry of next-event estimation towards a point light, per vertex.
-
-    Returns
-    -------
-    wi : (m, 3) unit direction to the light
-    dist : (m,) distance to the light [m] (floored at ``min_distance_m``)
-    cos_p : (m,) cosine between ``wi`` and the normal (<= 0: light behind the surface)
-    origin : (m, 3) shadow-ray origin, offset off the surface towards the light
-    t_max : (m,) shadow-ray length, stopping just short of the light
-    """
-    m = p.shape[0]
-    wi = np.empty((m, 3))
-    dist = np.empty(m)
-    cos_p = np.empty(m)
-    origin = np.empty((m, 3))
-    t_max = np.empty(m)
-    for i in prange(m):
-        dx = light_pos[0] - p[i, 0]
-        dy = light_pos[1] - p[i, 1]
-        dz = light_pos[2] - p[i, 2]
-        dd = np.sqrt(dx * dx + dy * dy + dz * dz)
-        # A surface through the light itself would see I / 0^2.
-        dd = dd if dd > min_distance_m else min_distance_m
-        wx, wy, wz = dx / dd, dy / dd, dz / dd
-        c = wx * n[i, 0] + wy * n[i, 1] + wz * n[i, 2]
-        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
-        dist[i] = dd
-        cos_p[i] = c
-        s = _offset_scale(p[i, 0], p[i, 1], p[i, 2])
-        s = s if c >= 0.0 else -s
-        for k in range(3):
-            origin[i, k] = p[i, k] + s * n[i, k]
-        ox = light_pos[0] - origin[i, 0]
-        oy = light_pos[1] - origin[i, 1]
-        oz = light_pos[2] - origin[i, 2]
-        t_max[i] = np.sqrt(ox * ox + oy * oy + oz * oz) * (1.0 - 1e-6)
-    return wi, dist, cos_p, origin, t_max
-
-
-@njit(cache=True, parallel=True)
-def offset_origins(p, n, w):
-    """Points moved off their surface along ``n`` to the side of ``w``; (m, 3)."""
-    m = p.shape[0]
-    out = np.empty((m, 3))
-    for i in prange(m):
-        s = _offset_scale(p[i, 0], p[i, 1], p[i, 2])
-        if n[i, 0] * w[i, 0] + n[i, 1] * w[i, 1] + n[i, 2] * w[i, 2] < 0.0:
-            s = -s
-        for k in range(3):
-            out[i, k] = p[i, k] + s * n[i, k]
-    return out
 
 
 @njit(cache=True)
@@ -222,3 +133,176 @@ def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
         for k in range(3):
             out[i, k] = rotation[k, 0] * cx_ + rotation[k, 1] * cy_ + rotation[k, 2] * cz_
     return out
+
+
+@njit(cache=True, parallel=True)
+def primary_rays(seed, first_pass, n_passes, u_px, v_px, jitter, fx, fy, cx, cy, dist, rotation):
+    """Camera rays of ``n_passes`` sample passes: (n_passes * npix, 3) float32 directions.
+
+    Pass ``s`` jitters pixel ``q`` by the uniforms of dimensions 0, 1 at bounce 0 of its path.
+    """
+    npix = u_px.shape[0]
+    m = n_passes * npix
+    u = np.empty(m)
+    v = np.empty(m)
+    sk = seed_key(seed)
+    for i in prange(m):
+        s = first_pass + i // npix
+        q = i % npix
+        if jitter:
+            ju, jv = uniform_pair(path_key(sk, s, q), 0, 0)
+            u[i] = u_px[q] + ju - 0.5
+            v[i] = v_px[q] + jv - 0.5
+        else:
+            u[i] = u_px[q]
+            v[i] = v_px[q]
+    return camera_rays(u, v, fx, fy, cx, cy, dist, rotation).astype(np.float32)
+
+
+@njit(cache=True, inline="always")
+def _profile_intensity(cos_a, scale, prof_angle, prof_rel):
+    """Radiant intensity [W/sr] at angle arccos(cos_a) from the source axis (linear table)."""
+    if prof_angle.shape[0] == 0:
+        return scale
+    # arccos needs its argument inside [-1, 1]; rounding can leave it 1 + 1e-16.
+    c = min(1.0, max(-1.0, cos_a))
+    a = math.acos(c)
+    if a >= prof_angle[-1]:
+        return 0.0
+    return scale * np.interp(a, prof_angle, prof_rel)
+
+
+@njit(cache=True, parallel=True)
+def bounce(
+    hit, o, d, tfar, prim, pix, pass_local, first_pass, length, throughput,
+    normals, tri_mat, mat_kind, mat_params,
+    light_pos, light_axis, light_scale, prof_angle, prof_rel, min_light_distance_m,
+    amb_dir, amb_irr, amb_centre, amb_u, amb_v, amb_size, amb_footprint, render_origin, npix,
+    seed, bounce_index, rr_from_bounce, scatter,
+):
+    """All the work at one path vertex except ray casting (seed eqs. 19-22).
+
+    For every traced ray ``hit[j]`` that met a surface: the hit point and a normal facing the
+    ray; the candidate contribution of the camera's source (seed eqs. 20-21, 0 where the light
+    is behind the surface) with its shadow ray and the full path length; the same for every
+    ambient source (DC only, inside its beam footprint); and, if ``scatter``, the next ray by
+    BRDF importance sampling with Russian roulette (uniform dimensions 0-2 and 3 of this
+    bounce). Sampling does not depend on visibility, so both happen in one pass.
+
+    Ray arrays are float32 in the render frame (what Embree takes); the arithmetic is float64.
+    """
+    k = hit.shape[0]
+    n_amb = amb_dir.shape[0]
+    flat = np.empty(k, dtype=np.int64)
+    act = np.zeros(k)
+    act_len = np.empty(k)
+    sh_o = np.empty((k, 3), dtype=np.float32)
+    sh_d = np.empty((k, 3), dtype=np.float32)
+    sh_t = np.empty(k, dtype=np.float32)
+    amb = np.zeros((n_amb, k))
+    amb_o = np.empty((n_amb, k, 3), dtype=np.float32)
+    nxt_o = np.empty((k, 3), dtype=np.float32)
+    nxt_d = np.empty((k, 3), dtype=np.float32)
+    nxt_len = np.empty(k)
+    nxt_thr = np.zeros(k)
+    alive = np.zeros(k, dtype=np.bool_)
+    sk = seed_key(seed)
+    for j in prange(k):
+        i = hit[j]
+        f = prim[i]
+        t = np.float64(tfar[i])
+        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
+        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
+        if nx * dx + ny * dy + nz * dz > 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        px = o[i, 0] + t * dx
+        py = o[i, 1] + t * dy
+        pz = o[i, 2] + t * dz
+        t0, t1, t2, b0, b1, b2 = _duff_frame(nx, ny, nz)
+        wol0 = -(dx * t0 + dy * t1 + dz * t2)
+        wol1 = -(dx * b0 + dy * b1 + dz * b2)
+        wol2 = -(dx * nx + dy * ny + dz * nz)
+        m = tri_mat[f]
+        kind = mat_kind[m]
+        par = mat_params[m]
+        ln = length[i] + t
+        flat[j] = pass_local[i] * npix + pix[i]
+        thr = throughput[i]
+        s = _offset_scale(px, py, pz)
+
+        # Camera source: E = I(theta) cos / d^2 (seed eq. 20), L = E f (eq. 21).
+        lx, ly, lz = light_pos[0] - px, light_pos[1] - py, light_pos[2] - pz
+        dist = math.sqrt(lx * lx + ly * ly + lz * lz)
+        # A surface through the light itself would see I / 0^2.
+        dist = dist if dist > min_light_distance_m else min_light_distance_m
+        inv_dist = 1.0 / dist
+        lx, ly, lz = lx * inv_dist, ly * inv_dist, lz * inv_dist
+        cos_p = lx * nx + ly * ny + lz * nz
+        act_len[j] = ln + dist
+        if cos_p > 0.0 and thr > 0.0:
+            fr = eval_brdf(kind, par, lx * t0 + ly * t1 + lz * t2, lx * b0 + ly * b1 + lz * b2,
+                           cos_p, wol0, wol1, wol2)
+            inten = _profile_intensity(
+                -(lx * light_axis[0] + ly * light_axis[1] + lz * light_axis[2]),
+                light_scale, prof_angle, prof_rel,
+            )
+            c = thr * fr * inten * cos_p * inv_dist * inv_dist
+            if c > 0.0:
+                act[j] = c
+                ox, oy, oz = px + s * nx, py + s * ny, pz + s * nz
+                sh_o[j, 0], sh_o[j, 1], sh_o[j, 2] = ox, oy, oz
+                sh_d[j, 0], sh_d[j, 1], sh_d[j, 2] = lx, ly, lz
+                ex, ey, ez = light_pos[0] - ox, light_pos[1] - oy, light_pos[2] - oz
+                sh_t[j] = math.sqrt(ex * ex + ey * ey + ez * ez) * (1.0 - 1e-6)
+
+        # Ambient sources: collimated, E cos, DC only.
+        for a in range(n_amb):
+            ax, ay, az = -amb_dir[a, 0], -amb_dir[a, 1], -amb_dir[a, 2]
+            cos_a = ax * nx + ay * ny + az * nz
+            if cos_a <= 0.0 or thr <= 0.0:
+                continue
+            if amb_footprint[a]:
+                rx = px + render_origin[0] - amb_centre[a, 0]
+                ry = py + render_origin[1] - amb_centre[a, 1]
+                rz = pz + render_origin[2] - amb_centre[a, 2]
+                cu = abs(rx * amb_u[a, 0] + ry * amb_u[a, 1] + rz * amb_u[a, 2])
+                cv = abs(rx * amb_v[a, 0] + ry * amb_v[a, 1] + rz * amb_v[a, 2])
+                if cu > 0.5 * amb_size[a, 0] or cv > 0.5 * amb_size[a, 1]:
+                    continue
+            fr = eval_brdf(kind, par, ax * t0 + ay * t1 + az * t2, ax * b0 + ay * b1 + az * b2,
+                           cos_a, wol0, wol1, wol2)
+            c = thr * fr * amb_irr[a] * cos_a
+            if c > 0.0:
+                amb[a, j] = c
+                amb_o[a, j, 0] = px + s * nx
+                amb_o[a, j, 1] = py + s * ny
+                amb_o[a, j, 2] = pz + s * nz
+
+        if not scatter or not thr > 0.0:
+            continue
+        key = path_key(sk, first_pass + pass_local[i], pix[i])
+        u0, u1 = uniform_pair(key, bounce_index, 0)
+        u2, u3 = uniform_pair(key, bounce_index, 1)
+        x, y, z, _pdf, w = sample_brdf(kind, par, wol0, wol1, wol2, u0, u1, u2)
+        tn = thr * w
+        if not tn > 0.0:
+            continue
+        if bounce_index + 1 >= rr_from_bounce:
+            # Survival probability follows the throughput; dividing by it keeps the estimate
+            # unbiased. The floor keeps 1/q bounded.
+            q = min(1.0, max(0.05, tn))
+            if u3 >= q:
+                continue
+            tn = tn / q
+        wx = x * t0 + y * b0 + z * nx
+        wy = x * t1 + y * b1 + z * ny
+        wz = x * t2 + y * b2 + z * nz
+        inv = 1.0 / math.sqrt(wx * wx + wy * wy + wz * wz)  # orthonormal frame: ~1
+        sz = s if z >= 0.0 else -s
+        nxt_o[j, 0], nxt_o[j, 1], nxt_o[j, 2] = px + sz * nx, py + sz * ny, pz + sz * nz
+        nxt_d[j, 0], nxt_d[j, 1], nxt_d[j, 2] = wx * inv, wy * inv, wz * inv
+        nxt_len[j] = ln
+        nxt_thr[j] = tn
+        alive[j] = True
+    return (flat, act, act_len, sh_o, sh_d, sh_t, amb, amb_o,
+            nxt_o, nxt_d, nxt_len, nxt_thr, alive)

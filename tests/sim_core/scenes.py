@@ -34,7 +34,8 @@ def scene_from(camera_pos, look_at, objects, power_w=1.0, width=None, height=Non
                     "up": [0.0, 0.0, 1.0]}}
     if width:
         cam.update(width_px=width, height_px=height)
-    spec = {"camera": cam, "illumination": {"power_w": power_w}, "objects": objects, **extra}
+    spec = {"camera": cam, "illumination": {"power_w": power_w}, "objects": objects,
+            "optics": {"diffraction": False, "pixel_aperture": False}, **extra}
     return build_scene(parse_scene_spec(spec))
 
 

@@ -92,13 +92,13 @@ def test_zero_width_switches_the_surge_off_without_nan() -> None:
     assert np.isfinite(a[0]) and a[0] == b[0]
 
 
-def test_defaults_are_the_papers_table_5_fit_and_the_lunar_preset_uses_them() -> None:
+def test_defaults_are_the_papers_table_5_fit_and_the_vesta_preset_uses_them() -> None:
     assert Hapke() == Hapke(w=0.45, b0=1.83, h=0.53, phase_b=0.0)
-    assert material_preset("lunar-regolith") == Hapke()
+    assert material_preset("vesta-regolith") == Hapke()
 
 
 MATERIALS = [
-    material_preset("lunar-regolith"),
+    material_preset("vesta-regolith"),
     Hapke(w=0.9, b0=0.5, h=0.05, phase_b=0.3),
     Hapke(w=0.2, b0=2.0, h=1.0, phase_b=-1.0),
 ]

@@ -26,7 +26,7 @@ EXPECTED_PRESETS = {
     "black-flannel": Lambertian,
     "white-diffuse": Lambertian,
     "grey-diffuse": Lambertian,
-    "lunar-regolith": Hapke,
+    "vesta-regolith": Hapke,
 }
 
 
