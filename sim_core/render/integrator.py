@@ -298,10 +298,13 @@ def _ground_truth(ctx: _Context) -> dict:
     tfar, prim = ctx.tracer.intersect32(np.zeros_like(d, dtype=np.float32), d.astype(np.float32))
     hit = prim >= 0
     rng = np.where(hit, tfar.astype(np.float64), np.nan)
-    normal = ctx.normals[np.where(hit, prim, 0)] * hit[:, None]
-    facing = np.einsum("ij,ij->i", normal, d) > 0.0
-    normal[facing] *= -1.0
-    obj = np.where(hit, ctx.scene.object_index[np.where(hit, prim, 0)], -1).astype(np.int32)
+    normal = np.zeros((ctx.npix, 3))
+    obj = np.full(ctx.npix, -1, dtype=np.int32)
+    if hit.any():  # an empty scene has no normal table to index
+        normal[hit] = ctx.normals[prim[hit]]
+        facing = np.einsum("ij,ij->i", normal, d) > 0.0
+        normal[facing] *= -1.0
+        obj[hit] = ctx.scene.object_index[prim[hit]]
     # z component of each unit direction in the camera frame: depth_z = range * z.
     z_cam = d @ ctx.rotation[:, 2]
     return {
@@ -311,6 +314,16 @@ def _ground_truth(ctx: _Context) -> dict:
         "object_id": obj.reshape(h, w),
         "hit": hit.reshape(h, w),
     }
+
+
+def _shadow(tracer: RayTracer, contrib, origins, dirs, t_max) -> np.ndarray:
+    """Occlusion of the shadow rays whose contribution is positive; (k,) bool, False elsewhere."""
+    blocked = np.zeros(contrib.shape[0], dtype=np.bool_)
+    sel = np.flatnonzero(contrib > 0.0)
+    if sel.size:
+        o, d, t = kernels.gather_rays(sel, origins, dirs, t_max)
+        blocked[sel] = tracer.occluded32(o, d, t)
+    return blocked
 
 
 def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
@@ -349,28 +362,21 @@ def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
             ctx.amb_v, ctx.amb_size, ctx.amb_footprint, ctx.origin, npix,
             st.seed, b, st.russian_roulette_from_bounce, b < n_bounces,
         )
-        sel = np.flatnonzero(act > 0.0)
-        if sel.size:
-            blocked = ctx.tracer.occluded32(sh_o[sel], sh_d[sel], sh_t[sel])
-            ok = sel[~blocked]
-            kernels.accumulate_modulated(
-                flat[ok], act[ok], act_len[ok], ctx.psi_rad_m, out_active, out_re, out_im
-            )
+        blocked = _shadow(ctx.tracer, act, sh_o, sh_d, sh_t)
+        kernels.accumulate_vertices(
+            flat, act, act_len, blocked, ctx.psi_rad_m, out_active, out_re, out_im
+        )
         for a in range(ctx.n_ambient):
-            sel = np.flatnonzero(amb[a] > 0.0)
-            if sel.size == 0:
-                continue
-            dirs = np.empty((sel.size, 3), dtype=np.float32)
+            dirs = np.empty_like(amb_o[a])
             dirs[:] = -ctx.amb_dir[a]
-            tmax = np.full(sel.size, np.finfo(np.float32).max, dtype=np.float32)
-            blocked = ctx.tracer.occluded32(amb_o[a][sel], dirs, tmax)
-            ok = sel[~blocked]
-            kernels.accumulate(flat[ok], amb[a][ok], out_ambient)
+            tmax = np.full(amb_o[a].shape[0], np.finfo(np.float32).max, dtype=np.float32)
+            blocked = _shadow(ctx.tracer, amb[a], amb_o[a], dirs, tmax)
+            kernels.accumulate_ambient(flat, amb[a], blocked, out_ambient)
         if b == n_bounces:
             break
         keep = np.flatnonzero(alive)
         src = hit[keep]
-        o, d = nxt_o[keep], nxt_d[keep]
+        o, d, _ = kernels.gather_rays(keep, nxt_o, nxt_d, np.empty(0, dtype=np.float32))
         pix, pass_local = pix[src], pass_local[src]
         length, throughput = nxt_len[keep], nxt_thr[keep]
 

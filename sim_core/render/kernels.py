@@ -15,7 +15,6 @@ import hashlib
 import math
 from pathlib import Path
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -54,24 +53,22 @@ def _drop_stale_cache() -> None:
 
 _drop_stale_cache()
 
-# The default OpenMP/TBB layers keep their threads spinning after a parallel region, which
-# starves the Embree worker threads and numpy between kernels (measured: 2x slower frames on
-# 2 cores). The workqueue layer parks its threads.
-if numba.config.THREADING_LAYER == "default":
-    numba.config.THREADING_LAYER = "workqueue"
+# Every division in these kernels is guarded where its divisor can be 0 (see the comments), so
+# numba's per-division zero check (error_model="python") only costs time: "numpy" drops it.
+# The threading layer is set in sim_core.materials.kernels, imported above.
 
 # Relative and absolute offset of secondary-ray origins; see integrator.RAY_OFFSET_REL.
 _OFFSET_REL = 1e-5
 _OFFSET_MIN_M = 1e-6
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _offset_scale(px, py, pz):
     m = max(abs(px), abs(py), abs(pz)) * _OFFSET_REL
     return m if m > _OFFSET_MIN_M else _OFFSET_MIN_M
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _duff_frame(nx, ny, nz):
     """Branchless orthonormal basis (Duff et al. 2017) around a unit normal."""
     sign = 1.0 if nz >= 0.0 else -1.0
@@ -81,28 +78,34 @@ def _duff_frame(nx, ny, nz):
     return (1.0 + sign * nx * nx * a, sign * b, -sign * nx, b, sign + ny * ny * a, -ny)
 
 
-@njit(cache=True)
-def accumulate_modulated(flat, contrib, length_m, psi_rad_m, out_dc, out_re, out_im):
-    """Add contributions to DC and to each frequency's phasor (seed eqs. 17, 31), in order."""
+@njit(cache=True, parallel=True, error_model="numpy")
+def accumulate_vertices(flat, act, act_len, blocked, psi_rad_m, out_dc, out_re, out_im):
+    """Add the unblocked active-light contributions of one bounce (seed eqs. 17, 31).
+
+    Within one bounce every path owns its own (pass, pixel) slot ``flat``, so the writes never
+    collide and the loop runs in parallel with the same result as a serial one.
+    """
     nf = psi_rad_m.shape[0]
-    for j in range(flat.shape[0]):
-        c = contrib[j]
-        q = flat[j]
-        out_dc[q] += c
-        for k in range(nf):
-            phase = psi_rad_m[k] * length_m[j]
-            out_re[k, q] += c * np.cos(phase)
-            out_im[k, q] -= c * np.sin(phase)
+    for j in prange(flat.shape[0]):
+        c = act[j]
+        if c > 0.0 and not blocked[j]:
+            q = flat[j]
+            out_dc[q] += c
+            for k in range(nf):
+                phase = psi_rad_m[k] * act_len[j]
+                out_re[k, q] += c * math.cos(phase)
+                out_im[k, q] -= c * math.sin(phase)
 
 
-@njit(cache=True)
-def accumulate(flat, contrib, out):
-    """Add contributions to pixels, in order."""
-    for j in range(flat.shape[0]):
-        out[flat[j]] += contrib[j]
+@njit(cache=True, parallel=True, error_model="numpy")
+def accumulate_ambient(flat, amb, blocked, out):
+    """Add the unblocked ambient contributions of one bounce; slots are unique per bounce."""
+    for j in prange(flat.shape[0]):
+        if amb[j] > 0.0 and not blocked[j]:
+            out[flat[j]] += amb[j]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
     """World-frame unit directions through pixel coordinates (OpenCV model, pinhole).
 
@@ -135,7 +138,7 @@ def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def primary_rays(seed, first_pass, n_passes, u_px, v_px, jitter, fx, fy, cx, cy, dist, rotation):
     """Camera rays of ``n_passes`` sample passes: (n_passes * npix, 3) float32 directions.
 
@@ -159,7 +162,7 @@ def primary_rays(seed, first_pass, n_passes, u_px, v_px, jitter, fx, fy, cx, cy,
     return camera_rays(u, v, fx, fy, cx, cy, dist, rotation).astype(np.float32)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _profile_intensity(cos_a, scale, prof_angle, prof_rel):
     """Radiant intensity [W/sr] at angle arccos(cos_a) from the source axis (linear table)."""
     if prof_angle.shape[0] == 0:
@@ -172,7 +175,7 @@ def _profile_intensity(cos_a, scale, prof_angle, prof_rel):
     return scale * np.interp(a, prof_angle, prof_rel)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def bounce(
     hit, o, d, tfar, prim, pix, pass_local, first_pass, length, throughput,
     normals, tri_mat, mat_kind, mat_params,
@@ -306,3 +309,23 @@ def bounce(
         alive[j] = True
     return (flat, act, act_len, sh_o, sh_d, sh_t, amb, amb_o,
             nxt_o, nxt_d, nxt_len, nxt_thr, alive)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def gather_rays(idx, o, d, t):
+    """Rows ``idx`` of ray origins, directions (float32, (k, 3)) and lengths, contiguous.
+
+    numpy's fancy indexing of (k, 3) float32 rows measured ~20 ns per row here; this is a
+    plain parallel copy. ``t`` may be empty (then an empty array comes back).
+    """
+    n = idx.shape[0]
+    go = np.empty((n, 3), dtype=np.float32)
+    gd = np.empty((n, 3), dtype=np.float32)
+    gt = np.empty(n if t.shape[0] else 0, dtype=t.dtype)
+    for j in prange(n):
+        i = idx[j]
+        go[j, 0], go[j, 1], go[j, 2] = o[i, 0], o[i, 1], o[i, 2]
+        gd[j, 0], gd[j, 1], gd[j, 2] = d[i, 0], d[i, 1], d[i, 2]
+        if t.shape[0]:
+            gt[j] = t[i]
+    return go, gd, gt
