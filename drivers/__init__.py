@@ -4,10 +4,14 @@
   (:class:`TurntableProtocol`, :class:`Turntable`).
 - Solar simulator: an Oriel arc-lamp supply (69907 family) and a 68945 exposure controller
   (shutter), two RS-232 ports (:class:`SolarSimulatorProtocol`, :class:`SolarSimulator`).
-- The ToF camera (USB) comes later.
+- The ToF camera: a PMD pico flexx over USB, through royale where installed
+  (:class:`drivers.royale_backend.RoyaleCamera`) or our own bulk-transfer wire format
+  (:class:`drivers.camera.UsbCamera`), behind one :class:`drivers.camera.Camera` protocol.
+- :class:`drivers.rig.Rig` composes the three behind one lock.
 
-The byte-level simulators live in :mod:`drivers.sim`; ``python -m drivers.sim.pty_server KIND``
-serves one on a pseudo-terminal. Protocol details and sources: ``docs/devices.md``.
+The byte-level simulators live in :mod:`drivers.sim` (serial devices on a pseudo-terminal or a
+TCP socket, the camera as a pyusb backend); ``python -m drivers.sim.pty_server KIND`` serves a
+serial one on a pseudo-terminal. Protocol details and sources: ``docs/devices.md``.
 """
 
 from drivers.errors import (

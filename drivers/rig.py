@@ -1,0 +1,342 @@
+"""The rig: turntable, solar simulator and ToF camera behind one lock.
+
+:class:`Rig` composes the three device protocols. One ``threading.Lock`` guards the whole rig:
+``with rig.hold(): ...`` makes a sequence (move, illuminate, capture) atomic with respect to other
+threads (the service's pose loop, a status poll). Rig methods take the lock themselves unless the
+calling thread already holds it, so they work both inside and outside ``hold()``.
+
+:meth:`Rig.simulated` starts the three simulators - the SMC100 and the Oriel units on
+pseudo-terminals (:func:`drivers.sim.pty_server.start_simulator`), the camera as a pyusb backend
+(:class:`drivers.sim.usb_camera.UsbCameraSim`) - and returns a rig whose *real* drivers are
+connected to them. The simulated camera's frame source receives, with every request, the rig
+state read from the simulators' physical models (``CameraRequest.rig_state``), so a renderer
+plugged in as ``frame_source`` renders for the current turntable angle and illumination.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+from drivers.camera import Camera, UsbCamera, UsbCameraSettings
+from drivers.errors import DeviceInputError, DeviceTimeoutError
+from drivers.sim.pty_server import SimHandle, start_simulator
+from drivers.sim.usb_camera import FrameSource, UsbCameraSim
+from drivers.solar_simulator import (
+    LAMP_SETTINGS,
+    SHUTTER_SETTINGS,
+    SolarSimulator,
+    SolarSimulatorProtocol,
+)
+from drivers.turntable import SMC100_SETTINGS, Turntable, TurntableProtocol
+from sim_core.raw import RawFrame
+
+__all__ = ["Rig", "RigState"]
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RigState:
+    """What the rig is doing, as far as the images are concerned.
+
+    Attributes
+    ----------
+    turntable_angle_deg : float
+        Turntable position in degrees.
+    solar_suns : float
+        Level of the solar simulator in suns implied by the lamp power (0 with the lamp off).
+    shutter_open : bool
+        Whether the solar simulator's shutter lets the light through.
+    """
+
+    turntable_angle_deg: float
+    solar_suns: float
+    shutter_open: bool
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.turntable_angle_deg):
+            raise DeviceInputError(
+                "turntable_angle_deg", f"got {self.turntable_angle_deg!r}; a finite angle"
+            )
+        if not (math.isfinite(self.solar_suns) and self.solar_suns >= 0):
+            raise DeviceInputError(
+                "solar_suns", f"got {self.solar_suns!r}; 0 (lamp off) or a level in suns"
+            )
+
+    @property
+    def irradiance_suns(self) -> float:
+        """Level reaching the scene: ``solar_suns`` with the shutter open, else 0."""
+        return self.solar_suns if self.shutter_open else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+class Rig:
+    """Turntable, solar simulator and camera behind one ``threading.Lock``.
+
+    Parameters
+    ----------
+    turntable : TurntableProtocol
+    solar : SolarSimulatorProtocol
+    camera : Camera
+    on_close : iterable of callables
+        Called (in order) by :meth:`close` after the devices are closed, e.g. to stop simulators.
+
+    Examples
+    --------
+    >>> rig = Rig.simulated(seed=1)
+    >>> with rig.hold():
+    ...     state = rig.apply(RigState(30.0, 1.0, True))
+    ...     frames = rig.capture(2)
+    >>> frames[0].meta["rig"]["turntable_angle_deg"]
+    30.0
+    >>> rig.close()
+    """
+
+    def __init__(
+        self,
+        turntable: TurntableProtocol,
+        solar: SolarSimulatorProtocol,
+        camera: Camera,
+        *,
+        on_close: Iterable[Callable[[], None]] = (),
+    ) -> None:
+        self.turntable = turntable
+        self.solar = solar
+        self.camera = camera
+        self.lock = threading.Lock()
+        self._owner: int | None = None
+        self._held_since = 0.0
+        self._on_close = list(on_close)
+        self._closed = False
+        #: the simulators behind a :meth:`simulated` rig (empty for a real rig)
+        self.sims: dict[str, Any] = {}
+
+    # -- locking ------------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def hold(self, timeout_s: float | None = None) -> Iterator[Rig]:
+        """Hold the rig's lock for a block; yields the rig.
+
+        Nested ``hold()`` in the thread that holds the lock passes straight through. Raises
+        :class:`DeviceTimeoutError` (naming the holder) if the lock is not free within
+        ``timeout_s`` (None: wait as long as it takes).
+        """
+        me = threading.get_ident()
+        if self._owner == me:
+            yield self
+            return
+        ok = self.lock.acquire() if timeout_s is None else self.lock.acquire(timeout=timeout_s)
+        if not ok:
+            held = time.monotonic() - self._held_since
+            raise DeviceTimeoutError(
+                f"rig busy: its lock is held by thread {self._owner} for {held:.1f} s; not "
+                f"free within {timeout_s:g} s"
+            )
+        self._owner, self._held_since = me, time.monotonic()
+        try:
+            yield self
+        finally:
+            self._owner = None
+            self.lock.release()
+
+    @property
+    def is_held(self) -> bool:
+        """True while some thread holds the rig."""
+        return self.lock.locked()
+
+    # -- state --------------------------------------------------------------------------------
+    def state(self) -> RigState:
+        """Read the state back from the devices."""
+        with self.hold():
+            return RigState(
+                turntable_angle_deg=self.turntable.position_deg(),
+                solar_suns=self.solar.read_suns(),
+                shutter_open=self.solar.shutter_is_open(),
+            )
+
+    def apply(self, target: RigState, *, wait_stable_s: float | None = None) -> RigState:
+        """Drive the rig to ``target`` and return the state read back.
+
+        Moves the turntable (homing first if needed), lights the lamp and sets the level
+        (``solar_suns`` > 0, within 0.8..1.2 suns) or puts the lamp out (0), and opens or closes
+        the shutter. With ``wait_stable_s`` the solar simulator's output is waited for
+        (:meth:`SolarSimulatorProtocol.wait_until_stable`) before returning.
+        """
+        with self.hold():
+            self.turntable.move_to(target.turntable_angle_deg)
+            if target.solar_suns > 0:
+                if not self.solar.is_lamp_on():
+                    self.solar.lamp_on()
+                self.solar.set_suns(target.solar_suns)
+                if wait_stable_s is not None:
+                    self.solar.wait_until_stable(wait_stable_s)
+            elif self.solar.is_lamp_on():
+                self.solar.lamp_off()
+            if target.shutter_open:
+                self.solar.open_shutter()
+            else:
+                self.solar.close_shutter()
+            return self.state()
+
+    def capture(self, n: int = 1) -> list[RawFrame]:
+        """Capture ``n`` frames; each frame's ``meta["rig"]`` holds the rig state at capture."""
+        with self.hold():
+            state = self.state().to_dict()
+            frames = self.camera.capture(n)
+        return [dataclasses.replace(f, meta={**f.meta, "rig": state}) for f in frames]
+
+    # -- life cycle ---------------------------------------------------------------------------
+    def close(self) -> None:
+        """Close the camera and both serial drivers, then run ``on_close``; safe to call twice.
+
+        Does not wait for the lock: closing must work even if a holder is stuck.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        for device in (self.camera, self.solar, self.turntable):
+            try:
+                device.close()
+            except Exception as exc:  # close everything even if one device fails
+                _log.warning("rig close: %s: %s", type(device).__name__, exc)
+        for hook in self._on_close:
+            try:
+                hook()
+            except Exception as exc:
+                _log.warning("rig close hook failed: %s", exc)
+
+    def __enter__(self) -> Rig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- the simulated rig --------------------------------------------------------------------
+    @classmethod
+    def simulated(
+        cls,
+        frame_source: FrameSource | None = None,
+        *,
+        seed: int = 0,
+        use_case: str = "MODE_5_45FPS_500",
+        instant: bool = True,
+        time_scale: float = 1.0,
+        transport: str = "pty",
+        turntable_faults: Iterable[str] = (),
+        solar_faults: Iterable[str] = (),
+        camera_faults: Iterable[str] = (),
+        camera_settings: UsbCameraSettings | None = None,
+    ) -> Rig:
+        """Start the three simulators and return a rig with real drivers connected to them.
+
+        Parameters
+        ----------
+        frame_source : callable or None
+            ``CameraRequest -> RawFrame`` for the simulated camera (a plane at 1 m when None);
+            ``request.rig_state`` is the :class:`RigState` of the simulated devices.
+        seed : int
+            The camera simulator's noise seed.
+        use_case : str
+            Use case the camera is configured with.
+        instant : bool
+            Motions, warm-up and frame timing complete at once (fast tests); otherwise the
+            simulators run in (scaled) real time.
+        time_scale : float
+            Simulated seconds per wall-clock second for the serial simulators.
+        transport : {"pty", "tcp"}
+            Where the serial simulators are served.
+        turntable_faults, solar_faults, camera_faults : iterable of str
+            Faults armed at start (``"stall:1"``, ``"lamp-fault"``, ``"drop:1@3"``).
+        camera_settings : UsbCameraSettings or None
+            Driver settings for the camera.
+        """
+        started: list[Callable[[], None]] = []
+        try:
+            tt_sim = start_simulator(
+                "turntable",
+                turntable_faults,
+                transport=transport,
+                instant=instant,
+                time_scale=time_scale,
+            )
+            started.append(tt_sim.stop)
+            solar_sim = start_simulator(
+                "solar-simulator",
+                solar_faults,
+                transport=transport,
+                instant=instant,
+                time_scale=time_scale,
+            )
+            started.append(solar_sim.stop)
+            cam_sim = UsbCameraSim(
+                frame_source,
+                seed=seed,
+                instant=instant,
+                faults=camera_faults,
+                state_provider=_physical_state(tt_sim, solar_sim),
+            )
+            fast = instant or time_scale > 1
+            turntable = Turntable(
+                tt_sim.ports[0],
+                settle_s=0.0 if fast else 0.2,
+                poll_interval_s=0.005 if fast else 0.05,
+                stall_timeout_s=0.5 if fast else 2.0,
+                settings=dataclasses.replace(
+                    SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
+                ),
+            )
+            turntable.connect()
+            started.append(turntable.close)
+            solar = SolarSimulator(
+                *solar_sim.ports,
+                warmup_s=0.0 if instant else 1800.0 / time_scale,
+                poll_interval_s=0.01 if fast else 0.5,
+                lamp_settings=dataclasses.replace(
+                    LAMP_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
+                ),
+                shutter_settings=dataclasses.replace(
+                    SHUTTER_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
+                ),
+            )
+            solar.connect()
+            started.append(solar.close)
+            camera = UsbCamera(backend=cam_sim, use_case=use_case, settings=camera_settings)
+            camera.connect()
+        except BaseException:
+            for stop in reversed(started):
+                with contextlib.suppress(Exception):
+                    stop()
+            raise
+        rig = cls(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop])
+        rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
+        return rig
+
+
+def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], RigState]:
+    """Read the rig state from the simulators' models (not through the drivers or the lock)."""
+    smc = tt_sim.models["turntable"]
+    solar = solar_sim.models["rig"]
+
+    def state() -> RigState:
+        lamp = solar.lamp
+        suns = (
+            solar.calibration.suns_for(lamp.electrical()[2], extrapolate=True)
+            if lamp.lamp_on
+            else 0.0
+        )
+        return RigState(
+            turntable_angle_deg=smc.current_position(),
+            solar_suns=max(0.0, suns),
+            shutter_open=bool(solar.shutter.is_open),
+        )
+
+    return state
