@@ -63,6 +63,15 @@ def simulate(
         float | None, typer.Option("--turntable-deg", help="Override the turntable angle [deg].")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    target_range_error_mm: Annotated[
+        float | None,
+        typer.Option("--target-range-error-mm",
+                     help="Sample adaptively until the range standard error is below this."),
+    ] = None,
+    time_budget_s: Annotated[
+        float | None,
+        typer.Option("--time-budget-s", help="Best accuracy within this many seconds."),
+    ] = None,
 ) -> None:
     """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
     from sim_core.pipeline import save_frame
@@ -101,12 +110,22 @@ def simulate(
                 built, settings, effects=effects, ideal=ideal,
                 tolerance_mm=effect_tolerance_mm,
                 progress=lambda done, total: progress.update(task, completed=done),
+                target_range_error_mm=target_range_error_mm,
+                time_budget_s=time_budget_s,
             )
     except InvalidInputError as exc:
         _fail_invalid(exc)
         return
     if explain:
         console.print(frame.plan.explain(), markup=False, highlight=False)
+    if frame.adaptive is not None:
+        a = frame.adaptive
+        console.print(
+            f"adaptive sampling: range standard error <= {a.achieved_range_error_mm:.3g} mm "
+            f"(p95 {a.achieved_range_error_p95_mm:.3g} mm) over {a.pixels_that_matter} pixels, "
+            f"{a.spp_min}-{a.spp_max} spp (mean {a.spp_mean:.0f}), {a.rounds} rounds, "
+            f"{a.seconds:.2f} s"
+        )
     save_frame(out, frame, scene_name=spec.name)
     t = frame.timings_s
     console.print(

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from sim_core import frame_io
+from sim_core.adaptive import AdaptiveReport, render_adaptive
 from sim_core.optics import apply_mtf, cos_off_axis
 from sim_core.plan import EffectPlan, plan_effects
 from sim_core.raw import RawFrame, reconstruct_raw
@@ -55,6 +56,7 @@ class SimulatedFrame:
     raw: RawFrame | None = None
     ideal: bool = True
     grey_full_scale: float | None = None
+    adaptive: AdaptiveReport | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -71,8 +73,14 @@ def simulate(
     tolerance_mm: float | None = None,
     tracer: RayTracer | None = None,
     progress=None,
+    target_range_error_mm: float | None = None,
+    time_budget_s: float | None = None,
 ) -> SimulatedFrame:
-    """Simulate one frame of ``scene``; see the module docstring for the stages."""
+    """Simulate one frame of ``scene``; see the module docstring for the stages.
+
+    With ``target_range_error_mm`` and/or ``time_budget_s`` the render samples adaptively
+    (:mod:`sim_core.adaptive`) instead of taking ``settings.spp`` samples everywhere.
+    """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     own_tracer = tracer is None
@@ -89,7 +97,12 @@ def simulate(
             integrator=settings.integrator if multipath else "direct",
             ambient=plan.enabled("ambient"),
         )
-        result = render(scene, run, tracer=tracer, progress=progress)
+        adaptive = None
+        if target_range_error_mm is None and time_budget_s is None:
+            result = render(scene, run, tracer=tracer, progress=progress)
+        else:
+            target_m = None if target_range_error_mm is None else target_range_error_mm * 1e-3
+            result, adaptive = render_adaptive(scene, run, target_m, time_budget_s, tracer)
     finally:
         if own_tracer:
             tracer.close()
@@ -137,6 +150,7 @@ def simulate(
         raw=raw,
         ideal=ideal,
         grey_full_scale=grey_full_scale,
+        adaptive=adaptive,
     )
 
 
@@ -223,8 +237,19 @@ def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "")
         "grey_preview_full_scale": full_scale,
         "arrays": ARRAY_UNITS,
         "effect_plan": frame.plan.to_dict(),
+        **_adaptive_meta(frame.adaptive),
         "sensor": None if frame.raw is None else frame.raw.meta.get("sensor"),
         **frame.extra,
     }
     frame_io.write_json(out / "frame.json", meta)
     return out
+
+
+def _adaptive_meta(report: AdaptiveReport | None) -> dict:
+    if report is None:
+        return {}
+    return {
+        "adaptive": report.to_dict(),
+        "achieved_range_error_mm": report.achieved_range_error_mm,
+        "seconds": report.seconds,
+    }

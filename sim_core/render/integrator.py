@@ -107,11 +107,11 @@ class RenderResult:
 
 
 class _Accumulator:
-    """Running per-pixel sums and sums of squares of per-pass sample values."""
+    """Running per-pixel sums and sums of squares of per-sample values, with per-pixel counts."""
 
     def __init__(self, npix: int, n_f: int) -> None:
         self.npix = npix
-        self.n = 0
+        self.n = np.zeros(npix, dtype=np.int64)
         self.s_active = np.zeros(npix)
         self.ss_active = np.zeros(npix)
         self.s_ambient = np.zeros(npix)
@@ -122,9 +122,12 @@ class _Accumulator:
         self.ss_im = np.zeros((n_f, npix))
         self.s_reim = np.zeros((n_f, npix))
 
-    def add(self, active, ambient, re, im) -> None:
-        """Add passes given as (g, npix) arrays (phasor parts: (n_f, g, npix))."""
-        self.n += active.shape[0]
+    def add(self, active, ambient, re, im, pixels: np.ndarray) -> None:
+        """Add g passes over ``pixels`` given as (g, npix) arrays (phasor parts (n_f, g, npix)).
+
+        Pixels that were not traced hold zeros and do not count as sampled.
+        """
+        self.n[pixels] += active.shape[0]
         self.s_active += active.sum(axis=0)
         self.ss_active += (active * active).sum(axis=0)
         self.s_ambient += ambient.sum(axis=0)
@@ -135,13 +138,111 @@ class _Accumulator:
         self.ss_im += (im * im).sum(axis=1)
         self.s_reim += (re * im).sum(axis=1)
 
-    @staticmethod
-    def _var(s, ss, n):
-        if n < 2:
-            return np.zeros_like(s)
-        mean = s / n
-        # Clamp tiny negative values from cancellation; the variance is never negative.
-        return np.maximum(ss / n - mean * mean, 0.0) * (n / (n - 1))
+    def mean(self, s: np.ndarray) -> np.ndarray:
+        """Per-pixel mean; unsampled pixels (n = 0) report 0, not 0/0."""
+        return s / np.maximum(self.n, 1)
+
+    def cov(self, a: np.ndarray, b: np.ndarray, sab: np.ndarray) -> np.ndarray:
+        """Unbiased per-sample covariance of two quantities; 0 with fewer than 2 samples."""
+        n = self.n
+        nn = np.maximum(n, 1)
+        c = (sab / nn - (a / nn) * (b / nn)) * (nn / np.maximum(nn - 1, 1))
+        return np.where(n >= 2, c, 0.0)
+
+    def var(self, s: np.ndarray, ss: np.ndarray) -> np.ndarray:
+        # Clamp tiny negative values from cancellation; a variance is never negative.
+        return np.maximum(self.cov(s, s, ss), 0.0)
+
+
+class ProgressiveRenderer:
+    """A render that can take more samples, for every pixel or for some, at any time.
+
+    ``render`` is this with ``spp`` samples for every pixel; adaptive sampling
+    (:mod:`sim_core.adaptive`) adds samples where the estimated error is still too large. A
+    pixel's k-th sample is the same whichever pixels are traced with it, so the result depends
+    only on how many samples each pixel got.
+    """
+
+    def __init__(
+        self, scene: Scene, settings: RenderSettings, tracer: RayTracer | None = None
+    ) -> None:
+        self._t_start = time.perf_counter()
+        self.scene = scene
+        self.settings = settings
+        cam = scene.camera
+        self.shape = cam.intrinsics.shape
+        self.npix = self.shape[0] * self.shape[1]
+        self._own_tracer = tracer is None
+        self.tracer = tracer or RayTracer(scene.triangles_m, cam.position_m, settings.threads)
+        self._stats0 = self.tracer.stats.snapshot()
+        self.timings_s: dict[str, float] = {"path_tracing": 0.0}
+        self.ctx = _Context(scene, settings, self.tracer, cam.position_m)
+        t0 = time.perf_counter()
+        self._truth = _ground_truth(self.ctx)
+        self.timings_s["ground_truth"] = time.perf_counter() - t0
+        self.acc = _Accumulator(self.npix, self.ctx.n_f)
+
+    @property
+    def samples(self) -> np.ndarray:
+        """Samples taken so far per pixel, (H, W)."""
+        return self.acc.n.reshape(self.shape)
+
+    def add_samples(
+        self,
+        n: int,
+        pixels: np.ndarray | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> None:
+        """Take ``n`` more samples of each pixel in ``pixels`` (flat indices; default all)."""
+        if pixels is None:
+            pix = np.arange(self.npix, dtype=np.int64)
+        else:
+            pix = np.asarray(pixels, dtype=np.int64)
+        if pix.size == 0 or n <= 0:
+            return
+        t0 = time.perf_counter()
+        group = max(1, WAVEFRONT_RAYS // pix.size)
+        done = 0
+        while done < n:
+            g = min(group, n - done)
+            _render_passes(self.ctx, pix, self.acc.n[pix], g, self.acc)
+            done += g
+            if progress is not None:
+                progress(done, n)
+        self.timings_s["path_tracing"] += time.perf_counter() - t0
+
+    def light_field(self) -> LightField:
+        """The estimate so far."""
+        acc, ctx, shape = self.acc, self.ctx, self.shape
+        var_re = acc.var(acc.s_re, acc.ss_re)
+        var_im = acc.var(acc.s_im, acc.ss_im)
+        cov = acc.cov(acc.s_re, acc.s_im, acc.s_reim)
+        return LightField(
+            frequencies_hz=ctx.freqs.copy(),
+            dc_active=acc.mean(acc.s_active).reshape(shape),
+            dc_ambient=acc.mean(acc.s_ambient).reshape(shape),
+            phasor=acc.mean(acc.s_re + 1j * acc.s_im).reshape((ctx.n_f, *shape)),
+            samples_per_pixel=acc.n.astype(np.int32).reshape(shape),
+            dc_active_var=acc.var(acc.s_active, acc.ss_active).reshape(shape),
+            dc_ambient_var=acc.var(acc.s_ambient, acc.ss_ambient).reshape(shape),
+            phasor_cov=np.stack([var_re, var_im, cov], axis=1).reshape((ctx.n_f, 3, *shape)),
+            **self._truth,
+        )
+
+    def result(self) -> RenderResult:
+        """The light field and what it cost so far."""
+        stats = self.tracer.stats
+        return RenderResult(
+            light_field=self.light_field(),
+            seconds=time.perf_counter() - self._t_start,
+            embree_seconds=stats.seconds - self._stats0.seconds,
+            rays_traced=stats.rays - self._stats0.rays,
+            timings_s=dict(self.timings_s),
+        )
+
+    def close(self) -> None:
+        if self._own_tracer:
+            self.tracer.close()
 
 
 def render(
@@ -150,7 +251,7 @@ def render(
     tracer: RayTracer | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> RenderResult:
-    """Render ``scene`` into a :class:`LightField`.
+    """Render ``scene`` with ``settings.spp`` samples per pixel into a :class:`LightField`.
 
     Parameters
     ----------
@@ -159,70 +260,14 @@ def render(
     tracer : RayTracer, optional
         Reuse an Embree scene built for this geometry (its origin must be the camera centre).
     progress : callable, optional
-        Called as ``progress(passes_done, passes_total)`` after each wavefront.
+        Called as ``progress(samples_done, samples_total)`` after each wavefront.
     """
-    t_start = time.perf_counter()
-    cam = scene.camera
-    intr = cam.intrinsics
-    h, w = intr.shape
-    npix = h * w
-    origin = cam.position_m
-    own_tracer = tracer is None
-    if tracer is None:
-        tracer = RayTracer(scene.triangles_m, origin, threads=settings.threads)
-    stats0 = tracer.stats.snapshot()
-    timings: dict[str, float] = {}
-
-    ctx = _Context(scene, settings, tracer, origin)
-    t0 = time.perf_counter()
-    truth = _ground_truth(ctx)
-    timings["ground_truth"] = time.perf_counter() - t0
-
-    acc = _Accumulator(npix, ctx.n_f)
-    group = max(1, WAVEFRONT_RAYS // npix)
-    t0 = time.perf_counter()
-    for first in range(0, settings.spp, group):
-        passes = range(first, min(first + group, settings.spp))
-        _render_passes(ctx, passes, acc)
-        if progress is not None:
-            progress(passes.stop, settings.spp)
-    timings["path_tracing"] = time.perf_counter() - t0
-
-    n = acc.n
-    shape = (h, w)
-    lf = LightField(
-        frequencies_hz=ctx.freqs.copy(),
-        dc_active=(acc.s_active / n).reshape(shape),
-        dc_ambient=(acc.s_ambient / n).reshape(shape),
-        phasor=((acc.s_re + 1j * acc.s_im) / n).reshape((ctx.n_f, *shape)),
-        samples_per_pixel=np.full(shape, n, dtype=np.int32),
-        dc_active_var=_Accumulator._var(acc.s_active, acc.ss_active, n).reshape(shape),
-        dc_ambient_var=_Accumulator._var(acc.s_ambient, acc.ss_ambient, n).reshape(shape),
-        phasor_cov=_phasor_cov(acc, n).reshape((ctx.n_f, 3, *shape)),
-        **truth,
-    )
-    stats = tracer.stats
-    result = RenderResult(
-        light_field=lf,
-        seconds=time.perf_counter() - t_start,
-        embree_seconds=stats.seconds - stats0.seconds,
-        rays_traced=stats.rays - stats0.rays,
-        timings_s=timings,
-    )
-    if own_tracer:
-        tracer.close()
-    return result
-
-
-def _phasor_cov(acc: _Accumulator, n: int) -> np.ndarray:
-    if n < 2:
-        return np.zeros((acc.s_re.shape[0], 3, acc.npix))
-    mre, mim = acc.s_re / n, acc.s_im / n
-    corr = n / (n - 1)
-    var_re = np.maximum(acc.ss_re / n - mre * mre, 0.0) * corr
-    var_im = np.maximum(acc.ss_im / n - mim * mim, 0.0) * corr
-    cov = (acc.s_reim / n - mre * mim) * corr
-    return np.stack([var_re, var_im, cov], axis=1)
+    r = ProgressiveRenderer(scene, settings, tracer)
+    try:
+        r.add_samples(settings.spp, progress=progress)
+        return r.result()
+    finally:
+        r.close()
 
 
 def material_tables(materials) -> tuple[np.ndarray, np.ndarray]:
@@ -326,9 +371,10 @@ def _shadow(tracer: RayTracer, contrib, origins, dirs, t_max) -> np.ndarray:
     return blocked
 
 
-def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
-    """Trace one wavefront holding the sample passes ``passes`` and add it to ``acc``."""
-    g = len(passes)
+def _render_passes(
+    ctx: _Context, pixels: np.ndarray, first_sample: np.ndarray, g: int, acc: _Accumulator
+) -> None:
+    """Trace ``g`` more samples of each pixel in ``pixels`` (one wavefront), add them to ``acc``."""
     npix = ctx.npix
     st = ctx.settings
     m = g * npix
@@ -337,15 +383,13 @@ def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
     out_re = np.zeros((ctx.n_f, m))
     out_im = np.zeros((ctx.n_f, m))
 
-    d = kernels.primary_rays(
-        st.seed, passes.start, g, ctx.u_px, ctx.v_px, st.jitter, ctx.intr.fx_px,
+    d, slot, keys = kernels.primary_rays(
+        st.seed, pixels, first_sample, g, npix, ctx.u_px, ctx.v_px, st.jitter, ctx.intr.fx_px,
         ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px, ctx.distortion, ctx.rotation,
     )
     o = np.zeros_like(d)
-    pix = np.tile(np.arange(npix, dtype=np.int64), g)
-    pass_local = np.repeat(np.arange(g, dtype=np.int64), npix)
-    length = np.zeros(m)
-    throughput = np.ones(m)
+    length = np.zeros(d.shape[0])
+    throughput = np.ones(d.shape[0])
 
     n_bounces = st.effective_bounces
     for b in range(1, n_bounces + 1):
@@ -355,12 +399,12 @@ def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
             break
         (flat, act, act_len, sh_o, sh_d, sh_t, amb, amb_o,
          nxt_o, nxt_d, nxt_len, nxt_thr, alive) = kernels.bounce(
-            hit, o, d, tfar, prim, pix, pass_local, passes.start, length, throughput,
+            hit, o, d, tfar, prim, slot, keys, length, throughput,
             ctx.normals, ctx.tri_mat, ctx.mat_kind, ctx.mat_params,
             ctx.light_pos, ctx.light_axis, ctx.light_scale, ctx.prof_angle, ctx.prof_rel,
             MIN_LIGHT_DISTANCE_M, ctx.amb_dir, ctx.amb_irr, ctx.amb_centre, ctx.amb_u,
-            ctx.amb_v, ctx.amb_size, ctx.amb_footprint, ctx.origin, npix,
-            st.seed, b, st.russian_roulette_from_bounce, b < n_bounces,
+            ctx.amb_v, ctx.amb_size, ctx.amb_footprint, ctx.origin,
+            b, st.russian_roulette_from_bounce, b < n_bounces,
         )
         blocked = _shadow(ctx.tracer, act, sh_o, sh_d, sh_t)
         kernels.accumulate_vertices(
@@ -377,11 +421,11 @@ def _render_passes(ctx: _Context, passes: range, acc: _Accumulator) -> None:
         keep = np.flatnonzero(alive)
         src = hit[keep]
         o, d, _ = kernels.gather_rays(keep, nxt_o, nxt_d, np.empty(0, dtype=np.float32))
-        pix, pass_local = pix[src], pass_local[src]
+        slot, keys = slot[src], keys[src]
         length, throughput = nxt_len[keep], nxt_thr[keep]
 
     gshape = (g, npix)
     acc.add(
         out_active.reshape(gshape), out_ambient.reshape(gshape),
-        out_re.reshape(ctx.n_f, *gshape), out_im.reshape(ctx.n_f, *gshape),
+        out_re.reshape(ctx.n_f, *gshape), out_im.reshape(ctx.n_f, *gshape), pixels,
     )

@@ -139,27 +139,40 @@ def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def primary_rays(seed, first_pass, n_passes, u_px, v_px, jitter, fx, fy, cx, cy, dist, rotation):
-    """Camera rays of ``n_passes`` sample passes: (n_passes * npix, 3) float32 directions.
+def primary_rays(
+    seed, pixels, first_sample, n_passes, npix, u_px, v_px, jitter, fx, fy, cx, cy, dist,
+    rotation,
+):
+    """Camera rays for ``n_passes`` more samples of each pixel in ``pixels``.
 
-    Pass ``s`` jitters pixel ``q`` by the uniforms of dimensions 0, 1 at bounce 0 of its path.
+    Ray ``i`` belongs to pixel ``q = pixels[i % n]`` and is that pixel's sample number
+    ``first_sample[i % n] + i // n``: its path key hashes (seed, that sample number, q), so a
+    pixel's k-th sample is the same whichever pixels are traced with it. Its jitter uses the
+    uniforms of bounce 0. Returns float32 directions (m, 3), the accumulation slot of each
+    ray (``(i // n) * npix + q``) and the path keys.
     """
-    npix = u_px.shape[0]
-    m = n_passes * npix
+    n = pixels.shape[0]
+    m = n_passes * n
     u = np.empty(m)
     v = np.empty(m)
+    slot = np.empty(m, dtype=np.int64)
+    keys = np.empty(m, dtype=np.uint64)
     sk = seed_key(seed)
     for i in prange(m):
-        s = first_pass + i // npix
-        q = i % npix
+        j = i % n
+        q = pixels[j]
+        local = i // n
+        key = path_key(sk, first_sample[j] + local, q)
+        keys[i] = key
+        slot[i] = local * npix + q
         if jitter:
-            ju, jv = uniform_pair(path_key(sk, s, q), 0, 0)
+            ju, jv = uniform_pair(key, 0, 0)
             u[i] = u_px[q] + ju - 0.5
             v[i] = v_px[q] + jv - 0.5
         else:
             u[i] = u_px[q]
             v[i] = v_px[q]
-    return camera_rays(u, v, fx, fy, cx, cy, dist, rotation).astype(np.float32)
+    return camera_rays(u, v, fx, fy, cx, cy, dist, rotation).astype(np.float32), slot, keys
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -177,11 +190,11 @@ def _profile_intensity(cos_a, scale, prof_angle, prof_rel):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def bounce(
-    hit, o, d, tfar, prim, pix, pass_local, first_pass, length, throughput,
+    hit, o, d, tfar, prim, slot, keys, length, throughput,
     normals, tri_mat, mat_kind, mat_params,
     light_pos, light_axis, light_scale, prof_angle, prof_rel, min_light_distance_m,
-    amb_dir, amb_irr, amb_centre, amb_u, amb_v, amb_size, amb_footprint, render_origin, npix,
-    seed, bounce_index, rr_from_bounce, scatter,
+    amb_dir, amb_irr, amb_centre, amb_u, amb_v, amb_size, amb_footprint, render_origin,
+    bounce_index, rr_from_bounce, scatter,
 ):
     """All the work at one path vertex except ray casting (seed eqs. 19-22).
 
@@ -209,7 +222,6 @@ def bounce(
     nxt_len = np.empty(k)
     nxt_thr = np.zeros(k)
     alive = np.zeros(k, dtype=np.bool_)
-    sk = seed_key(seed)
     for j in prange(k):
         i = hit[j]
         f = prim[i]
@@ -229,7 +241,7 @@ def bounce(
         kind = mat_kind[m]
         par = mat_params[m]
         ln = length[i] + t
-        flat[j] = pass_local[i] * npix + pix[i]
+        flat[j] = slot[i]
         thr = throughput[i]
         s = _offset_scale(px, py, pz)
 
@@ -283,7 +295,7 @@ def bounce(
 
         if not scatter or not thr > 0.0:
             continue
-        key = path_key(sk, first_pass + pass_local[i], pix[i])
+        key = keys[i]
         u0, u1 = uniform_pair(key, bounce_index, 0)
         u2, u3 = uniform_pair(key, bounce_index, 1)
         x, y, z, _pdf, w = sample_brdf(kind, par, wol0, wol1, wol2, u0, u1, u2)

@@ -79,4 +79,6 @@ class LightField:
         var_re, var_im, cov = self.phasor_cov[:, 0], self.phasor_cov[:, 1], self.phasor_cov[:, 2]
         # Perpendicular direction (-ci, cr): var = ci^2 var_re + cr^2 var_im - 2 cr ci cov.
         var_perp = ci * ci * var_re + cr * cr * var_im - 2.0 * cr * ci * cov
-        return np.sqrt(np.maximum(var_perp, 0.0) / self.samples_per_pixel)
+        # Unsampled pixels (0 samples) have no estimate: report an infinite error.
+        n = self.samples_per_pixel
+        return np.where(n > 0, np.sqrt(np.maximum(var_perp, 0.0) / np.maximum(n, 1)), np.inf)

@@ -1,0 +1,173 @@
+"""Accuracy as a knob: sample until the range error is small enough, or until time runs out.
+
+The Monte Carlo standard error of a pixel's range follows from the spread of its samples'
+phasors (``LightField.phasor_standard_error``): the phasor component perpendicular to the mean
+moves the phase, sigma_phi = sigma_perp / |mean|, and sigma_range = c / (4 pi f) sigma_phi
+(seed eq. 7). Sampling works in rounds; every round gives more samples only to the pixels that
+matter (their centre ray hits a surface that returns light) and whose estimate is still above
+the target, as many as the 1/sqrt(n) law says they need (at most 4x per round, since the
+estimate itself is noisy at low counts).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from sim_core.constants import SPEED_OF_LIGHT_M_S
+from sim_core.errors import InvalidInputError
+from sim_core.render import LightField, ProgressiveRenderer, RenderResult, RenderSettings
+from sim_core.scene import Scene
+from sim_core.tracing import RayTracer
+
+#: samples every pixel gets before any estimate is trusted
+INITIAL_SPP = 16
+#: hard cap of samples per pixel, so dark or pathological pixels cannot stall the render
+MAX_SPP = 16384
+#: growth of a pixel's sample count per round, at most
+MAX_GROWTH = 4.0
+
+
+@dataclass(frozen=True)
+class AdaptiveReport:
+    """What adaptive sampling did and reached; ``to_dict`` goes into frame.json."""
+
+    target_range_error_mm: float | None
+    time_budget_s: float | None
+    achieved_range_error_mm: float
+    achieved_range_error_p95_mm: float
+    fraction_meeting_target: float
+    seconds: float
+    rounds: int
+    pixels_that_matter: int
+    spp_min: int
+    spp_mean: float
+    spp_max: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def range_standard_error_m(lf: LightField, k: int = 0) -> np.ndarray:
+    """Monte Carlo standard error of range per pixel [m]; inf where there is no signal."""
+    mag = np.abs(lf.phasor[k])
+    se_perp = lf.phasor_standard_error()[k]
+    sigma_phi = np.where(mag > 0.0, se_perp / np.where(mag > 0.0, mag, 1.0), np.inf)
+    return SPEED_OF_LIGHT_M_S / (4.0 * np.pi * lf.frequencies_hz[k]) * sigma_phi
+
+
+def pixels_that_matter(lf: LightField) -> np.ndarray:
+    """Pixels whose centre ray hits geometry that returns the camera's light, (H, W) bool."""
+    return lf.hit & (lf.dc_active > 0.0)
+
+
+def render_adaptive(
+    scene: Scene,
+    settings: RenderSettings,
+    target_range_error_m: float | None = None,
+    time_budget_s: float | None = None,
+    tracer: RayTracer | None = None,
+    initial_spp: int = INITIAL_SPP,
+    max_spp: int = MAX_SPP,
+) -> tuple[RenderResult, AdaptiveReport]:
+    """Render until every pixel that matters has a range standard error below the target,
+    or (with ``time_budget_s``) spend the budget on the worst pixels; both may be given.
+    """
+    if target_range_error_m is None and time_budget_s is None:
+        raise InvalidInputError(
+            "target_range_error_mm", "give a target range error or a time budget (or both)"
+        )
+    if target_range_error_m is not None and not 0.0 < target_range_error_m < 1e3:
+        raise InvalidInputError(
+            "target_range_error_mm", f"{target_range_error_m * 1e3} mm is outside (0, 1e6) mm"
+        )
+    if time_budget_s is not None and not 0.0 < time_budget_s <= 86_400.0:
+        raise InvalidInputError("time_budget_s", f"{time_budget_s} s is outside (0, 86400] s")
+    t0 = time.perf_counter()
+    r = ProgressiveRenderer(scene, settings, tracer)
+    try:
+        r.add_samples(initial_spp)
+        rounds = 1
+        while True:
+            lf = r.light_field()
+            se = range_standard_error_m(lf).ravel()
+            matter = pixels_that_matter(lf).ravel()
+            n = r.acc.n
+            elapsed = time.perf_counter() - t0
+            if time_budget_s is not None and elapsed >= time_budget_s:
+                break
+            open_ = matter & (n < max_spp)
+            if target_range_error_m is not None:
+                open_ &= se > target_range_error_m
+                want = np.where(open_, n * (se / target_range_error_m) ** 2, n)
+            else:
+                # Budget only: halve the error of the worse half of the pixels each round.
+                if not open_.any():
+                    break
+                open_ &= se >= np.median(se[open_])
+                want = np.where(open_, 4.0 * n, n)
+            if not open_.any():
+                break
+            grow = np.clip(want, n + 1, np.minimum(MAX_GROWTH * n, max_spp)) - n
+            extra = np.where(open_, np.ceil(grow), 0).astype(np.int64)
+            if time_budget_s is not None:
+                per_sample = (time.perf_counter() - t0) / max(int(n.sum()), 1)
+                extra = _fit_budget(extra, se, per_sample, time_budget_s - elapsed)
+                if not extra.any():
+                    break
+            _add_grouped(r, extra)
+            rounds += 1
+        result = r.result()
+    finally:
+        r.close()
+    lf = result.light_field
+    se = range_standard_error_m(lf)
+    matter = pixels_that_matter(lf)
+    se_m = se[matter]
+    finite = se_m[np.isfinite(se_m)]
+    spp = lf.samples_per_pixel[matter] if matter.any() else lf.samples_per_pixel.ravel()
+    report = AdaptiveReport(
+        target_range_error_mm=None if target_range_error_m is None else target_range_error_m * 1e3,
+        time_budget_s=time_budget_s,
+        achieved_range_error_mm=float(finite.max() * 1e3) if finite.size else 0.0,
+        achieved_range_error_p95_mm=float(np.percentile(finite, 95) * 1e3) if finite.size else 0.0,
+        fraction_meeting_target=(
+            float(np.mean(se_m <= target_range_error_m)) if target_range_error_m and se_m.size
+            else 1.0
+        ),
+        seconds=time.perf_counter() - t0,
+        rounds=rounds,
+        pixels_that_matter=int(matter.sum()),
+        spp_min=int(spp.min()) if spp.size else 0,
+        spp_mean=float(spp.mean()) if spp.size else 0.0,
+        spp_max=int(spp.max()) if spp.size else 0,
+    )
+    return result, report
+
+
+def _fit_budget(extra: np.ndarray, se: np.ndarray, per_sample_s: float, left_s: float):
+    """Keep the worst pixels' extra samples that fit in the time left."""
+    cost = extra * per_sample_s
+    if cost.sum() <= left_s:
+        return extra
+    order = np.argsort(-np.where(extra > 0, se, -np.inf))
+    fits = np.cumsum(cost[order]) <= left_s
+    out = np.zeros_like(extra)
+    out[order[fits]] = extra[order[fits]]
+    return out
+
+
+def _add_grouped(r: ProgressiveRenderer, extra: np.ndarray) -> None:
+    """Give each pixel ``extra`` more samples, in batches of pixels that want the same count.
+
+    Counts are rounded up to powers of two so that there are few batches (each one is a
+    wavefront over its pixels).
+    """
+    need = extra > 0
+    levels = np.zeros_like(extra)
+    levels[need] = 2 ** np.ceil(np.log2(extra[need])).astype(np.int64)
+    for k in np.unique(levels[need]):
+        r.add_samples(int(k), np.flatnonzero(levels == k))
+
