@@ -59,9 +59,9 @@ def test_reported_error_agrees_with_the_real_error_over_several_seeds(corner, re
 
 
 def test_a_larger_time_budget_buys_a_smaller_error(corner):
-    small_res, small = render_adaptive(corner, RenderSettings(max_bounces=3, seed=2),
+    _, small = render_adaptive(corner, RenderSettings(max_bounces=3, seed=2),
                                        time_budget_s=0.5)
-    big_res, big = render_adaptive(corner, RenderSettings(max_bounces=3, seed=2),
+    _, big = render_adaptive(corner, RenderSettings(max_bounces=3, seed=2),
                                    time_budget_s=3.0)
     assert big.achieved_range_error_p95_mm < small.achieved_range_error_p95_mm
     # A round that is under way finishes, so the budget can be overrun by one round at most.
