@@ -24,6 +24,16 @@ app = typer.Typer(
 bench_app = typer.Typer(help="Benchmarks that print figures.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 
+
+def _register_device_commands() -> None:
+    from service.devices_cmd import devices_app, sim_device
+
+    app.add_typer(devices_app, name="devices")
+    app.command("sim-device")(sim_device)
+
+
+_register_device_commands()
+
 err_console = Console(stderr=True)
 console = Console()
 
@@ -201,6 +211,17 @@ def bench_render(
         )
     except InvalidInputError as exc:
         _fail_invalid(exc)
+
+
+@bench_app.command("accuracy")
+def bench_accuracy(
+    out: Annotated[Path | None, typer.Option("--out", help="Directory for CSV, PNG, JSON.")] = None,
+    quick: Annotated[bool, typer.Option("--quick", help="Reduced sweep (minutes).")] = False,
+) -> None:
+    """Accuracy against time: error of every setting against a high-quality reference."""
+    from service.bench_accuracy import run_accuracy_benchmark
+
+    run_accuracy_benchmark(out, quick, console)
 
 
 @bench_app.command("ground-test")

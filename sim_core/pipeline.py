@@ -75,11 +75,14 @@ def simulate(
     progress=None,
     target_range_error_mm: float | None = None,
     time_budget_s: float | None = None,
+    noise_rng: np.random.Generator | None = None,
 ) -> SimulatedFrame:
     """Simulate one frame of ``scene``; see the module docstring for the stages.
 
     With ``target_range_error_mm`` and/or ``time_budget_s`` the render samples adaptively
     (:mod:`sim_core.adaptive`) instead of taking ``settings.spp`` samples everywhere.
+    ``noise_rng`` replaces the sensor-noise generator derived from ``settings.seed`` (the camera
+    simulator draws each frame's noise from its own seed and frame number).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -129,8 +132,9 @@ def simulate(
     else:
         sensor = dataclasses.replace(scene.sensor, sbi_enabled=plan.enabled("sbi"))
         e = mean_electrons(dc_active, dc_ambient, phasor, scene.camera, sensor)
-        rng = (np.random.default_rng([settings.seed, NOISE_STREAM])
-               if plan.enabled("noise") else None)
+        rng = None
+        if plan.enabled("noise"):
+            rng = noise_rng or np.random.default_rng([settings.seed, NOISE_STREAM])
         raw = expose(e, scene.camera, sensor, rng, meta={"seed": settings.seed})
         timings["sensor"] = time.perf_counter() - t
         t = time.perf_counter()

@@ -1,0 +1,159 @@
+"""The Mitsuba 3 comparison benchmark: a quick run where Mitsuba works, a clear error where not.
+
+Mitsuba is an optional benchmark dependency (extra ``bench``); CI installs only ``.[dev]``, so
+there the tests assert the RuntimeError that says how to install it. Nothing here is skipped.
+"""
+
+import importlib.util
+import io
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rich.console import Console
+
+from service import bench_mitsuba as bm
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _mitsuba_loads() -> tuple[bool, str]:
+    """(True, "") if Mitsuba and its LLVM backend load; else (False, the RuntimeError text)."""
+    try:
+        bm.load_mitsuba()
+    except RuntimeError as exc:
+        return False, str(exc)
+    return True, ""
+
+
+def _assert_clear(msg: str) -> None:
+    assert "pip install" in msg and "mitsuba" in msg.lower()
+    assert "libllvm19" in msg and "DRJIT_LIBLLVM_PATH" in msg
+
+
+@pytest.mark.slow
+def test_quick_comparison_or_clear_error():
+    console = Console(file=io.StringIO(), width=200)
+    if importlib.util.find_spec("mitsuba") is None:
+        with pytest.raises(RuntimeError) as err:
+            bm.run_mitsuba_comparison(console, quick=True)
+        _assert_clear(str(err.value))
+        return
+    ok, msg = _mitsuba_loads()
+    if not ok:  # installed without a usable libLLVM: the same clear error
+        with pytest.raises(RuntimeError) as err:
+            bm.run_mitsuba_comparison(console, quick=True)
+        _assert_clear(str(err.value))
+        _assert_clear(msg)
+        return
+
+    res = bm.run_mitsuba_comparison(console, spps=(2,), bounces=(1, 2), quick=True)
+    out = console.file.getvalue()
+    assert "Speed and DC agreement" in out and "reference check" in out
+    assert res["camera_mismatch_deg"] < 1e-3
+    assert [(r["bounces"], r["spp"]) for r in res["rows"]] == [(1, 2), (2, 2)]
+    for row in res["rows"]:
+        for key in ("ours_s", "mitsuba_s", "ratio_ours_over_mitsuba", "scale", "rel_rmse",
+                    "max_rel_err", "rel_rmse_blocks"):
+            assert math.isfinite(row[key]) and row[key] >= 0.0, (key, row)
+        assert 0.8 < row["scale"] < 1.25
+        assert row["mitsuba_max_depth"] == row["bounces"] + 1
+    # Direct light hardly has Monte Carlo noise: the two must agree closely already.
+    direct = res["rows"][0]
+    assert abs(direct["scale"] - 1.0) < 0.01 and direct["rel_rmse"] < 0.02
+    ref = res["reference"]
+    assert abs(ref["scale"] - 1.0) < 0.03
+    assert ref["rel_rmse_over_noise"] < 1.5  # the difference is Monte Carlo noise
+    tte = res["time_to_error"]
+    for who in ("ours", "mitsuba"):
+        assert math.isfinite(tte[who]["seconds_to_target"]) and tte[who]["seconds_to_target"] > 0
+        assert all(e > 0 for e in tte[who]["rel_rmse_raw"])
+    assert math.isfinite(tte["ratio_ours_over_mitsuba"])
+
+
+def test_missing_mitsuba_raises_clear_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # makes `import mitsuba` fail
+    with pytest.raises(RuntimeError) as err:
+        bm.run_mitsuba_comparison(Console(file=io.StringIO()), quick=True)
+    _assert_clear(str(err.value))
+    assert "not installed" in str(err.value)
+
+
+def test_unloadable_libllvm_raises_clear_error(tmp_path):
+    """A fresh process with a wrong DRJIT_LIBLLVM_PATH: Dr.Jit cannot start its LLVM backend."""
+    code = (
+        "from service.bench_mitsuba import load_mitsuba\n"
+        "try:\n    load_mitsuba()\nexcept RuntimeError as e:\n    print('RTE:', e)\n"
+        "else:\n    print('LOADED')\n"
+    )
+    env = {**os.environ, "DRJIT_LIBLLVM_PATH": str(tmp_path / "libLLVM-nope.so")}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "RTE:" in proc.stdout and "LOADED" not in proc.stdout, proc.stdout
+    _assert_clear(proc.stdout)
+
+
+def test_scale_fit_and_errors():
+    rng = np.random.default_rng(0)
+    ours = rng.uniform(1.0, 2.0, (40, 48))
+    agr = bm.agreement(ours, ours / 2.5)
+    assert agr["scale"] == pytest.approx(2.5)
+    assert agr["rel_rmse"] < 1e-12 and agr["max_rel_err"] < 1e-12
+    assert agr["rel_rmse_blocks"] < 1e-12
+    # noise in the second image does not bias the scale (it is fitted on block means)
+    noisy = ours / 2.0 * (1.0 + 0.2 * rng.standard_normal(ours.shape))
+    agr = bm.agreement(ours, noisy)
+    assert agr["scale"] == pytest.approx(2.0, rel=0.01)
+    assert 0.15 < agr["rel_rmse"] < 0.25
+    assert agr["rel_rmse_blocks"] < 0.05
+    assert bm.rel_rmse(ours * 1.1, ours) == pytest.approx(0.1)
+    assert bm.block_means(np.arange(17 * 16.0).reshape(17, 16), 8).shape == (2, 2)
+
+
+def test_loglog_crossing():
+    t = np.array([1.0, 2.0, 4.0, 8.0])
+    err = 0.2 / np.sqrt(t)
+    x, extrapolated = bm.loglog_crossing(t, err, 0.1)
+    assert x == pytest.approx(4.0) and not extrapolated
+    x, extrapolated = bm.loglog_crossing(t, err, 0.05)  # beyond the sweep: fitted line
+    assert x == pytest.approx(16.0) and extrapolated
+    x, _ = bm.loglog_crossing(t, np.full(4, 0.1), 0.05)  # not decreasing
+    assert math.isnan(x)
+
+
+def test_ply_writer_and_camera_refusals(tmp_path):
+    tris = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 1], [1, 0, 1], [0, 1, 1]]], float)
+    path = tmp_path / "m.ply"
+    bm.write_ply(path, tris)
+    data = path.read_bytes()
+    head, body = data.split(b"end_header\n")
+    assert b"element vertex 6" in head and b"element face 2" in head
+    assert len(body) == 6 * 12 + 2 * 13
+    np.testing.assert_array_equal(np.frombuffer(body[:72], "<f4").reshape(2, 3, 3), tris)
+
+    from sim_core.camera import Camera, Intrinsics, look_at
+    from sim_core.scene import build_scene
+    from sim_core.scene_spec import load_scene_spec
+
+    scene = build_scene(load_scene_spec(bm.CORNER_SCENE), base_dir=bm.CORNER_SCENE.parent)
+    pose = look_at([1.5, 1.5, 1.5], [0, 0, 0], [0, 0, 1])
+    for intr, what in (
+        (Intrinsics(224, 171, 200.0, 210.0, 111.5, 85.0), "square pixels"),
+        (Intrinsics(224, 171, 200.0, 200.0, 111.5, 85.0, (0.1, 0, 0, 0, 0)), "distortion"),
+    ):
+        cam = Camera(intr, pose)
+        bad = type(scene)(**{**scene.__dict__, "camera": cam})
+        with pytest.raises(ValueError, match=what):
+            bm.mitsuba_sensor_dict(None, bad)
+
+
+def test_find_libllvm_returns_a_file_or_none():
+    path = bm.find_libllvm()
+    assert path is None or Path(path).is_file()
