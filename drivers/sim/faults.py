@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import re
 import threading
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 
 from drivers.errors import DeviceInputError
@@ -43,7 +44,15 @@ FAULTS: dict[str, str] = {
     "lamp-fault": "arc lamp goes out, STB fault bit, ESR device error (event: command, lamp on)",
     "interlock": "lamp supply interlock opens; lamp off, START refused (event: a command)",
 }
+# The camera simulator (drivers.sim.usb_camera) shares the grammar and the injector; its own
+# faults, and what "truncated" and "disconnect" mean for it, are listed in its CAMERA_FAULTS.
+FAULTS.update({
+    "no-data": "camera: the bulk IN endpoint sends nothing, the host's read times out",
+    "corrupt": "camera: payload bytes flipped after the CRC was computed",
+    "drop": "camera: a frame is produced, its sequence number used, but never sent",
+})
 FAULT_NAMES: tuple[str, ...] = tuple(FAULTS)
+CAMERA_FAULT_NAMES: tuple[str, ...] = ("no-data", "truncated", "corrupt", "drop", "disconnect")
 _COMMON = ("no-reply", "garbled", "truncated", "disconnect")
 TURNTABLE_FAULTS: tuple[str, ...] = (*_COMMON, "stall", "stall-hang")
 SOLAR_FAULTS: tuple[str, ...] = (*_COMMON, "lamp-fault", "interlock")
@@ -122,15 +131,22 @@ class FaultInjector:
     count down, the first due spec fires and loses one of its count.
     """
 
-    def __init__(self, specs: list[FaultSpec] | None = None) -> None:
+    def __init__(
+        self,
+        specs: Iterable[FaultSpec | str] | None = None,
+        allowed: tuple[str, ...] = FAULT_NAMES,
+    ) -> None:
         self._lock = threading.Lock()
-        self._specs: list[FaultSpec] = list(specs or [])
+        self.allowed = allowed
+        self._specs: list[FaultSpec] = [
+            parse_fault(s, allowed) if isinstance(s, str) else s for s in (specs or [])
+        ]
         self.fired: list[str] = []
 
     def inject(self, spec: FaultSpec | str, **params: float) -> FaultSpec:
         """Arm a fault now (a spec or its text form); keyword arguments become its params."""
         if isinstance(spec, str):
-            spec = parse_fault(spec)
+            spec = parse_fault(spec, self.allowed)
         if params:
             spec = replace(spec, params={**spec.params, **params})
         with self._lock:

@@ -29,11 +29,10 @@ from __future__ import annotations
 import collections
 import errno
 import math
-import re
 import threading
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,6 +54,7 @@ from drivers.camera_wire import (
     get_use_case,
 )
 from drivers.errors import DeviceInputError
+from drivers.sim.faults import CAMERA_FAULT_NAMES, FaultInjector, FaultSpec, parse_fault
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.raw import PHASE_OFFSETS_RAD, RawFrame
 
@@ -183,96 +183,24 @@ CAMERA_FAULTS: dict[str, str] = {
     "disconnect": "the device leaves the bus for 'downtime_s' (default 0.3 s; inf: for good) "
     "and comes back with a new address in power-on state (event: a frame)",
 }
-_SPEC = re.compile(r"^(?P<name>[a-z][a-z-]*)(?::(?P<count>\d+))?(?:@(?P<skip>\d+))?$")
-
-
-@dataclass(frozen=True)
-class CameraFault:
-    """One armed camera fault (``count`` None: every event; ``skip``: events let through)."""
-
-    name: str
-    count: int | None = None
-    skip: int = 0
-    params: dict[str, float] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.name not in CAMERA_FAULTS:
-            raise DeviceInputError(
-                "fault", f"unknown camera fault {self.name!r}; known: {', '.join(CAMERA_FAULTS)}"
-            )
-        if self.count is not None and self.count < 1:
-            raise DeviceInputError("fault.count", f"got {self.count}; at least 1 (or omit)")
-        if self.skip < 0:
-            raise DeviceInputError("fault.skip", f"got {self.skip}; 0 or more")
+#: A camera fault is a :class:`drivers.sim.faults.FaultSpec` whose name is a camera fault.
+CameraFault = FaultSpec
 
 
 def parse_camera_fault(text: str) -> CameraFault:
-    """Parse ``name[:count][@skip]``.
+    """Parse ``name[:count][@skip]`` for the camera (see :data:`CAMERA_FAULTS`).
 
     >>> parse_camera_fault("drop:2@3")
-    CameraFault(name='drop', count=2, skip=3, params={})
+    FaultSpec(name='drop', count=2, skip=3, params={})
     """
-    match = _SPEC.match(text.strip())
-    if match is None:
-        raise DeviceInputError(
-            "fault", f"cannot parse {text!r}; expected name[:count][@skip], e.g. 'corrupt:1'"
-        )
-    count = match.group("count")
-    return CameraFault(
-        match.group("name"), None if count is None else int(count), int(match.group("skip") or 0)
-    )
+    return parse_fault(text, CAMERA_FAULT_NAMES)
 
 
-class CameraFaultInjector:
-    """Armed camera faults; :meth:`fire` counts one event and says whether a fault is due."""
+class CameraFaultInjector(FaultInjector):
+    """Armed camera faults: the serial simulators' injector, restricted to camera faults."""
 
     def __init__(self, faults: Iterable[CameraFault | str] = ()) -> None:
-        self._lock = threading.Lock()
-        self._specs: list[CameraFault] = [
-            parse_camera_fault(f) if isinstance(f, str) else f for f in faults
-        ]
-        self.fired: list[str] = []
-
-    def inject(self, fault: CameraFault | str, **params: float) -> CameraFault:
-        """Arm a fault now; keyword arguments become its params (``downtime_s=0.5``)."""
-        spec = parse_camera_fault(fault) if isinstance(fault, str) else fault
-        if params:
-            spec = replace(spec, params={**spec.params, **params})
-        with self._lock:
-            self._specs.append(spec)
-        return spec
-
-    def clear(self, name: str | None = None) -> None:
-        """Disarm every fault, or every fault called ``name``."""
-        with self._lock:
-            self._specs = [s for s in self._specs if name is not None and s.name != name]
-
-    def armed(self) -> list[CameraFault]:
-        with self._lock:
-            return list(self._specs)
-
-    def fire(self, name: str) -> CameraFault | None:
-        """Count one event for faults called ``name``; return the one that fires, if any."""
-        with self._lock:
-            fired: CameraFault | None = None
-            kept: list[CameraFault] = []
-            for spec in self._specs:
-                if spec.name != name:
-                    kept.append(spec)
-                elif spec.skip > 0:
-                    kept.append(replace(spec, skip=spec.skip - 1))
-                elif fired is None:
-                    fired = spec
-                    if spec.count is None:
-                        kept.append(spec)
-                    elif spec.count > 1:
-                        kept.append(replace(spec, count=spec.count - 1))
-                else:
-                    kept.append(spec)
-            self._specs = kept
-            if fired is not None:
-                self.fired.append(name)
-            return fired
+        super().__init__(list(faults), allowed=CAMERA_FAULT_NAMES)
 
 
 # -- libusb error codes, as pyusb's libusb1 backend raises them ------------------------------

@@ -6,6 +6,7 @@ import pytest
 
 from drivers.errors import DeviceInputError
 from drivers.sim.faults import (
+    CAMERA_FAULT_NAMES,
     FAULT_NAMES,
     SOLAR_FAULTS,
     TURNTABLE_FAULTS,
@@ -20,7 +21,7 @@ pytestmark = pytest.mark.timeout(10)
 def test_every_required_fault_has_a_name():
     for name in ("no-reply", "garbled", "truncated", "stall", "disconnect", "lamp-fault"):
         assert name in FAULT_NAMES
-    assert set(TURNTABLE_FAULTS) | set(SOLAR_FAULTS) == set(FAULT_NAMES)
+    assert set(TURNTABLE_FAULTS) | set(SOLAR_FAULTS) | set(CAMERA_FAULT_NAMES) == set(FAULT_NAMES)
 
 
 @pytest.mark.parametrize(
