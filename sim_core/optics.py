@@ -158,7 +158,9 @@ def apply_mtf(image: np.ndarray, components: list[MTFComponent]) -> np.ndarray:
     pad = padding_px(components)
     h, w = image.shape[-2:]
     widths = [(0, 0)] * (image.ndim - 2) + [(pad, pad), (pad, pad)]
-    padded = np.pad(image, widths, mode="reflect" if min(h, w) > pad else "edge")
+    # "reflect" also for pads wider than the image (numpy reflects repeatedly): "edge" would
+    # repeat a border pixel across the whole pad and the filter would pull that streak back in.
+    padded = np.pad(image, widths, mode="reflect")
     hp, wp = padded.shape[-2:]
     fy = np.fft.fftfreq(hp)[:, None]
     fx = np.fft.fftfreq(wp)[None, :]

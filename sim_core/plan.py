@@ -28,6 +28,7 @@ import numpy as np
 
 from sim_core import optics
 from sim_core.camera import Camera, Intrinsics
+from sim_core.raw import ValidityThresholds
 from sim_core.render import RenderSettings, render
 from sim_core.scene import Scene
 from sim_core.sensor import f_number, mean_electrons, predicted_range_std_m
@@ -170,7 +171,12 @@ def plan_effects(
         tol = IDEAL_TOLERANCE_MM if tolerance_mm is None else tolerance_mm
         noise_mm = 0.0
     else:
-        sigma = predicted_range_std_m(e, scene.sensor, f0)[seen] * 1e3
+        # Only pixels the camera would report set the tolerance: one far below the validity
+        # threshold (a dark backdrop) has a huge predicted noise but never reaches the frame.
+        amplitude_dn = (scene.sensor.demodulation_contrast * np.abs(e.phasor[0])
+                        / scene.sensor.adc_gain_e_per_dn)
+        measurable = seen & (amplitude_dn >= ValidityThresholds().min_amplitude_dn)
+        sigma = predicted_range_std_m(e, scene.sensor, f0)[measurable] * 1e3
         sigma = sigma[np.isfinite(sigma)]
         noise_mm = float(np.median(sigma)) if sigma.size else 0.0
         tol = max(0.25 * noise_mm, 0.1) if tolerance_mm is None else tolerance_mm

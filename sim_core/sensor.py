@@ -15,8 +15,9 @@ taps. Then shot noise (Poisson, seed eq. 16), SBI (below), read noise, full well
 
 SBI (suppression of background illumination, seed section 2.2.3 after Schmidt & Jaehne): once
 the fuller tap passes ``sbi_start_e`` (n_SBI,start, about 36,500 e-), a compensation charge
-n_delta = max(A, B) - n_SBI,start is removed from both taps; the difference A - B, which holds
-the phase, is kept. Each compensation charge is itself a Poisson draw, so the shot noise of
+n_delta = max(A, B) - n_SBI,start is removed from both taps, but never more than the emptier
+tap holds (a strong modulated signal alone then fills the fuller tap, which saturates and is
+flagged); the difference A - B, which holds the phase, is kept. Each compensation charge is itself a Poisson draw, so the shot noise of
 everything collected stays in the difference and SBI adds its own. If n_delta exceeds
 ``sbi_limit_e`` the pixel is in the SBI limit region and invalid (seed Fig. 7).
 """
@@ -175,10 +176,15 @@ def expose(
     sbi_limit = np.zeros(a.shape[-2:], dtype=bool)
     if sensor.sbi_enabled:
         excess = np.maximum(np.maximum(a, b) - sensor.sbi_start_e, 0.0)
+        # The circuit removes the same charge from both taps, but never more than the emptier
+        # tap holds: beyond that the difference (the phase) alone fills the fuller tap, which
+        # then reaches full well and is flagged, instead of the emptier tap going negative.
+        removable = np.minimum(excess, np.minimum(a, b))
         if rng is not None:
-            comp_a, comp_b = safe_poisson(rng, excess), safe_poisson(rng, excess)
+            comp_a = np.minimum(safe_poisson(rng, removable), a)
+            comp_b = np.minimum(safe_poisson(rng, removable), b)
         else:
-            comp_a = comp_b = excess
+            comp_a = comp_b = removable
         a = a - comp_a
         b = b - comp_b
         sbi_limit = np.any(excess > sensor.sbi_limit_e, axis=(0, 1))

@@ -92,11 +92,17 @@ def unwrap_two_frequencies(
         c1 = r1 + n1 * u1
         for n2 in range(int(np.ceil(u_ext / u2))):
             c2 = r2 + n2 * u2
-            err = np.abs(c1 - c2)
+            # The candidates live on a circle of circumference u_ext: a range just below u_ext
+            # and one just above 0 are neighbours, not u_ext apart (signed circular distance).
+            diff = c2 - c1
+            diff = diff - u_ext * np.round(diff / u_ext)
+            err = np.abs(diff)
             better = err < best_err
             best_err = np.where(better, err, best_err)
-            best = np.where(better, (w1 * c1 + w2 * c2) / (w1 + w2), best)
-    return np.mod(best, u_ext)
+            best = np.where(better, c1 + w2 / (w1 + w2) * diff, best)
+    out = np.mod(best, u_ext)
+    # mod of a tiny negative number rounds to exactly u_ext: fold it back to 0.
+    return np.where(out >= u_ext, 0.0, out)
 
 
 def reconstruct(

@@ -248,10 +248,13 @@ def bounce(
         # Camera source: E = I(theta) cos / d^2 (seed eq. 20), L = E f (eq. 21).
         lx, ly, lz = light_pos[0] - px, light_pos[1] - py, light_pos[2] - pz
         dist = math.sqrt(lx * lx + ly * ly + lz * lz)
-        # A surface through the light itself would see I / 0^2.
-        dist = dist if dist > min_light_distance_m else min_light_distance_m
-        inv_dist = 1.0 / dist
-        lx, ly, lz = lx * inv_dist, ly * inv_dist, lz * inv_dist
+        # The direction to the light is normalised by the true distance: the BRDF contract
+        # asks for unit vectors (a point exactly at the light has no direction: cos_p = 0).
+        inv_true = 1.0 / dist if dist > 0.0 else 0.0
+        lx, ly, lz = lx * inv_true, ly * inv_true, lz * inv_true
+        # A surface through the light itself would see I / 0^2: the irradiance is capped at
+        # I / d_min^2 (the clamp enters 1/d^2 only).
+        inv_dist = 1.0 / (dist if dist > min_light_distance_m else min_light_distance_m)
         cos_p = lx * nx + ly * ny + lz * nz
         act_len[j] = ln + dist
         if cos_p > 0.0 and thr > 0.0:
