@@ -657,7 +657,7 @@ def _time_to_error(
         theirs.render(spp, b, seed=0)
         t = {"ours": [], "mitsuba": []}
         e = {"ours": [], "mitsuba": []}
-        for r in range(max(1, min(plan.repeats, 2))):
+        for r in range(plan.repeats):
             img, _, dt = ours.render(spp, b, seed=2000 + r)
             t["ours"].append(dt)
             e["ours"].append(rel_rmse(img, ref))

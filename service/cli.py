@@ -224,6 +224,20 @@ def bench_accuracy(
     run_accuracy_benchmark(out, quick, console)
 
 
+@bench_app.command("mitsuba")
+def bench_mitsuba(
+    quick: Annotated[bool, typer.Option("--quick", help="Tiny sweep (seconds).")] = False,
+) -> None:
+    """Our renderer against Mitsuba 3 on the corner: time ratio, image agreement, time to 2 %."""
+    from service.bench_mitsuba import run_mitsuba_comparison
+
+    try:
+        run_mitsuba_comparison(console, quick=quick)
+    except RuntimeError as exc:
+        err_console.print(f"[bold red]error:[/] {exc}")
+        raise typer.Exit(code=1) from None
+
+
 @bench_app.command("ground-test")
 def bench_ground_test(
     spp: Annotated[int, typer.Option(help="Samples per pixel.")] = 64,

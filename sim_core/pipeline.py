@@ -99,6 +99,7 @@ def simulate(
             settings,
             integrator=settings.integrator if multipath else "direct",
             ambient=plan.enabled("ambient"),
+            footprint_px=plan.pixel_footprint_px(scene),
         )
         adaptive = None
         if target_range_error_mm is None and time_budget_s is None:

@@ -81,6 +81,12 @@ class EffectPlan:
     def mtf_components(self, scene: Scene) -> list:
         return [c for c in all_mtf_components(scene) if self.enabled(c.name)]
 
+    def pixel_footprint_px(self, scene: Scene) -> float:
+        """Side of the sampled square per pixel: the light-sensitive area, or the whole pixel."""
+        if self.enabled("pixel_aperture"):
+            return float(np.sqrt(scene.sensor.fill_factor))
+        return 1.0
+
     def to_dict(self) -> dict:
         return {
             "mode": self.mode,
@@ -106,8 +112,6 @@ def all_mtf_components(scene: Scene) -> list:
     if spec.diffraction:
         comps.append(optics.Diffraction(cam.wavelength_m, f_number(cam, sensor),
                                         sensor.pixel_pitch_m))
-    if spec.pixel_aperture:
-        comps.append(optics.PixelAperture(sensor.fill_factor))
     if spec.electronics_cutoff_cycles_per_px is not None:
         comps.append(optics.Electronics(spec.electronics_cutoff_cycles_per_px))
     if spec.motion is not None:
@@ -184,6 +188,7 @@ def plan_effects(
         _multipath(mode, settings, lf_d, lf_p, seen, f0, tol, multipath_s),
         _ambient(mode, scene, lf_p, e, seen, ambient_s),
         _sbi(mode, scene, e) if not ideal else Effect("sbi", False, "--ideal: ideal sensor"),
+        _pixel_aperture(scene),
         *_mtf(mode, scene),
         _noise(ideal, noise_mm),
     ]
@@ -251,6 +256,17 @@ def _sbi(mode, scene, e) -> Effect:
         return Effect("sbi", True, why, 0.001, nums)
     return Effect("sbi", False, f"predicted tap charge at most {nums['tap_peak_e']:.3g} e- "
                   f"(x{SBI_MARGIN} margin) < n_SBI,start {s.sbi_start_e:.3g} e-", 0.0, nums)
+
+
+def _pixel_aperture(scene) -> Effect:
+    """The pixel aperture is sampled, not filtered: samples land on the light-sensitive area."""
+    if not scene.optics.pixel_aperture:
+        return Effect("pixel_aperture", False, "optics.pixel_aperture is false: samples cover "
+                      "the whole pixel")
+    side = float(np.sqrt(scene.sensor.fill_factor))
+    return Effect("pixel_aperture", True, f"sampled: each pixel's samples cover its "
+                  f"light-sensitive square of {side:.2f} px (fill factor "
+                  f"{scene.sensor.fill_factor})", 0.0, {"footprint_px": side})
 
 
 def _mtf(mode, scene) -> list[Effect]:

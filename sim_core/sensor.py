@@ -17,8 +17,9 @@ SBI (suppression of background illumination, seed section 2.2.3 after Schmidt & 
 the fuller tap passes ``sbi_start_e`` (n_SBI,start, about 36,500 e-), a compensation charge
 n_delta = max(A, B) - n_SBI,start is removed from both taps, but never more than the emptier
 tap holds (a strong modulated signal alone then fills the fuller tap, which saturates and is
-flagged); the difference A - B, which holds the phase, is kept. Each compensation charge is itself a Poisson draw, so the shot noise of
-everything collected stays in the difference and SBI adds its own. If n_delta exceeds
+flagged); the difference A - B, which holds the phase, is kept. Each compensation charge is
+itself a Poisson draw, so the shot noise of everything collected stays in the difference and
+SBI adds its own. If n_delta exceeds
 ``sbi_limit_e`` the pixel is in the SBI limit region and invalid (seed Fig. 7).
 """
 

@@ -74,6 +74,10 @@ class RenderSettings:
     jitter : bool
         Spread samples over the pixel footprint (box filter, antialiasing). False traces every
         sample through the pixel centre, which closed-form checks compare against.
+    footprint_px : float
+        Side of the square, centred on the pixel, that jittered samples cover [px]: 1 for the
+        whole pixel, sqrt(fill factor) for the light-sensitive area only (the pixel-aperture
+        MTF, sampled exactly instead of filtered).
     """
 
     integrator: str = "path"
@@ -84,6 +88,7 @@ class RenderSettings:
     threads: int | None = None
     ambient: bool = True
     jitter: bool = True
+    footprint_px: float = 1.0
 
     @property
     def effective_bounces(self) -> int:
@@ -384,7 +389,8 @@ def _render_passes(
     out_im = np.zeros((ctx.n_f, m))
 
     d, slot, keys = kernels.primary_rays(
-        st.seed, pixels, first_sample, g, npix, ctx.u_px, ctx.v_px, st.jitter, ctx.intr.fx_px,
+        st.seed, pixels, first_sample, g, npix, ctx.u_px, ctx.v_px,
+        st.footprint_px if st.jitter else 0.0, ctx.intr.fx_px,
         ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px, ctx.distortion, ctx.rotation,
     )
     o = np.zeros_like(d)

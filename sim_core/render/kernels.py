@@ -140,14 +140,15 @@ def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def primary_rays(
-    seed, pixels, first_sample, n_passes, npix, u_px, v_px, jitter, fx, fy, cx, cy, dist,
+    seed, pixels, first_sample, n_passes, npix, u_px, v_px, footprint_px, fx, fy, cx, cy, dist,
     rotation,
 ):
     """Camera rays for ``n_passes`` more samples of each pixel in ``pixels``.
 
     Ray ``i`` belongs to pixel ``q = pixels[i % n]`` and is that pixel's sample number
     ``first_sample[i % n] + i // n``: its path key hashes (seed, that sample number, q), so a
-    pixel's k-th sample is the same whichever pixels are traced with it. Its jitter uses the
+    pixel's k-th sample is the same whichever pixels are traced with it. It lands uniformly in
+    the ``footprint_px`` square around the pixel centre (0: the centre itself), drawn from the
     uniforms of bounce 0. Returns float32 directions (m, 3), the accumulation slot of each
     ray (``(i // n) * npix + q``) and the path keys.
     """
@@ -165,10 +166,10 @@ def primary_rays(
         key = path_key(sk, first_sample[j] + local, q)
         keys[i] = key
         slot[i] = local * npix + q
-        if jitter:
+        if footprint_px > 0.0:
             ju, jv = uniform_pair(key, 0, 0)
-            u[i] = u_px[q] + ju - 0.5
-            v[i] = v_px[q] + jv - 0.5
+            u[i] = u_px[q] + (ju - 0.5) * footprint_px
+            v[i] = v_px[q] + (jv - 0.5) * footprint_px
         else:
             u[i] = u_px[q]
             v[i] = v_px[q]
