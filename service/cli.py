@@ -34,6 +34,15 @@ def _register_device_commands() -> None:
 
 _register_device_commands()
 
+
+def _register_serve_commands() -> None:
+    from service.serve_cmd import register
+
+    register(app, bench_app)  # serve, compare, bench campaign
+
+
+_register_serve_commands()
+
 err_console = Console(stderr=True)
 console = Console()
 

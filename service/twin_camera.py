@@ -92,7 +92,13 @@ class RenderedFrameSource:
         self._lock = threading.Lock()
 
     def __call__(self, request: CameraRequest) -> RawFrame:
-        state = request.rig_state if isinstance(request.rig_state, RigState) else RigState()
+        state = request.rig_state
+        if not isinstance(state, RigState):  # a camera simulator without a rig: nominal state
+            angle = self.spec.turntable.angle_deg if self.spec.turntable else 0.0
+            sim = self.spec.ambient.solar_simulator
+            state = RigState(turntable_angle_deg=angle,
+                             solar_suns=sim.irradiance_suns if sim else 0.0,
+                             shutter_open=sim is not None)
         uc = request.use_case
         spec = self.spec.model_copy(update={"camera": self.spec.camera.model_copy(update={
             "modulation_frequencies_hz": list(uc.frequencies_hz),

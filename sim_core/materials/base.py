@@ -160,12 +160,14 @@ class Material(ABC):
     def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """BRDF value f_r [1/sr] without the cosine, shading frame; ``kernels.eval_brdf``."""
         wi, wo = _pair(wi, wo)
-        return kernels.eval_batch(*self._kernel(), wi, wo)
+        with kernels.PARALLEL_KERNEL_LOCK:
+            return kernels.eval_batch(*self._kernel(), wi, wo)
 
     def pdf_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Solid-angle pdf [1/sr] of ``sample_local`` returning ``wi``; ``kernels.pdf_brdf``."""
         wi, wo = _pair(wi, wo)
-        return kernels.pdf_batch(*self._kernel(), wi, wo)
+        with kernels.PARALLEL_KERNEL_LOCK:
+            return kernels.pdf_batch(*self._kernel(), wi, wo)
 
     def sample_local(self, wo: np.ndarray, u: np.ndarray) -> BSDFSample:
         """Importance-sample ``wi`` for ``wo`` from uniforms ``u`` (n, 3); ``kernels.sample_brdf``.
@@ -177,7 +179,8 @@ class Material(ABC):
         wo, u = _directions(wo, "wo"), _directions(u, "u")
         if u.shape != wo.shape:
             raise ValueError(f"u must have the shape of wo, got {u.shape} and {wo.shape}")
-        wi, pdf, weight = kernels.sample_batch(*self._kernel(), wo, u)
+        with kernels.PARALLEL_KERNEL_LOCK:
+            wi, pdf, weight = kernels.sample_batch(*self._kernel(), wo, u)
         cls = type(self)
         if cls.eval_local is not Material.eval_local or cls.pdf_local is not Material.pdf_local:
             return finish_sample(self, wi, wo)

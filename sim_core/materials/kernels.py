@@ -54,6 +54,7 @@ Parameter layouts
 from __future__ import annotations
 
 import math
+import threading
 
 import numba
 import numpy as np
@@ -66,6 +67,11 @@ from numba import njit, prange
 # (e.g. Hapke's constructor), so the choice is made here, before any of them can run.
 if numba.config.THREADING_LAYER == "default":
     numba.config.THREADING_LAYER = "workqueue"
+
+#: The workqueue layer aborts the process if two threads launch parallel kernels at once. Every
+#: caller of a parallel kernel in this package (material batches, the renderer) holds this lock,
+#: so a service or a simulated camera may render from several threads safely.
+PARALLEL_KERNEL_LOCK = threading.RLock()
 
 N_PARAMS = 8
 KIND_LAMBERTIAN = 0

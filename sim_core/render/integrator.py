@@ -35,7 +35,7 @@ import numpy as np
 
 from sim_core.camera import pixel_centre_grid
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.materials.kernels import N_PARAMS
+from sim_core.materials.kernels import N_PARAMS, PARALLEL_KERNEL_LOCK
 from sim_core.render import kernels
 from sim_core.render.kernels import camera_rays
 from sim_core.render.lightfield import LightField
@@ -183,7 +183,8 @@ class ProgressiveRenderer:
         self.timings_s: dict[str, float] = {"path_tracing": 0.0}
         self.ctx = _Context(scene, settings, self.tracer, cam.position_m)
         t0 = time.perf_counter()
-        self._truth = _ground_truth(self.ctx)
+        with PARALLEL_KERNEL_LOCK:
+            self._truth = _ground_truth(self.ctx)
         self.timings_s["ground_truth"] = time.perf_counter() - t0
         self.acc = _Accumulator(self.npix, self.ctx.n_f)
 
@@ -210,7 +211,8 @@ class ProgressiveRenderer:
         done = 0
         while done < n:
             g = min(group, n - done)
-            _render_passes(self.ctx, pix, self.acc.n[pix], g, self.acc)
+            with PARALLEL_KERNEL_LOCK:
+                _render_passes(self.ctx, pix, self.acc.n[pix], g, self.acc)
             done += g
             if progress is not None:
                 progress(done, n)

@@ -1,0 +1,148 @@
+"""The service's settings: one :class:`Settings`, read from the environment (``TOFTWIN_*``).
+
+Every field can be set as an environment variable with the prefix ``TOFTWIN_`` (``TOFTWIN_TOKEN``,
+``TOFTWIN_DATA_DIR``, ...) or in a settings file in dotenv format (``toftwin serve --settings
+FILE``); keyword arguments (the CLI options) win over both. Construction fails fast, naming the
+field, when the token is missing, a placeholder or too short, or the executor is malformed.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+#: the bundled example scenes (``scene: "satellite_ground_test"`` names one of them)
+EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
+
+#: tokens that are documentation placeholders, never real secrets
+PLACEHOLDER_TOKENS = frozenset(
+    {"changethis", "change-me", "changeme", "secret", "token", "password", "toftwin"}
+)
+MIN_TOKEN_LENGTH = 12
+
+_DASK = re.compile(r"^dask://(?P<host>[A-Za-z0-9_.:\[\]-]+):(?P<port>\d{1,5})$")
+
+
+class Settings(BaseSettings):
+    """Everything the service is configured with.
+
+    Attributes
+    ----------
+    token : SecretStr
+        Bearer token required by every call that moves hardware or changes data.
+    host, port : str, int
+        Where ``toftwin serve`` listens (loopback unless told otherwise).
+    data_dir : Path
+        Frames (``frames/<id>/``) and, by default, the SQLite database.
+    database_url : str or None
+        SQLAlchemy URL; ``sqlite:///<data_dir>/toftwin.db`` when None.
+    simulated : bool
+        Run on the device simulators with a rendered camera instead of real hardware.
+    executor : str
+        ``local`` (process pool, the default), ``thread`` (in-process threads, for tests and
+        debugging) or ``dask://HOST:PORT`` (an existing Dask scheduler).
+    workers : int
+        Processes (or threads) of a local executor.
+    pipeline_depth : int or None
+        Poses of a campaign in flight at once (rig stage of the next pose overlapping the
+        simulation of the previous ones); None: as many as the executor has workers. 1 makes
+        campaigns strictly sequential.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="TOFTWIN_", extra="ignore", env_file=None)
+
+    token: SecretStr = Field(description="Bearer token for calls that move or change things.")
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    data_dir: Path = Path("toftwin-data")
+    database_url: str | None = None
+
+    simulated: bool = False
+    scene: str = Field("satellite_ground_test", pattern=r"^[A-Za-z0-9_-]{1,64}$")
+    examples_dir: Path = EXAMPLES_DIR
+
+    executor: str = "local"
+    workers: int = Field(1, ge=1, le=64)
+    pipeline_depth: int | None = Field(None, ge=1, le=64)
+    sim_threads: int | None = Field(None, ge=1, le=256)
+    sim_spp: int = Field(16, ge=1, le=65536)
+    max_spp: int = Field(256, ge=1, le=65536)
+    job_timeout_s: float = Field(600.0, gt=0.0)
+
+    camera_spp: int = Field(8, ge=1, le=4096)
+    camera_integrator: Literal["direct", "path"] = "path"
+    camera_seed: int = Field(0, ge=0, le=2**31 - 1)
+
+    turntable_port: str | None = None
+    turntable_address: int = Field(1, ge=1, le=31)
+    lamp_port: str | None = None
+    shutter_port: str | None = None
+    camera_serial: str | None = None
+    solar_stable_timeout_s: float = Field(60.0, gt=0.0)
+    rig_wait_s: float = Field(30.0, gt=0.0)
+
+    max_body_bytes: int = Field(1_000_000, ge=1024)
+    max_scene_objects: int = Field(256, ge=1, le=10000)
+    max_scene_pixels: int = Field(1_000_000, ge=1)
+    max_scene_triangles: int = Field(2_000_000, ge=1)
+    max_poses: int = Field(720, ge=1, le=100000)
+    max_repeats: int = Field(100, ge=1, le=10000)
+    sse_interval_s: float = Field(0.5, gt=0.0)
+    sse_max_s: float = Field(3600.0, gt=0.0)
+    stop_wait_s: float = Field(30.0, ge=0.0)
+
+    @field_validator("token")
+    @classmethod
+    def _real_token(cls, v: SecretStr) -> SecretStr:
+        text = v.get_secret_value()
+        if text.strip().lower() in PLACEHOLDER_TOKENS:
+            raise ValueError("is a placeholder; set TOFTWIN_TOKEN to a random secret")
+        if len(text) < MIN_TOKEN_LENGTH:
+            raise ValueError(
+                f"has {len(text)} characters; at least {MIN_TOKEN_LENGTH} are required "
+                "(e.g. `python -c 'import secrets; print(secrets.token_urlsafe(24))'`)"
+            )
+        return v
+
+    @field_validator("executor")
+    @classmethod
+    def _known_executor(cls, v: str) -> str:
+        if v in ("local", "thread") or _DASK.match(v):
+            return v
+        raise ValueError(f"got {v!r}; allowed: 'local', 'thread' or 'dask://HOST:PORT'")
+
+    @property
+    def database(self) -> str:
+        """The SQLAlchemy URL in use."""
+        return self.database_url or f"sqlite:///{self.data_dir / 'toftwin.db'}"
+
+    @property
+    def dask_address(self) -> str | None:
+        """``tcp://HOST:PORT`` of the Dask scheduler, or None for a local executor."""
+        m = _DASK.match(self.executor)
+        return None if m is None else f"tcp://{m['host']}:{m['port']}"
+
+    @property
+    def depth(self) -> int:
+        """Poses in flight during a campaign."""
+        return self.pipeline_depth or self.workers
+
+    @property
+    def threads_per_job(self) -> int:
+        """Embree/numba threads of one simulation job (cores shared among local workers)."""
+        if self.sim_threads is not None:
+            return self.sim_threads
+        return max(1, (os.cpu_count() or 1) // self.workers)
+
+    @classmethod
+    def load(cls, settings_file: str | Path | None = None, **overrides: Any) -> Settings:
+        """Settings from the environment, an optional dotenv file, and explicit overrides."""
+        given = {k: v for k, v in overrides.items() if v is not None}
+        if settings_file is not None:
+            return cls(_env_file=str(settings_file), **given)  # type: ignore[call-arg]
+        return cls(**given)

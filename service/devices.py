@@ -1,0 +1,147 @@
+"""Manual device operations behind ``/api/v1/devices``.
+
+Commands hold the rig (:meth:`ServiceContext.manual_rig`: 409 while a campaign runs). Status
+reads do not take the rig lock - each serial exchange is atomic in its transport, so a read
+between a campaign's commands is safe - and the camera, which is not thread-safe, reports only
+what its driver has cached. The emergency stop takes no lock at all: it must never wait.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from drivers.errors import DeviceError
+from service import crud
+from service.poses import check_angle
+from service.scenes import camera_of, for_use_case
+
+if TYPE_CHECKING:
+    from service.context import ServiceContext
+
+
+
+def _read(name: str, read) -> dict[str, Any]:
+    try:
+        return {"name": name, "ok": True, "details": read()}
+    except DeviceError as exc:
+        return {"name": name, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+
+
+def status(ctx: ServiceContext) -> dict[str, Any]:
+    """Every device with what it reports, or its error."""
+    rig = ctx.rig
+    if rig is None:
+        devices = [{"name": n, "ok": False, "error": ctx.rig_error or "not configured"}
+                   for n in ("turntable", "solar_simulator", "camera")]
+    else:
+        devices = [
+            _read("turntable", lambda: {**turntable_position(ctx),
+                                        "status": rig.turntable.status().describe()}),
+            _read("solar_simulator", lambda: {**solar_state(ctx),
+                                              "status": rig.solar.status().describe()}),
+            _read("camera", lambda: {**rig.camera.identity().to_dict(),
+                                     "use_case": rig.camera.use_case.name}),
+        ]
+    return {"simulated": ctx.settings.simulated, "campaign_id": ctx.runner.active_id,
+            "devices": devices}
+
+
+def turntable_position(ctx: ServiceContext) -> dict[str, Any]:
+    rig = ctx.require_rig()
+    low, high = rig.turntable.limits_deg
+    return {"angle_deg": rig.turntable.position_deg(), "limits_deg": (low, high)}
+
+
+def home(ctx: ServiceContext) -> dict[str, Any]:
+    with ctx.manual_rig() as rig:
+        rig.turntable.home()
+    return turntable_position(ctx)
+
+
+def move(ctx: ServiceContext, angle_deg: float) -> dict[str, Any]:
+    rig = ctx.require_rig()
+    check_angle(rig, angle_deg, "angle_deg")  # 422 before the rig is even asked for
+    with ctx.manual_rig() as rig:
+        rig.turntable.move_to(angle_deg)
+    return turntable_position(ctx)
+
+
+def solar_state(ctx: ServiceContext) -> dict[str, Any]:
+    solar = ctx.require_rig().solar
+    return {"lamp_on": solar.is_lamp_on(), "suns": solar.read_suns(),
+            "shutter_open": solar.shutter_is_open()}
+
+
+def set_lamp(ctx: ServiceContext, on: bool) -> dict[str, Any]:
+    with ctx.manual_rig() as rig:
+        if on:
+            rig.solar.lamp_on()
+        else:
+            rig.solar.lamp_off()
+    return solar_state(ctx)
+
+
+def set_level(ctx: ServiceContext, suns: float) -> dict[str, Any]:
+    with ctx.manual_rig() as rig:
+        rig.solar.set_suns(suns)
+    return solar_state(ctx)
+
+
+def set_shutter(ctx: ServiceContext, open_: bool) -> dict[str, Any]:
+    with ctx.manual_rig() as rig:
+        if open_:
+            rig.solar.open_shutter()
+        else:
+            rig.solar.close_shutter()
+    return solar_state(ctx)
+
+
+def capture(ctx: ServiceContext) -> dict[str, Any]:
+    """Capture one frame, reconstruct it with the default scene's camera, store it."""
+    with ctx.manual_rig() as rig:
+        state = rig.state()
+        raw = rig.capture(1)[0]
+        use_case = rig.camera.use_case
+    camera = camera_of(for_use_case(ctx.default_scene.spec, use_case))
+    extra = {"rig": state.to_dict(), "use_case": use_case.name, "scene_name": ""}
+    frame_id, image = ctx.store.save_measured(raw, camera, extra)
+    with ctx.session() as s:
+        crud.add_frame(s, crud.frame_row(frame_id, "measured", rig=state.to_dict(),
+                                         summary={"valid_pixels": int(image.valid.sum())}))
+    return {"frame_id": frame_id, "rig": state.to_dict(),
+            "links": {"self": f"/api/v1/frames/{frame_id}"}}
+
+
+def emergency_stop(ctx: ServiceContext) -> dict[str, Any]:
+    """Halt the turntable and close the shutter now; pause a running campaign.
+
+    The commands go out at once, without the rig lock. A campaign (or a manual call) may be in
+    the middle of a rig stage and would open the shutter again, so once that stage has ended -
+    the campaign, told to pause, starts no other - both commands are sent again with the rig
+    held: when this returns, the stage is halted and the shutter closed.
+    """
+    from drivers.errors import DeviceTimeoutError
+
+    rig = ctx.require_rig()
+    paused = ctx.runner.emergency_stop()
+    errors: dict[str, str] = {}
+
+    def halt() -> list[str]:
+        done = []
+        for name, action in (("turntable", rig.turntable.stop),
+                             ("shutter", rig.solar.close_shutter)):
+            try:
+                action()
+                done.append(name)
+            except DeviceError as exc:
+                errors[name] = f"{type(exc).__name__}: {exc}"
+        return done
+
+    stopped = halt()
+    try:
+        with rig.hold(timeout_s=ctx.settings.rig_wait_s):
+            errors.clear()
+            stopped = halt()
+    except DeviceTimeoutError as exc:
+        errors["rig"] = f"commands sent once; the rig stayed busy: {exc}"
+    return {"stopped": stopped, "errors": errors, "campaign_paused": paused}

@@ -1,0 +1,1 @@
+"""One router per resource; routes validate, delegate and shape the response."""
