@@ -27,7 +27,8 @@ class PointLight:
         Radiant power [W] (the DC part; the modulated part has the same amplitude).
     profile_angle_rad, profile_relative : (k,) float64 or None
         Relative radiant intensity against the angle from ``axis``; linear interpolation,
-        zero beyond the last angle. None means isotropic.
+        zero beyond the last angle. None means isotropic. The renderer evaluates it in
+        ``sim_core.render.kernels._profile_intensity`` with ``scale_w_sr``.
     """
 
     position_m: np.ndarray
@@ -35,7 +36,8 @@ class PointLight:
     power_w: float
     profile_angle_rad: np.ndarray | None = None
     profile_relative: np.ndarray | None = None
-    _scale_w_sr: float = field(init=False, repr=False, default=0.0)
+    #: radiant intensity per unit of relative intensity [W/sr] (P / 4 pi when isotropic)
+    scale_w_sr: float = field(init=False, repr=False, default=0.0)
 
     def __post_init__(self) -> None:
         if self.profile_angle_rad is None:
@@ -47,16 +49,7 @@ class PointLight:
             rel = np.interp(theta, self.profile_angle_rad, self.profile_relative, right=0.0)
             solid = 2.0 * np.pi * np.trapezoid(rel * np.sin(theta), theta)
             scale = self.power_w / solid if solid > 0.0 else 0.0
-        object.__setattr__(self, "_scale_w_sr", float(scale))
-
-    def intensity_w_sr(self, direction_from_light: np.ndarray) -> np.ndarray:
-        """Radiant intensity [W/sr] towards unit directions ``(n, 3)`` leaving the source."""
-        if self.profile_angle_rad is None:
-            return np.full(direction_from_light.shape[0], self._scale_w_sr)
-        cos_a = np.clip(direction_from_light @ self.axis, -1.0, 1.0)  # arccos needs [-1, 1]
-        angle = np.arccos(cos_a)
-        rel = np.interp(angle, self.profile_angle_rad, self.profile_relative, right=0.0)
-        return self._scale_w_sr * rel
+        object.__setattr__(self, "scale_w_sr", float(scale))
 
 
 @dataclass(frozen=True)
@@ -87,15 +80,6 @@ class CollimatedLight:
     footprint_size_m: tuple[float, float] | None = None
     footprint_u: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     footprint_v: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
-
-    def in_beam(self, points_m: np.ndarray) -> np.ndarray:
-        """Boolean mask of ``(n, 3)`` points inside the beam's cross-section."""
-        if self.footprint_centre_m is None or self.footprint_size_m is None:
-            return np.ones(points_m.shape[0], dtype=bool)
-        rel = points_m - self.footprint_centre_m
-        a = np.abs(rel @ self.footprint_u)
-        b = np.abs(rel @ self.footprint_v)
-        return (a <= 0.5 * self.footprint_size_m[0]) & (b <= 0.5 * self.footprint_size_m[1])
 
 
 def beam_cross_section_basis(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -171,28 +171,3 @@ class RayTracer:
 
         self._dispatch(work, m)
         return out == 0
-
-    def occluded(
-        self, origins_rel: np.ndarray, directions: np.ndarray, t_max_m: np.ndarray | float
-    ) -> np.ndarray:
-        """True where something blocks the segment from the origin to ``t_max_m`` along the ray.
-
-        ``t_max_m`` may be ``inf`` for a light at infinity.
-        """
-        m = origins_rel.shape[0]
-        if m == 0 or self.n_triangles == 0:
-            self.stats.rays += m
-            return np.zeros(m, dtype=bool)
-        o32 = np.ascontiguousarray(origins_rel, dtype=np.float32)
-        d32 = np.ascontiguousarray(directions, dtype=np.float32)
-        # float32 max instead of inf: Embree accepts both, but inf would overflow a cast warning.
-        tmax = np.broadcast_to(np.asarray(t_max_m, dtype=np.float64), (m,))
-        dists = np.minimum(tmax, np.finfo(np.float32).max).astype(np.float32)
-        out = np.empty(m, dtype=np.int32)
-
-        def work(a: int, b: int) -> None:
-            out[a:b] = self._scene.run(o32[a:b], d32[a:b], dists=dists[a:b], query="OCCLUDED")
-
-        self._dispatch(work, m)
-        # embreex returns 0 for blocked and -1 for free (PERFORMANCE-NOTES.md).
-        return out == 0

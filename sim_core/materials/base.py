@@ -74,22 +74,16 @@ class BSDFSample:
 def frame_from_normal(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tangent vectors ``(t, b)`` completing unit normals ``n`` to right-handed frames.
 
-    Branchless construction of Duff et al. (2017), "Building an Orthonormal Basis, Revisited";
-    exact for every unit normal including n = (0, 0, -1).
+    The branchless construction of Duff et al. (2017), the same compiled
+    :func:`~sim_core.materials.kernels.duff_frame` the renderer uses.
 
     Parameters
     ----------
     n : (m, 3) float
         Unit normals.
     """
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    sign = np.where(z >= 0.0, 1.0, -1.0)
-    # a is finite because sign + z has the magnitude 1 + |z| >= 1.
-    a = -1.0 / (sign + z)
-    b = x * y * a
-    t = np.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=1)
-    bt = np.stack([b, sign + y * y * a, -y], axis=1)
-    return t, bt
+    with kernels.PARALLEL_KERNEL_LOCK:
+        return kernels.frame_batch(np.ascontiguousarray(n, dtype=np.float64))
 
 
 def to_local(w: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:

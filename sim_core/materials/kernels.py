@@ -460,6 +460,32 @@ def sample_brdf(kind, p, wox, woy, woz, u0, u1, u2):
     return x, y, z, pdf, sample_weight(f, z, pdf)
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def duff_frame(nx, ny, nz):
+    """Tangent and bitangent completing a unit normal to a right-handed frame.
+
+    Branchless construction of Duff et al. (2017), "Building an Orthonormal Basis, Revisited";
+    exact for every unit normal including (0, 0, -1). Returns (t0, t1, t2, b0, b1, b2).
+    """
+    sign = 1.0 if nz >= 0.0 else -1.0
+    # sign + nz has magnitude >= 1, so a is finite.
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
+    return (1.0 + sign * nx * nx * a, sign * b, -sign * nx, b, sign + ny * ny * a, -ny)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def frame_batch(n):
+    """:func:`duff_frame` over rows of ``n`` (m, 3): tangents and bitangents, each (m, 3)."""
+    m = n.shape[0]
+    t = np.empty((m, 3))
+    b = np.empty((m, 3))
+    for i in prange(m):
+        t[i, 0], t[i, 1], t[i, 2], b[i, 0], b[i, 1], b[i, 2] = duff_frame(n[i, 0], n[i, 1],
+                                                                          n[i, 2])
+    return t, b
+
+
 # -------------------------------------------------------------------------------------------
 # Batch wrappers for the numpy API
 # -------------------------------------------------------------------------------------------

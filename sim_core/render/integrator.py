@@ -310,7 +310,7 @@ class _Context:
         light = scene.light
         self.light_pos = np.asarray(light.position_m - self.origin, dtype=np.float64)
         self.light_axis = np.asarray(light.axis, dtype=np.float64)
-        self.light_scale = float(light._scale_w_sr)
+        self.light_scale = float(light.scale_w_sr)
         if light.profile_angle_rad is None:
             self.prof_angle = np.zeros(0)
             self.prof_rel = np.zeros(0)

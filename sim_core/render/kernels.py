@@ -20,7 +20,7 @@ from numba import njit, prange
 
 import sim_core.materials.kernels as _material_kernels
 import sim_core.render.rng as _rng
-from sim_core.materials.kernels import eval_brdf, sample_brdf
+from sim_core.materials.kernels import duff_frame, eval_brdf, sample_brdf
 from sim_core.render.rng import path_key, seed_key, uniform_pair
 
 
@@ -66,16 +66,6 @@ _OFFSET_MIN_M = 1e-6
 def _offset_scale(px, py, pz):
     m = max(abs(px), abs(py), abs(pz)) * _OFFSET_REL
     return m if m > _OFFSET_MIN_M else _OFFSET_MIN_M
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _duff_frame(nx, ny, nz):
-    """Branchless orthonormal basis (Duff et al. 2017) around a unit normal."""
-    sign = 1.0 if nz >= 0.0 else -1.0
-    # sign + nz has magnitude >= 1, so a is finite.
-    a = -1.0 / (sign + nz)
-    b = nx * ny * a
-    return (1.0 + sign * nx * nx * a, sign * b, -sign * nx, b, sign + ny * ny * a, -ny)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -234,7 +224,7 @@ def bounce(
         px = o[i, 0] + t * dx
         py = o[i, 1] + t * dy
         pz = o[i, 2] + t * dz
-        t0, t1, t2, b0, b1, b2 = _duff_frame(nx, ny, nz)
+        t0, t1, t2, b0, b1, b2 = duff_frame(nx, ny, nz)
         wol0 = -(dx * t0 + dy * t1 + dz * t2)
         wol1 = -(dx * b0 + dy * b1 + dz * b2)
         wol2 = -(dx * nx + dy * ny + dz * nz)
