@@ -5,7 +5,9 @@ frame per scene that builds the Embree scene and warms caches) and prints:
 
 - seconds per frame (wall clock),
 - rays traced per second (primary, shadow and bounce rays together),
-- the share of the wall time spent inside Embree queries (both cores busy there),
+- where the worker threads' time went, as shares of the machine's capacity (wall time x
+  threads): inside Embree queries, in the compiled kernels (camera rays, shading and next-event
+  estimation, accumulation), and the rest (Python glue, waiting, per-frame setup),
 - for reference, raw Embree throughput on a batch of this scene's primary rays.
 """
 
@@ -55,7 +57,8 @@ def run_render_benchmark(
     """Run the sweep, print a table, return its rows."""
     rows: list[dict] = []
     table = Table(title="toftwin render benchmark (one frame per row, 224 x 171)")
-    for col in ("scene", "integrator", "spp", "bounces", "s/frame", "Mrays/s", "Embree %"):
+    for col in ("scene", "integrator", "spp", "bounces", "s/frame", "Mrays/s", "Embree %",
+                "kernels %", "other %"):
         table.add_column(col, justify="right")
     for path in scenes or default_scene_paths():
         spec = load_scene_spec(path)
@@ -74,6 +77,9 @@ def run_render_benchmark(
                         integrator=integrator, spp=spp, max_bounces=b, seed=1, threads=threads
                     )
                     res = render(scene, settings, tracer)
+                    capacity = res.seconds * res.threads
+                    st = res.stage_thread_seconds
+                    kernels = (st["camera_rays"] + st["shading"] + st["accumulation"]) / capacity
                     row = {
                         "scene": spec.name,
                         "integrator": integrator,
@@ -82,12 +88,15 @@ def run_render_benchmark(
                         "seconds": res.seconds,
                         "mrays_per_s": res.rays_traced / res.seconds / 1e6,
                         "embree_share": res.embree_share,
+                        "kernel_share": kernels,
+                        "other_share": max(0.0, 1.0 - res.embree_share - kernels),
                         "raw_embree_mrays_per_s": raw,
                     }
                     rows.append(row)
                     table.add_row(
                         spec.name, integrator, str(spp), str(b), f"{res.seconds:.3f}",
                         f"{row['mrays_per_s']:.2f}", f"{100 * res.embree_share:.0f}",
+                        f"{100 * kernels:.0f}", f"{100 * row['other_share']:.0f}",
                     )
-    console.print(table)
+    console.print(table, width=max(console.width, 110))  # no squeezed columns in a pipe
     return rows

@@ -150,7 +150,7 @@ def simulate(
     console.print(
         f"wrote {out}/frame.npz ({frame.image.valid.sum()} valid pixels) in {t['total']:.2f} s, "
         f"{frame.rays_traced / max(t['render'], 1e-9) / 1e6:.2f} Mrays/s, "
-        f"{100 * frame.embree_seconds / max(t['render'], 1e-9):.0f} % in Embree"
+        f"{100 * frame.embree_share:.0f} % in Embree"
     )
 
 

@@ -51,7 +51,7 @@ class SimulatedFrame:
     scene_hash: str
     timings_s: dict[str, float]
     rays_traced: int
-    embree_seconds: float
+    embree_share: float  # share of the render threads' time inside Embree
     plan: EffectPlan
     raw: RawFrame | None = None
     ideal: bool = True
@@ -150,7 +150,7 @@ def simulate(
         scene_hash=scene.scene_hash,
         timings_s=timings,
         rays_traced=result.rays_traced,
-        embree_seconds=result.embree_seconds,
+        embree_share=result.embree_share,
         plan=plan,
         raw=raw,
         ideal=ideal,
@@ -236,7 +236,7 @@ def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "")
         },
         "timings_s": frame.timings_s,
         "rays_traced": frame.rays_traced,
-        "embree_seconds": frame.embree_seconds,
+        "embree_share": frame.embree_share,
         "shape": list(frame.image.range_m.shape),
         "frequencies_hz": frame.light_field.frequencies_hz.tolist(),
         "grey_preview_full_scale": full_scale,

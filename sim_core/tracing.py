@@ -6,14 +6,21 @@ then traces as precisely as one at the origin.
 
 ``EmbreeScene.run`` releases the GIL for its whole loop, so a batch split in contiguous chunks
 over a thread pool runs on all cores; each ray's answer does not depend on the chunking, so
-results are identical for any number of threads.
+results are identical for any number of threads. The renderer instead runs whole chunks of its
+work on the tracer's pool (:meth:`RayTracer.submit`) and queries Embree from those worker
+threads directly (``*_here`` methods).
+
+Time inside Embree is counted per thread (:attr:`TraceStats.seconds` is thread-seconds), so
+``seconds / (wall time x threads)`` is the share of the machine's capacity spent in Embree,
+whichever way the queries were spread.
 """
 
 from __future__ import annotations
 
 import os
+import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from itertools import pairwise
 
@@ -27,7 +34,10 @@ MIN_RAYS_PER_THREAD = 16_384
 
 @dataclass
 class TraceStats:
-    """Counters of the work done by a :class:`RayTracer`."""
+    """Counters of the work done by a :class:`RayTracer`.
+
+    ``seconds`` is thread-seconds inside Embree queries: summed over the threads that ran them.
+    """
 
     rays: int = 0
     calls: int = 0
@@ -63,6 +73,7 @@ class RayTracer:
         self.n_triangles = int(triangles_m.shape[0])
         self.threads = max(1, threads or os.cpu_count() or 1)
         self.stats = TraceStats()
+        self._stats_lock = threading.Lock()
         self._scene = rtcs.EmbreeScene(robust=robust)
         if self.n_triangles:
             rel = (np.asarray(triangles_m, dtype=np.float64) - self.origin_m).astype(np.float32)
@@ -80,20 +91,43 @@ class RayTracer:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def submit(self, fn, /, *args) -> Future:
+        """Run ``fn(*args)`` on this tracer's thread pool (inline with one thread).
+
+        ``fn`` must query Embree only through the ``*_here`` methods: waiting for the pool from
+        inside the pool could deadlock.
+        """
+        if self._pool is not None:
+            return self._pool.submit(fn, *args)
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args))
+        except BaseException as exc:  # delivered by future.result(), like the pool would
+            future.set_exception(exc)
+        return future
+
+    def _count(self, rays: int, calls: int, seconds: float) -> None:
+        with self._stats_lock:
+            self.stats.rays += rays
+            self.stats.calls += calls
+            self.stats.seconds += seconds
+
     def _dispatch(self, fn, n: int):
         """Run ``fn(start, stop)`` over [0, n) in contiguous chunks on the pool."""
-        t0 = time.perf_counter()
+
+        def timed(a: int, b: int) -> float:
+            t0 = time.perf_counter()
+            fn(a, b)
+            return time.perf_counter() - t0
+
         k = min(self.threads, max(1, n // MIN_RAYS_PER_THREAD))
         if k <= 1 or self._pool is None:
-            fn(0, n)
+            seconds = timed(0, n)
         else:
             edges = np.linspace(0, n, k + 1).astype(np.int64)
-            futures = [self._pool.submit(fn, a, b) for a, b in pairwise(edges.tolist())]
-            for f in futures:
-                f.result()
-        self.stats.seconds += time.perf_counter() - t0
-        self.stats.rays += n
-        self.stats.calls += 1
+            futures = [self._pool.submit(timed, a, b) for a, b in pairwise(edges.tolist())]
+            seconds = sum(f.result() for f in futures)
+        self._count(n, 1, seconds)
 
     def intersect(
         self, origins_rel: np.ndarray, directions: np.ndarray
@@ -118,7 +152,7 @@ class RayTracer:
         t = np.full(m, np.inf)
         prim = np.full(m, -1, dtype=np.int64)
         if m == 0 or self.n_triangles == 0:
-            self.stats.rays += m
+            self._count(m, 0, 0.0)
             return t, prim
         o32 = np.ascontiguousarray(origins_rel, dtype=np.float32)
         d32 = np.ascontiguousarray(directions, dtype=np.float32)
@@ -145,7 +179,7 @@ class RayTracer:
         tfar = np.full(m, np.finfo(np.float32).max, dtype=np.float32)
         pid = np.full(m, -1, dtype=np.int32)
         if m == 0 or self.n_triangles == 0:
-            self.stats.rays += m
+            self._count(m, 0, 0.0)
             return tfar, pid
 
         def work(a: int, b: int) -> None:
@@ -158,16 +192,28 @@ class RayTracer:
         self._dispatch(work, m)
         return tfar, pid
 
-    def occluded32(self, o32: np.ndarray, d32: np.ndarray, tmax32: np.ndarray) -> np.ndarray:
-        """Occlusion of float32 render-frame segments; ``tmax32`` is overwritten."""
+    def intersect_here(self, o32: np.ndarray, d32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`intersect32` on the calling thread (for work running on :meth:`submit`)."""
         m = o32.shape[0]
         if m == 0 or self.n_triangles == 0:
-            self.stats.rays += m
-            return np.zeros(m, dtype=bool)
-        out = np.empty(m, dtype=np.int32)
+            self._count(m, 0, 0.0)
+            return (np.full(m, np.finfo(np.float32).max, dtype=np.float32),
+                    np.full(m, -1, dtype=np.int32))
+        t0 = time.perf_counter()
+        res = self._scene.run(o32, d32, output=1)
+        self._count(m, 1, time.perf_counter() - t0)
+        return res["tfar"], res["primID"]
 
-        def work(a: int, b: int) -> None:
-            out[a:b] = self._scene.run(o32[a:b], d32[a:b], dists=tmax32[a:b], query="OCCLUDED")
+    def occluded_here(self, o32: np.ndarray, d32: np.ndarray, tmax32: np.ndarray) -> np.ndarray:
+        """Embree's occlusion answers on the calling thread: 0 = blocked, -1 = free.
 
-        self._dispatch(work, m)
-        return out == 0
+        ``tmax32`` is overwritten.
+        """
+        m = o32.shape[0]
+        if m == 0 or self.n_triangles == 0:
+            self._count(m, 0, 0.0)
+            return np.full(m, -1, dtype=np.int32)
+        t0 = time.perf_counter()
+        res = self._scene.run(o32, d32, dists=tmax32, query="OCCLUDED")
+        self._count(m, 1, time.perf_counter() - t0)
+        return res

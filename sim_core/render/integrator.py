@@ -16,19 +16,29 @@ Integrators
   delta lights: BRDF-sampled rays can never hit them, so next-event estimation alone is
   unbiased and no multiple importance sampling is needed.
 
+Work split
+----------
+A request for ``n`` samples of some pixels becomes independent chunks: a block of pixels and a
+few sample passes, about ``CHUNK_RAYS`` camera rays. A worker thread traces a chunk from start
+to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays) and adds its
+samples to the per-pixel sums; every block of pixels belongs to one task, so no two threads
+write the same pixel. Each chunk is wavefront-style inside (one Embree call per bounce for all
+its rays) and small enough to stay in cache; there is no barrier between stages.
+
 Determinism
 -----------
-Sample pass ``s`` (one sample for every pixel) draws all its random numbers from its own
-generator ``numpy.random.default_rng([seed, s])`` in a fixed order, and per-pass pixel sums are
-formed with ``np.bincount`` in ray order. Passes are grouped into wavefronts by a rule that only
-depends on the image size, and Embree's answers do not depend on threading, so the same seed
-gives bit-identical images whatever the number of threads.
+Every random number is a hash of (seed, pixel, sample number, bounce, dimension)
+(:mod:`sim_core.render.rng`), Embree's answers do not depend on threading, and each pixel's
+sums add its samples one by one in sample order. So the same seed gives bit-identical images
+whatever the number of threads and however the samples were split into chunks or requests.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import as_completed, wait
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,8 +52,13 @@ from sim_core.render.lightfield import LightField
 from sim_core.scene import Scene
 from sim_core.tracing import RayTracer
 
-#: rays per wavefront we aim for (Embree throughput is flat from ~10k rays per call and thread)
-WAVEFRONT_RAYS = 1 << 18
+#: camera rays per chunk: large enough that Embree's per-call overhead (~2 us) and the Python
+#: glue vanish, small enough that a chunk's ray state stays in a core's cache
+CHUNK_RAYS = 8192
+#: tasks per worker thread a request is split into, so threads finish within ~1/16 of each other
+TASKS_PER_THREAD = 16
+#: what the worker threads' time is charged to (:attr:`RenderResult.stage_thread_seconds`)
+STAGES = ("camera_rays", "embree", "shading", "accumulation")
 #: relative offset of secondary-ray origins along the normal; Embree is float32 (~6e-8 relative),
 #: so origins closer than ~100 ulps re-hit the surface they start on (self-intersection).
 RAY_OFFSET_REL = 1e-5
@@ -97,18 +112,28 @@ class RenderSettings:
 
 @dataclass
 class RenderResult:
-    """A light field and what it cost."""
+    """A light field and what it cost.
+
+    ``embree_thread_seconds`` is the time inside Embree queries summed over the ``threads``
+    worker threads, so :attr:`embree_share` is the share of the machine's capacity (wall time
+    x threads) that went to ray casting. ``stage_thread_seconds`` splits the worker threads'
+    path-tracing time by :data:`STAGES` (compiled kernels and Embree); what the capacity holds
+    beyond them is Python glue and waiting.
+    """
 
     light_field: LightField
     seconds: float
-    embree_seconds: float
+    embree_thread_seconds: float
     rays_traced: int
     timings_s: dict[str, float] = field(default_factory=dict)
+    threads: int = 1
+    stage_thread_seconds: dict[str, float] = field(default_factory=dict)
 
     @property
     def embree_share(self) -> float:
-        """Fraction of the wall time spent inside Embree queries."""
-        return self.embree_seconds / self.seconds if self.seconds > 0 else 0.0
+        """Fraction of the threads' wall time spent inside Embree queries."""
+        capacity = self.seconds * max(self.threads, 1)
+        return self.embree_thread_seconds / capacity if capacity > 0 else 0.0
 
 
 class _Accumulator:
@@ -127,21 +152,12 @@ class _Accumulator:
         self.ss_im = np.zeros((n_f, npix))
         self.s_reim = np.zeros((n_f, npix))
 
-    def add(self, active, ambient, re, im, pixels: np.ndarray) -> None:
-        """Add g passes over ``pixels`` given as (g, npix) arrays (phasor parts (n_f, g, npix)).
-
-        Pixels that were not traced hold zeros and do not count as sampled.
-        """
-        self.n[pixels] += active.shape[0]
-        self.s_active += active.sum(axis=0)
-        self.ss_active += (active * active).sum(axis=0)
-        self.s_ambient += ambient.sum(axis=0)
-        self.ss_ambient += (ambient * ambient).sum(axis=0)
-        self.s_re += re.sum(axis=1)
-        self.s_im += im.sum(axis=1)
-        self.ss_re += (re * re).sum(axis=1)
-        self.ss_im += (im * im).sum(axis=1)
-        self.s_reim += (re * im).sum(axis=1)
+    def add(self, pixels: np.ndarray, dc, ambient, re, im) -> None:
+        """Add per-sample values; sample ``r`` belongs to pixel ``pixels[r % len(pixels)]``."""
+        kernels.add_samples(
+            pixels, dc, ambient, re, im, self.n, self.s_active, self.ss_active, self.s_ambient,
+            self.ss_ambient, self.s_re, self.s_im, self.ss_re, self.ss_im, self.s_reim,
+        )
 
     def mean(self, s: np.ndarray) -> np.ndarray:
         """Per-pixel mean; unsampled pixels (n = 0) report 0, not 0/0."""
@@ -181,6 +197,8 @@ class ProgressiveRenderer:
         self.tracer = tracer or RayTracer(scene.triangles_m, cam.position_m, settings.threads)
         self._stats0 = self.tracer.stats.snapshot()
         self.timings_s: dict[str, float] = {"path_tracing": 0.0}
+        self.stage_thread_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+        self._stage_lock = threading.Lock()
         self.ctx = _Context(scene, settings, self.tracer, cam.position_m)
         t0 = time.perf_counter()
         with PARALLEL_KERNEL_LOCK:
@@ -199,23 +217,41 @@ class ProgressiveRenderer:
         pixels: np.ndarray | None = None,
         progress: Callable[[int, int], None] | None = None,
     ) -> None:
-        """Take ``n`` more samples of each pixel in ``pixels`` (flat indices; default all)."""
+        """Take ``n`` more samples of each pixel in ``pixels``, on the tracer's worker threads.
+
+        ``pixels`` are distinct flat indices in [0, H*W) (default: all pixels).
+        """
         if pixels is None:
             pix = np.arange(self.npix, dtype=np.int64)
         else:
-            pix = np.asarray(pixels, dtype=np.int64)
+            pix = np.asarray(pixels, dtype=np.int64).ravel()
+            if pix.size and (pix.min() < 0 or pix.max() >= self.npix):
+                raise ValueError(
+                    f"pixels: flat indices must lie in [0, {self.npix - 1}], "
+                    f"got [{pix.min()}, {pix.max()}]"
+                )
+            if np.unique(pix).size != pix.size:
+                raise ValueError("pixels: every pixel may appear only once per request")
         if pix.size == 0 or n <= 0:
             return
         t0 = time.perf_counter()
-        group = max(1, WAVEFRONT_RAYS // pix.size)
-        done = 0
-        while done < n:
-            g = min(group, n - done)
-            with PARALLEL_KERNEL_LOCK:
-                _render_passes(self.ctx, pix, self.acc.n[pix], g, self.acc)
-            done += g
-            if progress is not None:
-                progress(done, n)
+        tasks = TASKS_PER_THREAD * self.tracer.threads
+        block = int(min(max(-(-pix.size // tasks), 1), CHUNK_RAYS))
+        passes = max(1, CHUNK_RAYS // block)
+        futures = [
+            self.tracer.submit(_trace_block, self.ctx, pix[a:a + block], n, passes, self.acc,
+                               self.stage_thread_s, self._stage_lock)
+            for a in range(0, pix.size, block)
+        ]
+        try:
+            for done, f in enumerate(as_completed(futures), start=1):
+                f.result()
+                if progress is not None:
+                    progress(n * done // len(futures), n)
+        finally:
+            for f in futures:  # after a failure: stop what has not started, wait for the rest
+                f.cancel()
+            wait(futures)
         self.timings_s["path_tracing"] += time.perf_counter() - t0
 
     def light_field(self) -> LightField:
@@ -242,9 +278,11 @@ class ProgressiveRenderer:
         return RenderResult(
             light_field=self.light_field(),
             seconds=time.perf_counter() - self._t_start,
-            embree_seconds=stats.seconds - self._stats0.seconds,
+            embree_thread_seconds=stats.seconds - self._stats0.seconds,
             rays_traced=stats.rays - self._stats0.rays,
             timings_s=dict(self.timings_s),
+            threads=self.tracer.threads,
+            stage_thread_seconds=dict(self.stage_thread_s),
         )
 
     def close(self) -> None:
@@ -296,8 +334,8 @@ class _Context:
         self.origin = np.asarray(origin, dtype=np.float64)
         self.freqs = np.asarray(scene.camera.modulation_frequencies_hz, dtype=np.float64)
         self.n_f = self.freqs.size
-        #: phase per metre of path, Psi of eq. 17 [rad/m]
-        self.psi_rad_m = 2.0 * np.pi * self.freqs / SPEED_OF_LIGHT_M_S
+        #: phase per metre of path in turns, Psi / 2 pi of eq. 17 [1/m]
+        self.turns_per_m = self.freqs / SPEED_OF_LIGHT_M_S
         self.u_px, self.v_px = pixel_centre_grid(scene.camera.intrinsics)
         self.npix = self.u_px.size
         self.rotation = np.ascontiguousarray(scene.camera.rotation)
@@ -368,72 +406,80 @@ def _ground_truth(ctx: _Context) -> dict:
     }
 
 
-def _shadow(tracer: RayTracer, contrib, origins, dirs, t_max) -> np.ndarray:
-    """Occlusion of the shadow rays whose contribution is positive; (k,) bool, False elsewhere."""
-    blocked = np.zeros(contrib.shape[0], dtype=np.bool_)
-    sel = np.flatnonzero(contrib > 0.0)
-    if sel.size:
-        o, d, t = kernels.gather_rays(sel, origins, dirs, t_max)
-        blocked[sel] = tracer.occluded32(o, d, t)
-    return blocked
+class _StageClock:
+    """Thread-seconds per stage of one task, merged into the renderer's totals at its end."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+        self._t = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        """Charge the time since the previous lap to ``stage``."""
+        now = time.perf_counter()
+        self.seconds[stage] += now - self._t
+        self._t = now
 
 
-def _render_passes(
-    ctx: _Context, pixels: np.ndarray, first_sample: np.ndarray, g: int, acc: _Accumulator
+def _trace_block(
+    ctx: _Context, pixels: np.ndarray, n: int, passes: int, acc: _Accumulator,
+    totals: dict[str, float], lock: threading.Lock,
 ) -> None:
-    """Trace ``g`` more samples of each pixel in ``pixels`` (one wavefront), add them to ``acc``."""
-    npix = ctx.npix
-    st = ctx.settings
-    m = g * npix
-    out_active = np.zeros(m)
-    out_ambient = np.zeros(m)
-    out_re = np.zeros((ctx.n_f, m))
-    out_im = np.zeros((ctx.n_f, m))
+    """Trace ``n`` more samples of each pixel in ``pixels``, ``passes`` samples per chunk.
 
-    d, slot, keys = kernels.primary_rays(
-        st.seed, pixels, first_sample, g, npix, ctx.u_px, ctx.v_px,
+    Runs on a worker thread; the caller gives each thread distinct pixels.
+    """
+    clock = _StageClock()
+    first = acc.n[pixels].copy()
+    for p0 in range(0, n, passes):
+        _trace_chunk(ctx, pixels, first + p0, min(passes, n - p0), acc, clock)
+    with lock:
+        for k, v in clock.seconds.items():
+            totals[k] += v
+
+
+def _trace_chunk(
+    ctx: _Context, pixels: np.ndarray, first_sample: np.ndarray, g: int, acc: _Accumulator,
+    clock: _StageClock,
+) -> None:
+    """Trace ``g`` samples of each pixel in ``pixels`` (sample numbers from ``first_sample``),
+    wavefront-style, and add them to ``acc``."""
+    st = ctx.settings
+    tracer = ctx.tracer
+    d, keys = kernels.primary_rays(
+        st.seed, pixels, first_sample, g, ctx.u_px, ctx.v_px,
         st.footprint_px if st.jitter else 0.0, ctx.intr.fx_px,
         ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px, ctx.distortion, ctx.rotation,
     )
+    m = d.shape[0]
+    out_dc = np.zeros(m)
+    out_amb = np.zeros(m)
+    out_re = np.zeros((ctx.n_f, m))
+    out_im = np.zeros((ctx.n_f, m))
     o = np.zeros_like(d)
-    length = np.zeros(d.shape[0])
-    throughput = np.ones(d.shape[0])
-
+    slot = np.arange(m, dtype=np.int64)
+    length = np.zeros(m)
+    throughput = np.ones(m)
+    clock.lap("camera_rays")
     n_bounces = st.effective_bounces
     for b in range(1, n_bounces + 1):
-        tfar, prim = ctx.tracer.intersect32(o, d)
-        hit = np.flatnonzero(prim >= 0)
-        if hit.size == 0:
-            break
-        (flat, act, act_len, sh_o, sh_d, sh_t, amb, amb_o,
-         nxt_o, nxt_d, nxt_len, nxt_thr, alive) = kernels.bounce(
-            hit, o, d, tfar, prim, slot, keys, length, throughput,
+        tfar, prim = tracer.intersect_here(o, d)
+        clock.lap("embree")
+        shadow, (o, d, slot, keys, length, throughput) = kernels.bounce(
+            o, d, tfar, prim, slot, keys, length, throughput,
             ctx.normals, ctx.tri_mat, ctx.mat_kind, ctx.mat_params,
             ctx.light_pos, ctx.light_axis, ctx.light_scale, ctx.prof_angle, ctx.prof_rel,
             MIN_LIGHT_DISTANCE_M, ctx.amb_dir, ctx.amb_irr, ctx.amb_centre, ctx.amb_u,
             ctx.amb_v, ctx.amb_size, ctx.amb_footprint, ctx.origin,
             b, st.russian_roulette_from_bounce, b < n_bounces,
         )
-        blocked = _shadow(ctx.tracer, act, sh_o, sh_d, sh_t)
-        kernels.accumulate_vertices(
-            flat, act, act_len, blocked, ctx.psi_rad_m, out_active, out_re, out_im
-        )
-        for a in range(ctx.n_ambient):
-            dirs = np.empty_like(amb_o[a])
-            dirs[:] = -ctx.amb_dir[a]
-            tmax = np.full(amb_o[a].shape[0], np.finfo(np.float32).max, dtype=np.float32)
-            blocked = _shadow(ctx.tracer, amb[a], amb_o[a], dirs, tmax)
-            kernels.accumulate_ambient(flat, amb[a], blocked, out_ambient)
-        if b == n_bounces:
+        clock.lap("shading")
+        sh_o, sh_d, sh_t, sh_slot, sh_c, sh_len, sh_amb = shadow
+        occluded = tracer.occluded_here(sh_o, sh_d, sh_t)
+        clock.lap("embree")
+        kernels.add_shadowed(occluded, sh_slot, sh_c, sh_len, sh_amb, ctx.turns_per_m,
+                             out_dc, out_amb, out_re, out_im)
+        clock.lap("accumulation")
+        if o.shape[0] == 0:
             break
-        keep = np.flatnonzero(alive)
-        src = hit[keep]
-        o, d, _ = kernels.gather_rays(keep, nxt_o, nxt_d, np.empty(0, dtype=np.float32))
-        slot, keys = slot[src], keys[src]
-        length, throughput = nxt_len[keep], nxt_thr[keep]
-
-    gshape = (g, npix)
-    acc.add(
-        out_active.reshape(gshape), out_ambient.reshape(gshape),
-        out_re.reshape(ctx.n_f, *gshape), out_im.reshape(ctx.n_f, *gshape), pixels,
-    )
+    acc.add(pixels, out_dc, out_amb, out_re, out_im)
+    clock.lap("accumulation")

@@ -1,12 +1,18 @@
-"""Compiled per-ray kernels of the wavefront integrator (numba).
+"""Compiled per-ray kernels of the integrator (numba).
 
-Profiling the numpy version (line_profiler, corner scene, direct, 32 spp) showed about 1 us of
-numpy work per path against ~0.1 us inside Embree: every step allocated and re-read (m, 3)
-temporaries. These kernels fuse the work of a bounce into two passes over the rays (``shade``:
-hit geometry, BRDF and next-event estimation; ``scatter``: BRDF sampling and Russian roulette)
-and run them on all cores (``prange``); each ray's result depends only on that ray, so the
-output is identical for any number of threads. Pixel accumulation is serial, in ray order, so
-sums are bit-reproducible.
+The integrator traces a frame as many independent *chunks* (a block of pixels, a few sample
+passes), each on one worker thread from start to finish: camera rays, then per bounce one
+Embree query, one call of :func:`bounce` and one occlusion query, then :func:`add_shadowed`,
+and finally :func:`add_samples` into the per-pixel sums. These kernels are therefore serial and
+``nogil``: two threads run them side by side with Embree, without numba's thread pool (whose
+workers, parked or spinning, competed with Embree's callers: measured ~30 % slower Embree
+queries), without a barrier after every stage, and on chunks small enough to stay in cache.
+
+Being serial, :func:`bounce` writes the rays it spawns (shadow rays, continuing paths) packed,
+in ray order, so no separate compaction pass is needed. History: the first numpy version spent
+~1 us of numpy per path against ~0.1 us inside Embree; the parallel fused kernels that followed
+still spent ~60 % of the wall time outside Embree, a third of it in ``math.sin``/``math.cos``
+(now :func:`sincos_turns`), allocation and compaction.
 """
 
 from __future__ import annotations
@@ -20,7 +26,13 @@ from numba import njit, prange
 
 import sim_core.materials.kernels as _material_kernels
 import sim_core.render.rng as _rng
-from sim_core.materials.kernels import duff_frame, eval_brdf, sample_brdf
+from sim_core.materials.kernels import (
+    duff_frame,
+    eval_brdf,
+    param_row,
+    sample_brdf,
+    sincos_turns,
+)
 from sim_core.render.rng import path_key, seed_key, uniform_pair
 
 
@@ -55,7 +67,9 @@ _drop_stale_cache()
 
 # Every division in these kernels is guarded where its divisor can be 0 (see the comments), so
 # numba's per-division zero check (error_model="python") only costs time: "numpy" drops it.
-# The threading layer is set in sim_core.materials.kernels, imported above.
+# The threading layer of the one parallel kernel (camera_rays) is set in
+# sim_core.materials.kernels, imported above.
+_SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 # Relative and absolute offset of secondary-ray origins; see integrator.RAY_OFFSET_REL.
 _OFFSET_REL = 1e-5
@@ -68,120 +82,114 @@ def _offset_scale(px, py, pz):
     return m if m > _OFFSET_MIN_M else _OFFSET_MIN_M
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def accumulate_vertices(flat, act, act_len, blocked, psi_rad_m, out_dc, out_re, out_im):
-    """Add the unblocked active-light contributions of one bounce (seed eqs. 17, 31).
-
-    Within one bounce every path owns its own (pass, pixel) slot ``flat``, so the writes never
-    collide and the loop runs in parallel with the same result as a serial one.
-    """
-    nf = psi_rad_m.shape[0]
-    for j in prange(flat.shape[0]):
-        c = act[j]
-        if c > 0.0 and not blocked[j]:
-            q = flat[j]
-            out_dc[q] += c
-            for k in range(nf):
-                phase = psi_rad_m[k] * act_len[j]
-                out_re[k, q] += c * math.cos(phase)
-                out_im[k, q] -= c * math.sin(phase)
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def accumulate_ambient(flat, amb, blocked, out):
-    """Add the unblocked ambient contributions of one bounce; slots are unique per bounce."""
-    for j in prange(flat.shape[0]):
-        if amb[j] > 0.0 and not blocked[j]:
-            out[flat[j]] += amb[j]
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
-    """World-frame unit directions through pixel coordinates (OpenCV model, pinhole).
+@njit(cache=True, inline="always", error_model="numpy")
+def camera_ray(u, v, fx, fy, cx, cy, dist, rotation):
+    """World-frame unit direction through pixel coordinates (u, v) (OpenCV model, pinhole).
 
     ``dist`` holds k1, k2, p1, p2, k3; the distortion is inverted by 20 fixed-point steps, as
     :func:`sim_core.camera.undistort_normalized` does.
     """
-    m = u_px.shape[0]
-    out = np.empty((m, 3))
     k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    distorted = k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0
-    for i in prange(m):
-        xd = (u_px[i] - cx) / fx
-        yd = (v_px[i] - cy) / fy
-        x, y = xd, yd
-        if distorted:
-            for _ in range(20):
-                r2 = x * x + y * y
-                radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                # keeps a wild k from dividing by 0
-                if abs(radial) < 1e-6:
-                    radial = 1e-6
-                dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-                dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-                x = (xd - dx) / radial
-                y = (yd - dy) / radial
-        inv = 1.0 / np.sqrt(x * x + y * y + 1.0)
-        cx_, cy_, cz_ = x * inv, y * inv, inv
-        for k in range(3):
-            out[i, k] = rotation[k, 0] * cx_ + rotation[k, 1] * cy_ + rotation[k, 2] * cz_
-    return out
+    xd = (u - cx) / fx
+    yd = (v - cy) / fy
+    x, y = xd, yd
+    if k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0:
+        for _ in range(20):
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            # keeps a wild k from dividing by 0
+            if abs(radial) < 1e-6:
+                radial = 1e-6
+            dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+            dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            x = (xd - dx) / radial
+            y = (yd - dy) / radial
+    inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
+    cx_, cy_, cz_ = x * inv, y * inv, inv
+    return (
+        rotation[0, 0] * cx_ + rotation[0, 1] * cy_ + rotation[0, 2] * cz_,
+        rotation[1, 0] * cx_ + rotation[1, 1] * cy_ + rotation[1, 2] * cz_,
+        rotation[2, 0] * cx_ + rotation[2, 1] * cy_ + rotation[2, 2] * cz_,
+    )
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
+def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
+    """:func:`camera_ray` over arrays of pixel coordinates: (m, 3) float64 unit directions.
+
+    Parallel (numba's thread pool): callers hold ``PARALLEL_KERNEL_LOCK``.
+    """
+    m = u_px.shape[0]
+    out = np.empty((m, 3))
+    for i in prange(m):
+        out[i, 0], out[i, 1], out[i, 2] = camera_ray(u_px[i], v_px[i], fx, fy, cx, cy, dist,
+                                                     rotation)
+    return out
+
+
+@njit(**_SERIAL)
 def primary_rays(
-    seed, pixels, first_sample, n_passes, npix, u_px, v_px, footprint_px, fx, fy, cx, cy, dist,
+    seed, pixels, first_sample, n_passes, u_px, v_px, footprint_px, fx, fy, cx, cy, dist,
     rotation,
 ):
     """Camera rays for ``n_passes`` more samples of each pixel in ``pixels``.
 
-    Ray ``i`` belongs to pixel ``q = pixels[i % n]`` and is that pixel's sample number
-    ``first_sample[i % n] + i // n``: its path key hashes (seed, that sample number, q), so a
-    pixel's k-th sample is the same whichever pixels are traced with it. It lands uniformly in
-    the ``footprint_px`` square around the pixel centre (0: the centre itself), drawn from the
-    uniforms of bounce 0. Returns float32 directions (m, 3), the accumulation slot of each
-    ray (``(i // n) * npix + q``) and the path keys.
+    Ray ``r`` belongs to pixel ``pixels[r % n]`` and is that pixel's sample number
+    ``first_sample[r % n] + r // n``: its path key hashes (seed, that sample number, pixel), so
+    a pixel's k-th sample is the same whichever pixels are traced with it. It lands uniformly
+    in the ``footprint_px`` square around the pixel centre (0: the centre itself), drawn from
+    the uniforms of bounce 0. Returns float32 render-frame directions (m, 3) and the path keys.
     """
     n = pixels.shape[0]
     m = n_passes * n
-    u = np.empty(m)
-    v = np.empty(m)
-    slot = np.empty(m, dtype=np.int64)
+    d = np.empty((m, 3), dtype=np.float32)
     keys = np.empty(m, dtype=np.uint64)
     sk = seed_key(seed)
-    for i in prange(m):
-        j = i % n
-        q = pixels[j]
-        local = i // n
-        key = path_key(sk, first_sample[j] + local, q)
-        keys[i] = key
-        slot[i] = local * npix + q
-        if footprint_px > 0.0:
-            ju, jv = uniform_pair(key, 0, 0)
-            u[i] = u_px[q] + (ju - 0.5) * footprint_px
-            v[i] = v_px[q] + (jv - 0.5) * footprint_px
-        else:
-            u[i] = u_px[q]
-            v[i] = v_px[q]
-    return camera_rays(u, v, fx, fy, cx, cy, dist, rotation).astype(np.float32), slot, keys
+    for p in range(n_passes):  # nested loops: r % n and r // n would cost two int divisions
+        for j in range(n):
+            r = p * n + j
+            q = pixels[j]
+            key = path_key(sk, first_sample[j] + p, q)
+            keys[r] = key
+            u, v = u_px[q], v_px[q]
+            if footprint_px > 0.0:
+                ju, jv = uniform_pair(key, 0, 0)
+                u += (ju - 0.5) * footprint_px
+                v += (jv - 0.5) * footprint_px
+            d[r, 0], d[r, 1], d[r, 2] = camera_ray(u, v, fx, fy, cx, cy, dist, rotation)
+    return d, keys
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _profile_intensity(cos_a, scale, prof_angle, prof_rel):
-    """Radiant intensity [W/sr] at angle arccos(cos_a) from the source axis (linear table)."""
-    if prof_angle.shape[0] == 0:
+    """Radiant intensity [W/sr] at angle arccos(cos_a) from the source axis.
+
+    ``prof_angle`` (increasing, rad) and ``prof_rel`` are the source's angular table,
+    interpolated linearly like ``np.interp``; an empty table means isotropic. Zero at and beyond
+    the last angle. Written out instead of calling ``np.interp``, whose inlined code kept the
+    ray loop around it from being optimised even where the table is empty (measured ~30 ns
+    per vertex).
+    """
+    n = prof_angle.shape[0]
+    if n == 0:
         return scale
     # arccos needs its argument inside [-1, 1]; rounding can leave it 1 + 1e-16.
-    c = min(1.0, max(-1.0, cos_a))
-    a = math.acos(c)
-    if a >= prof_angle[-1]:
+    a = math.acos(min(1.0, max(-1.0, cos_a)))
+    if a >= prof_angle[n - 1]:
         return 0.0
-    return scale * np.interp(a, prof_angle, prof_rel)
+    if a <= prof_angle[0]:
+        return scale * prof_rel[0]
+    k = 1
+    while prof_angle[k] <= a:  # stops at k <= n - 1: a < prof_angle[n - 1]
+        k += 1
+    a0, a1 = prof_angle[k - 1], prof_angle[k]
+    w = (a - a0) / (a1 - a0)  # a0 <= a < a1, so a1 - a0 > 0
+    return scale * (prof_rel[k - 1] + w * (prof_rel[k] - prof_rel[k - 1]))
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(**_SERIAL)
 def bounce(
-    hit, o, d, tfar, prim, slot, keys, length, throughput,
+    o, d, tfar, prim, slot, keys, length, throughput,
     normals, tri_mat, mat_kind, mat_params,
     light_pos, light_axis, light_scale, prof_angle, prof_rel, min_light_distance_m,
     amb_dir, amb_irr, amb_centre, amb_u, amb_v, amb_size, amb_footprint, render_origin,
@@ -189,33 +197,42 @@ def bounce(
 ):
     """All the work at one path vertex except ray casting (seed eqs. 19-22).
 
-    For every traced ray ``hit[j]`` that met a surface: the hit point and a normal facing the
-    ray; the candidate contribution of the camera's source (seed eqs. 20-21, 0 where the light
-    is behind the surface) with its shadow ray and the full path length; the same for every
-    ambient source (DC only, inside its beam footprint); and, if ``scatter``, the next ray by
-    BRDF importance sampling with Russian roulette (uniform dimensions 0-2 and 3 of this
-    bounce). Sampling does not depend on visibility, so both happen in one pass.
+    For every ray ``i`` that met a surface (``prim[i] >= 0``): the hit point and a normal
+    facing the ray; the candidate contribution of the camera's source (seed eqs. 20-21, none
+    where the light is behind the surface) with its shadow ray and the full path length; the
+    same for every ambient source (DC only, inside its beam footprint); and, if ``scatter``,
+    the next ray by BRDF importance sampling with Russian roulette (uniform dimensions 0-2 and
+    3 of this bounce). Sampling does not depend on visibility, so both happen in one pass.
 
-    Ray arrays are float32 in the render frame (what Embree takes); the arithmetic is float64.
+    Returns the shadow rays ``(o, d, t_max, slot, contribution, length, is_ambient)`` and the
+    continuing paths ``(o, d, slot, key, length, throughput)``, each packed in ray order.
+    ``slot`` is the path's row in the chunk's per-sample sums; ``length`` of an ambient shadow
+    ray is unused (ambient light is unmodulated). Ray arrays are float32 in the render frame
+    (what Embree takes); the arithmetic is float64.
     """
-    k = hit.shape[0]
+    m = prim.shape[0]
     n_amb = amb_dir.shape[0]
-    flat = np.empty(k, dtype=np.int64)
-    act = np.zeros(k)
-    act_len = np.empty(k)
-    sh_o = np.empty((k, 3), dtype=np.float32)
-    sh_d = np.empty((k, 3), dtype=np.float32)
-    sh_t = np.empty(k, dtype=np.float32)
-    amb = np.zeros((n_amb, k))
-    amb_o = np.empty((n_amb, k, 3), dtype=np.float32)
-    nxt_o = np.empty((k, 3), dtype=np.float32)
-    nxt_d = np.empty((k, 3), dtype=np.float32)
-    nxt_len = np.empty(k)
-    nxt_thr = np.zeros(k)
-    alive = np.zeros(k, dtype=np.bool_)
-    for j in prange(k):
-        i = hit[j]
+    cap = m * (1 + n_amb)
+    sh_o = np.empty((cap, 3), dtype=np.float32)
+    sh_d = np.empty((cap, 3), dtype=np.float32)
+    sh_t = np.empty(cap, dtype=np.float32)
+    sh_slot = np.empty(cap, dtype=np.int64)
+    sh_c = np.empty(cap)
+    sh_len = np.empty(cap)
+    sh_amb = np.empty(cap, dtype=np.bool_)
+    ns = 0
+    nx_o = np.empty((m if scatter else 0, 3), dtype=np.float32)
+    nx_d = np.empty((m if scatter else 0, 3), dtype=np.float32)
+    nx_slot = np.empty(m if scatter else 0, dtype=np.int64)
+    nx_key = np.empty(m if scatter else 0, dtype=np.uint64)
+    nx_len = np.empty(m if scatter else 0)
+    nx_thr = np.empty(m if scatter else 0)
+    nn = 0
+    for i in range(m):
         f = prim[i]
+        thr = throughput[i]
+        if f < 0 or not thr > 0.0:
+            continue
         t = np.float64(tfar[i])
         dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
         nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
@@ -228,13 +245,12 @@ def bounce(
         wol0 = -(dx * t0 + dy * t1 + dz * t2)
         wol1 = -(dx * b0 + dy * b1 + dz * b2)
         wol2 = -(dx * nx + dy * ny + dz * nz)
-        m = tri_mat[f]
-        kind = mat_kind[m]
-        par = mat_params[m]
+        mat = tri_mat[f]
+        kind = mat_kind[mat]
+        par = param_row(mat_params, mat)
         ln = length[i] + t
-        flat[j] = slot[i]
-        thr = throughput[i]
         s = _offset_scale(px, py, pz)
+        ox, oy, oz = px + s * nx, py + s * ny, pz + s * nz  # shadow-ray origin, lit side
 
         # Camera source: E = I(theta) cos / d^2 (seed eq. 20), L = E f (eq. 21).
         lx, ly, lz = light_pos[0] - px, light_pos[1] - py, light_pos[2] - pz
@@ -247,8 +263,7 @@ def bounce(
         # I / d_min^2 (the clamp enters 1/d^2 only).
         inv_dist = 1.0 / (dist if dist > min_light_distance_m else min_light_distance_m)
         cos_p = lx * nx + ly * ny + lz * nz
-        act_len[j] = ln + dist
-        if cos_p > 0.0 and thr > 0.0:
+        if cos_p > 0.0:
             fr = eval_brdf(kind, par, lx * t0 + ly * t1 + lz * t2, lx * b0 + ly * b1 + lz * b2,
                            cos_p, wol0, wol1, wol2)
             inten = _profile_intensity(
@@ -257,18 +272,21 @@ def bounce(
             )
             c = thr * fr * inten * cos_p * inv_dist * inv_dist
             if c > 0.0:
-                act[j] = c
-                ox, oy, oz = px + s * nx, py + s * ny, pz + s * nz
-                sh_o[j, 0], sh_o[j, 1], sh_o[j, 2] = ox, oy, oz
-                sh_d[j, 0], sh_d[j, 1], sh_d[j, 2] = lx, ly, lz
+                sh_o[ns, 0], sh_o[ns, 1], sh_o[ns, 2] = ox, oy, oz
+                sh_d[ns, 0], sh_d[ns, 1], sh_d[ns, 2] = lx, ly, lz
                 ex, ey, ez = light_pos[0] - ox, light_pos[1] - oy, light_pos[2] - oz
-                sh_t[j] = math.sqrt(ex * ex + ey * ey + ez * ez) * (1.0 - 1e-6)
+                sh_t[ns] = math.sqrt(ex * ex + ey * ey + ez * ez) * (1.0 - 1e-6)
+                sh_slot[ns] = slot[i]
+                sh_c[ns] = c
+                sh_len[ns] = ln + dist
+                sh_amb[ns] = False
+                ns += 1
 
         # Ambient sources: collimated, E cos, DC only.
         for a in range(n_amb):
             ax, ay, az = -amb_dir[a, 0], -amb_dir[a, 1], -amb_dir[a, 2]
             cos_a = ax * nx + ay * ny + az * nz
-            if cos_a <= 0.0 or thr <= 0.0:
+            if cos_a <= 0.0:
                 continue
             if amb_footprint[a]:
                 rx = px + render_origin[0] - amb_centre[a, 0]
@@ -282,12 +300,16 @@ def bounce(
                            cos_a, wol0, wol1, wol2)
             c = thr * fr * amb_irr[a] * cos_a
             if c > 0.0:
-                amb[a, j] = c
-                amb_o[a, j, 0] = px + s * nx
-                amb_o[a, j, 1] = py + s * ny
-                amb_o[a, j, 2] = pz + s * nz
+                sh_o[ns, 0], sh_o[ns, 1], sh_o[ns, 2] = ox, oy, oz
+                sh_d[ns, 0], sh_d[ns, 1], sh_d[ns, 2] = ax, ay, az
+                sh_t[ns] = np.float32(np.inf)
+                sh_slot[ns] = slot[i]
+                sh_c[ns] = c
+                sh_len[ns] = 0.0
+                sh_amb[ns] = True
+                ns += 1
 
-        if not scatter or not thr > 0.0:
+        if not scatter:
             continue
         key = keys[i]
         u0, u1 = uniform_pair(key, bounce_index, 0)
@@ -308,30 +330,68 @@ def bounce(
         wz = x * t2 + y * b2 + z * nz
         inv = 1.0 / math.sqrt(wx * wx + wy * wy + wz * wz)  # orthonormal frame: ~1
         sz = s if z >= 0.0 else -s
-        nxt_o[j, 0], nxt_o[j, 1], nxt_o[j, 2] = px + sz * nx, py + sz * ny, pz + sz * nz
-        nxt_d[j, 0], nxt_d[j, 1], nxt_d[j, 2] = wx * inv, wy * inv, wz * inv
-        nxt_len[j] = ln
-        nxt_thr[j] = tn
-        alive[j] = True
-    return (flat, act, act_len, sh_o, sh_d, sh_t, amb, amb_o,
-            nxt_o, nxt_d, nxt_len, nxt_thr, alive)
+        nx_o[nn, 0], nx_o[nn, 1], nx_o[nn, 2] = px + sz * nx, py + sz * ny, pz + sz * nz
+        nx_d[nn, 0], nx_d[nn, 1], nx_d[nn, 2] = wx * inv, wy * inv, wz * inv
+        nx_slot[nn] = slot[i]
+        nx_key[nn] = key
+        nx_len[nn] = ln
+        nx_thr[nn] = tn
+        nn += 1
+    return (
+        (sh_o[:ns], sh_d[:ns], sh_t[:ns], sh_slot[:ns], sh_c[:ns], sh_len[:ns], sh_amb[:ns]),
+        (nx_o[:nn], nx_d[:nn], nx_slot[:nn], nx_key[:nn], nx_len[:nn], nx_thr[:nn]),
+    )
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def gather_rays(idx, o, d, t):
-    """Rows ``idx`` of ray origins, directions (float32, (k, 3)) and lengths, contiguous.
+@njit(**_SERIAL)
+def add_shadowed(occluded, sh_slot, sh_c, sh_len, sh_amb, turns_per_m, out_dc, out_amb,
+                 out_re, out_im):
+    """Add the contributions whose shadow ray is unblocked to their path's sums (eqs. 17, 31).
 
-    numpy's fancy indexing of (k, 3) float32 rows measured ~20 ns per row here; this is a
-    plain parallel copy. ``t`` may be empty (then an empty array comes back).
+    ``occluded`` is Embree's answer per shadow ray (0 = blocked, -1 = free). The camera source
+    adds ``c`` to DC and ``c exp(-i 2π f L / c0)`` to each frequency's phasor (``turns_per_m``
+    = f / c0); ambient sources add to their DC sum only.
     """
-    n = idx.shape[0]
-    go = np.empty((n, 3), dtype=np.float32)
-    gd = np.empty((n, 3), dtype=np.float32)
-    gt = np.empty(n if t.shape[0] else 0, dtype=t.dtype)
-    for j in prange(n):
-        i = idx[j]
-        go[j, 0], go[j, 1], go[j, 2] = o[i, 0], o[i, 1], o[i, 2]
-        gd[j, 0], gd[j, 1], gd[j, 2] = d[i, 0], d[i, 1], d[i, 2]
-        if t.shape[0]:
-            gt[j] = t[i]
-    return go, gd, gt
+    nf = turns_per_m.shape[0]
+    for j in range(sh_slot.shape[0]):
+        if occluded[j] == 0:
+            continue
+        q = sh_slot[j]
+        c = sh_c[j]
+        if sh_amb[j]:
+            out_amb[q] += c
+            continue
+        out_dc[q] += c
+        for k in range(nf):
+            sin_p, cos_p = sincos_turns(turns_per_m[k] * sh_len[j])
+            out_re[k, q] += c * cos_p
+            out_im[k, q] -= c * sin_p
+
+
+@njit(**_SERIAL)
+def add_samples(pixels, out_dc, out_amb, out_re, out_im, n, s_dc, ss_dc, s_amb, ss_amb, s_re,
+                s_im, ss_re, ss_im, s_reim):
+    """Add a chunk's per-sample values to the per-pixel sums and sums of squares.
+
+    Sample ``r`` belongs to pixel ``pixels[r % len(pixels)]``; samples are added one at a time
+    in ``r`` order, which is the order of the pixel's sample numbers, so every sum is the same
+    however the samples were grouped into chunks and threads.
+    """
+    npx = pixels.shape[0]
+    nf = out_re.shape[0]
+    for r in range(out_dc.shape[0]):
+        q = pixels[r % npx]
+        n[q] += 1
+        a = out_dc[r]
+        s_dc[q] += a
+        ss_dc[q] += a * a
+        b = out_amb[r]
+        s_amb[q] += b
+        ss_amb[q] += b * b
+        for k in range(nf):
+            re, im = out_re[k, r], out_im[k, r]
+            s_re[k, q] += re
+            s_im[k, q] += im
+            ss_re[k, q] += re * re
+            ss_im[k, q] += im * im
+            s_reim[k, q] += re * im

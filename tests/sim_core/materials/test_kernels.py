@@ -226,7 +226,8 @@ def _mean_weight(kind, p, wo, n):
 
 @njit(parallel=True)
 def _shade_like(kinds, table, mat, wi, wo, u):
-    """A prange loop over rays with a per-ray material, like render.kernels.shade/scatter."""
+    """A prange loop over rays with a per-ray material from a table, as the renderer reads it
+    (``param_row``: a tuple, not an array row)."""
     n = wi.shape[0]
     f = np.empty(n)
     pdf = np.empty(n)
@@ -234,7 +235,7 @@ def _shade_like(kinds, table, mat, wi, wo, u):
     for j in prange(n):
         m = mat[j]
         kind = kinds[m]
-        par = table[m]
+        par = kn.param_row(table, m)
         f[j] = kn.eval_brdf(kind, par, wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
         pdf[j] = kn.pdf_brdf(kind, par, wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
         x, y, z, q, w = kn.sample_brdf(
