@@ -98,5 +98,6 @@ def run_render_benchmark(
                         f"{row['mrays_per_s']:.2f}", f"{100 * res.embree_share:.0f}",
                         f"{100 * kernels:.0f}", f"{100 * row['other_share']:.0f}",
                     )
-    console.print(table, width=max(console.width, 110))  # no squeezed columns in a pipe
+    # a pipe reports 80 columns: print the table at its natural width rather than squeezed
+    Console(file=console.file, width=max(console.width, 110)).print(table)
     return rows
