@@ -98,6 +98,5 @@ def run_render_benchmark(
                         f"{row['mrays_per_s']:.2f}", f"{100 * res.embree_share:.0f}",
                         f"{100 * kernels:.0f}", f"{100 * row['other_share']:.0f}",
                     )
-    # a pipe reports 80 columns: print the table at its natural width rather than squeezed
-    Console(file=console.file, width=max(console.width, 110)).print(table)
+    console.print(table)
     return rows

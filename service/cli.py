@@ -44,7 +44,8 @@ def _register_serve_commands() -> None:
 _register_serve_commands()
 
 err_console = Console(stderr=True)
-console = Console()
+#: in a pipe (CI logs, ``| tee``) rich would squeeze the benchmark tables into 80 columns
+console = Console() if sys.stdout.isatty() else Console(width=120)
 
 
 def _fail_invalid(exc: InvalidInputError) -> None:
