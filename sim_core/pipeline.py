@@ -58,6 +58,8 @@ class SimulatedFrame:
     grey_full_scale: float | None = None
     adaptive: AdaptiveReport | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: render worker threads' time per stage (Embree, kernels) [thread-seconds]
+    render_thread_seconds: dict[str, float] = field(default_factory=dict)
 
 
 def z_over_range(scene: Scene) -> np.ndarray:
@@ -151,6 +153,7 @@ def simulate(
         timings_s=timings,
         rays_traced=result.rays_traced,
         embree_share=result.embree_share,
+        render_thread_seconds=dict(result.stage_thread_seconds),
         plan=plan,
         raw=raw,
         ideal=ideal,
@@ -237,6 +240,7 @@ def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "")
         "timings_s": frame.timings_s,
         "rays_traced": frame.rays_traced,
         "embree_share": frame.embree_share,
+        "render_thread_seconds": frame.render_thread_seconds,
         "shape": list(frame.image.range_m.shape),
         "frequencies_hz": frame.light_field.frequencies_hz.tolist(),
         "grey_preview_full_scale": full_scale,
