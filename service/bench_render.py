@@ -7,7 +7,8 @@ frame per scene that builds the Embree scene and warms caches) and prints:
 - rays traced per second (primary, shadow and bounce rays together),
 - where the worker threads' time went, as shares of the machine's capacity (wall time x
   threads): inside Embree queries, in the compiled kernels (camera rays, shading and next-event
-  estimation, accumulation), and the rest (Python glue, waiting, per-frame setup),
+  estimation, accumulation), and the rest (Python glue and numpy buffers, waiting, per-frame
+  setup),
 - for reference, raw Embree throughput on a batch of this scene's primary rays.
 """
 

@@ -419,6 +419,10 @@ class _StageClock:
         self.seconds[stage] += now - self._t
         self._t = now
 
+    def skip(self) -> None:
+        """Charge the time since the previous lap to no stage (it counts as "other")."""
+        self._t = time.perf_counter()
+
 
 def _trace_block(
     ctx: _Context, pixels: np.ndarray, n: int, passes: int, acc: _Accumulator,
@@ -450,6 +454,7 @@ def _trace_chunk(
         st.footprint_px if st.jitter else 0.0, ctx.intr.fx_px,
         ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px, ctx.distortion, ctx.rotation,
     )
+    clock.lap("camera_rays")
     m = d.shape[0]
     out_dc = np.zeros(m)
     out_amb = np.zeros(m)
@@ -459,7 +464,7 @@ def _trace_chunk(
     slot = np.arange(m, dtype=np.int64)
     length = np.zeros(m)
     throughput = np.ones(m)
-    clock.lap("camera_rays")
+    clock.skip()  # numpy buffers: "other"
     n_bounces = st.effective_bounces
     for b in range(1, n_bounces + 1):
         tfar, prim = tracer.intersect_here(o, d)
