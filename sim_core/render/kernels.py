@@ -373,25 +373,27 @@ def add_samples(pixels, out_dc, out_amb, out_re, out_im, n, s_dc, ss_dc, s_amb, 
                 s_im, ss_re, ss_im, s_reim):
     """Add a chunk's per-sample values to the per-pixel sums and sums of squares.
 
-    Sample ``r`` belongs to pixel ``pixels[r % len(pixels)]``; samples are added one at a time
-    in ``r`` order, which is the order of the pixel's sample numbers, so every sum is the same
-    however the samples were grouped into chunks and threads.
+    Sample ``r`` belongs to pixel ``pixels[r % len(pixels)]`` (the chunk holds whole passes).
+    Samples are added one at a time in ``r`` order, which is the order of the pixel's sample
+    numbers, so every sum is the same however the samples were grouped into chunks and threads.
     """
     npx = pixels.shape[0]
     nf = out_re.shape[0]
-    for r in range(out_dc.shape[0]):
-        q = pixels[r % npx]
-        n[q] += 1
-        a = out_dc[r]
-        s_dc[q] += a
-        ss_dc[q] += a * a
-        b = out_amb[r]
-        s_amb[q] += b
-        ss_amb[q] += b * b
-        for k in range(nf):
-            re, im = out_re[k, r], out_im[k, r]
-            s_re[k, q] += re
-            s_im[k, q] += im
-            ss_re[k, q] += re * re
-            ss_im[k, q] += im * im
-            s_reim[k, q] += re * im
+    for p in range(out_dc.shape[0] // npx):  # nested loops: no integer division per sample
+        for j in range(npx):
+            r = p * npx + j
+            q = pixels[j]
+            n[q] += 1
+            a = out_dc[r]
+            s_dc[q] += a
+            ss_dc[q] += a * a
+            b = out_amb[r]
+            s_amb[q] += b
+            ss_amb[q] += b * b
+            for k in range(nf):
+                re, im = out_re[k, r], out_im[k, r]
+                s_re[k, q] += re
+                s_im[k, q] += im
+                ss_re[k, q] += re * re
+                ss_im[k, q] += im * im
+                s_reim[k, q] += re * im
