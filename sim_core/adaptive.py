@@ -162,8 +162,8 @@ def _fit_budget(extra: np.ndarray, se: np.ndarray, per_sample_s: float, left_s: 
 def _add_grouped(r: ProgressiveRenderer, extra: np.ndarray) -> None:
     """Give each pixel ``extra`` more samples, in batches of pixels that want the same count.
 
-    Counts are rounded up to powers of two so that there are few batches (each one is a
-    wavefront over its pixels).
+    Counts are rounded up to powers of two so that there are few batches (each one a request
+    to the renderer for its pixels).
     """
     need = extra > 0
     levels = np.zeros_like(extra)

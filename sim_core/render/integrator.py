@@ -1,10 +1,10 @@
-"""Wavefront path tracing for an AMCW ToF camera (seed section 2.3.1, eqs. 17-31).
+"""Path tracing for an AMCW ToF camera (seed section 2.3.1, eqs. 17-31).
 
-Every bounce is one batch of rays for the whole image (and several sample passes at once).
-Each path carries its total length L from the light source through all bounces to the pixel;
-a path's contribution ``w`` (radiance, W m^-2 sr^-1) adds to the DC image and
-``w * exp(-1j * 2*pi*f*L / c)`` to each modulation frequency's phasor (eqs. 17, 31). Ambient
-light adds to DC only.
+Rays are traced in batches (chunks of pixels and sample passes, see "Work split"), every bounce
+of a batch in one Embree call. Each path carries its total length L from the light source
+through all bounces to the pixel; a path's contribution ``w`` (radiance, W m^-2 sr^-1) adds to
+the DC image and ``w * exp(-1j * 2*pi*f*L / c)`` to each modulation frequency's phasor (eqs.
+17, 31). Ambient light adds to DC only.
 
 Integrators
 -----------
@@ -305,7 +305,7 @@ def render(
     tracer : RayTracer, optional
         Reuse an Embree scene built for this geometry (its origin must be the camera centre).
     progress : callable, optional
-        Called as ``progress(samples_done, samples_total)`` after each wavefront.
+        Called as ``progress(samples_done, samples_total)`` as blocks of pixels finish.
     """
     r = ProgressiveRenderer(scene, settings, tracer)
     try:
