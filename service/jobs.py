@@ -23,10 +23,12 @@ from typing import Any
 
 from sim_core.scene_spec import SceneSpec
 
-#: One render at a time per process. numba's ``workqueue`` threading layer (the one sim_core
-#: selects) aborts the whole process when two threads launch parallel kernels at once, so every
-#: render in this process - jobs on a threaded executor or a multi-threaded Dask worker, and the
-#: simulated camera's frames (:func:`service.context.open_rig`) - takes this lock.
+#: One render at a time per process: every render in this process - jobs on a threaded executor
+#: or a multi-threaded Dask worker, and the simulated camera's frames
+#: (:func:`service.context.open_rig`) - takes this lock. A render already uses all cores, so two
+#: at once would only compete. (sim_core is thread-safe on its own: its few parallel numba
+#: kernels, which numba's ``workqueue`` layer cannot run from two threads at once, take
+#: ``PARALLEL_KERNEL_LOCK``.)
 RENDER_LOCK = threading.Lock()
 
 
@@ -46,7 +48,7 @@ class SimulationJob:
         Solar simulator level reaching the scene [sun]; 0 with the shutter closed.
     integrator, spp, max_bounces, seed, russian_roulette_from_bounce : render settings
     threads : int or None
-        Embree threads on the worker (None: all its cores).
+        Render threads on the worker (None: all its cores).
     effects : "auto" or "all"
     ideal : bool
         Ideal sensor (no noise, SBI, ADC).

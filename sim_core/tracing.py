@@ -28,7 +28,8 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
-#: below this many rays per thread, splitting costs more than it gains (PERFORMANCE-NOTES.md)
+#: below this many rays per thread, splitting costs more than it gains
+#: (../shared/PERFORMANCE-NOTES.md: ~1-3 us per call, throughput flat from ~10k rays)
 MIN_RAYS_PER_THREAD = 16_384
 
 
@@ -57,7 +58,8 @@ class RayTracer:
     origin_m : (3,) float64
         Origin of the render frame; every ray of this tracer is given relative to it.
     threads : int, optional
-        Worker threads for large batches (default: all cores).
+        Worker threads: they split large batches, and the renderer runs its chunks on them
+        (default: all cores).
     robust : bool
         Embree's robust (watertight) mode; about 30 % slower, exact at shared edges.
     """
@@ -102,7 +104,7 @@ class RayTracer:
         future: Future = Future()
         try:
             future.set_result(fn(*args))
-        except BaseException as exc:  # delivered by future.result(), like the pool would
+        except Exception as exc:  # delivered by future.result(), like the pool would
             future.set_exception(exc)
         return future
 

@@ -164,10 +164,11 @@ def sincos_turns(t):
     quarter-turn ``q/4`` are exact binary operations for |t| < 2^52, so only the final
     ``x = 2π r`` rounds (relative 1e-16), and a long path (many turns) loses nothing beyond the
     rounding of ``t`` itself. Then a Taylor polynomial on |x| <= π/4 and the quadrant swap.
-    ``t`` must be finite.
+    Beyond 2^52 turns every float is a whole number of turns: (0, 1). NaN or inf give NaN.
     """
-    r = t - math.floor(t + 0.5)  # in [-1/2, 1/2]
-    q = math.floor(4.0 * r + 0.5)  # quadrant, -2..2
+    # np.floor stays float (math.floor is an int64 in numba and overflows beyond 2^63 turns)
+    r = t - np.floor(t + 0.5)  # in [-1/2, 1/2]
+    q = np.floor(4.0 * r + 0.5)  # quadrant, -2..2
     x = (r - 0.25 * q) * (2.0 * math.pi)  # |x| <= π/4
     # Estrin's scheme in y = x^2: half the dependency depth of Horner's rule (the polynomial's
     # latency, not its arithmetic, is what a ray loop waits for).
@@ -511,6 +512,9 @@ def param_row(table, m):
     """
     return (table[m, 0], table[m, 1], table[m, 2], table[m, 3], table[m, 4], table[m, 5],
             table[m, 6], table[m, 7])
+
+
+assert N_PARAMS == 8, "param_row spells out N_PARAMS entries"
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -35,6 +35,7 @@ whatever the number of threads and however the samples were split into chunks or
 
 from __future__ import annotations
 
+import operator
 import threading
 import time
 from collections.abc import Callable
@@ -57,6 +58,9 @@ from sim_core.tracing import RayTracer
 CHUNK_RAYS = 8192
 #: tasks per worker thread a request is split into, so threads finish within ~1/16 of each other
 TASKS_PER_THREAD = 16
+#: fewest camera rays a chunk should get when the request allows (a small request of few samples
+#: would otherwise be cut into chunks of a few hundred rays, each paying the per-call costs)
+MIN_CHUNK_RAYS = 2048
 #: what the worker threads' time is charged to (:attr:`RenderResult.stage_thread_seconds`)
 STAGES = ("camera_rays", "embree", "shading", "accumulation")
 #: relative offset of secondary-ray origins along the normal; Embree is float32 (~6e-8 relative),
@@ -83,7 +87,8 @@ class RenderSettings:
     russian_roulette_from_bounce : int
         First bounce index at which paths may be terminated at random.
     threads : int or None
-        Threads for Embree queries (default: all cores). Never changes the result.
+        Worker threads of the render (default: all cores); each traces whole chunks, Embree
+        queries and kernels alike. Never changes the result.
     ambient : bool
         Whether ambient sources are traced at all.
     jitter : bool
@@ -140,7 +145,6 @@ class _Accumulator:
     """Running per-pixel sums and sums of squares of per-sample values, with per-pixel counts."""
 
     def __init__(self, npix: int, n_f: int) -> None:
-        self.npix = npix
         self.n = np.zeros(npix, dtype=np.int64)
         self.s_active = np.zeros(npix)
         self.ss_active = np.zeros(npix)
@@ -154,7 +158,7 @@ class _Accumulator:
 
     def add(self, pixels: np.ndarray, dc, ambient, re, im) -> None:
         """Add per-sample values; sample ``r`` belongs to pixel ``pixels[r % len(pixels)]``."""
-        kernels.add_samples(
+        kernels.accumulate_chunk(
             pixels, dc, ambient, re, im, self.n, self.s_active, self.ss_active, self.s_ambient,
             self.ss_ambient, self.s_re, self.s_im, self.ss_re, self.ss_im, self.s_reim,
         )
@@ -199,6 +203,7 @@ class ProgressiveRenderer:
         self.timings_s: dict[str, float] = {"path_tracing": 0.0}
         self.stage_thread_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         self._stage_lock = threading.Lock()
+        self._request_lock = threading.Lock()
         self.ctx = _Context(scene, settings, self.tracer, cam.position_m)
         t0 = time.perf_counter()
         with PARALLEL_KERNEL_LOCK:
@@ -219,40 +224,64 @@ class ProgressiveRenderer:
     ) -> None:
         """Take ``n`` more samples of each pixel in ``pixels``, on the tracer's worker threads.
 
-        ``pixels`` are distinct flat indices in [0, H*W) (default: all pixels).
+        ``pixels`` are distinct flat integer indices in [0, H*W) (default: all pixels).
+        Requests to one renderer run one at a time.
         """
-        if pixels is None:
-            pix = np.arange(self.npix, dtype=np.int64)
-        else:
-            pix = np.asarray(pixels, dtype=np.int64).ravel()
-            if pix.size and (pix.min() < 0 or pix.max() >= self.npix):
-                raise ValueError(
-                    f"pixels: flat indices must lie in [0, {self.npix - 1}], "
-                    f"got [{pix.min()}, {pix.max()}]"
-                )
-            if np.unique(pix).size != pix.size:
-                raise ValueError("pixels: every pixel may appear only once per request")
+        try:
+            n = operator.index(n)
+        except TypeError:
+            raise ValueError(f"n: samples per pixel must be an integer, got {n!r}") from None
+        pix = self._checked_pixels(pixels)
         if pix.size == 0 or n <= 0:
             return
-        t0 = time.perf_counter()
-        tasks = TASKS_PER_THREAD * self.tracer.threads
-        block = int(min(max(-(-pix.size // tasks), 1), CHUNK_RAYS))
-        passes = max(1, CHUNK_RAYS // block)
-        futures = [
-            self.tracer.submit(_trace_block, self.ctx, pix[a:a + block], n, passes, self.acc,
-                               self.stage_thread_s, self._stage_lock)
-            for a in range(0, pix.size, block)
-        ]
-        try:
-            for done, f in enumerate(as_completed(futures), start=1):
-                f.result()
-                if progress is not None:
-                    progress(n * done // len(futures), n)
-        finally:
-            for f in futures:  # after a failure: stop what has not started, wait for the rest
-                f.cancel()
-            wait(futures)
-        self.timings_s["path_tracing"] += time.perf_counter() - t0
+        with self._request_lock:
+            t0 = time.perf_counter()
+            tasks = TASKS_PER_THREAD * self.tracer.threads
+            block = max(-(-pix.size // tasks), -(-MIN_CHUNK_RAYS // n))
+            block = int(min(block, CHUNK_RAYS, pix.size))
+            passes = max(1, CHUNK_RAYS // block)
+            starts = range(0, pix.size, block)
+            args = (n, passes, self.acc, self.stage_thread_s, self._stage_lock)
+            if self.tracer.threads == 1:  # in this thread, block by block
+                for done, a in enumerate(starts, start=1):
+                    _trace_block(self.ctx, pix[a:a + block], *args)
+                    if progress is not None:
+                        progress(n * done // len(starts), n)
+            else:
+                futures = [
+                    self.tracer.submit(_trace_block, self.ctx, pix[a:a + block], *args)
+                    for a in starts
+                ]
+                try:
+                    for done, f in enumerate(as_completed(futures), start=1):
+                        f.result()
+                        if progress is not None:
+                            progress(n * done // len(futures), n)
+                finally:
+                    for f in futures:  # after a failure: stop what has not started, wait
+                        f.cancel()
+                    wait(futures)
+            self.timings_s["path_tracing"] += time.perf_counter() - t0
+
+    def _checked_pixels(self, pixels: np.ndarray | None) -> np.ndarray:
+        """``pixels`` as distinct int64 flat indices, or a ValueError naming what is wrong."""
+        if pixels is None:
+            return np.arange(self.npix, dtype=np.int64)
+        arr = np.asarray(pixels)
+        if arr.size and (arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.integer)):
+            raise ValueError(
+                f"pixels: flat integer indices expected, got an array of {arr.dtype} "
+                "(for a mask use np.flatnonzero)"
+            )
+        pix = arr.astype(np.int64).ravel()
+        if pix.size and (pix.min() < 0 or pix.max() >= self.npix):
+            raise ValueError(
+                f"pixels: flat indices must lie in [0, {self.npix - 1}], "
+                f"got [{pix.min()}, {pix.max()}]"
+            )
+        if np.unique(pix).size != pix.size:
+            raise ValueError("pixels: every pixel may appear only once per request")
+        return pix
 
     def light_field(self) -> LightField:
         """The estimate so far."""
@@ -357,7 +386,6 @@ class _Context:
             self.prof_rel = np.asarray(light.profile_relative, dtype=np.float64)
         amb = scene.ambient if settings.ambient else ()
         n_a = len(amb)
-        self.n_ambient = n_a
         self.amb_dir = np.array([a.direction for a in amb], dtype=np.float64).reshape(n_a, 3)
         self.amb_irr = np.array([a.irradiance_w_m2 for a in amb], dtype=np.float64)
         self.amb_footprint = np.array(

@@ -3,7 +3,7 @@
 The integrator traces a frame as many independent *chunks* (a block of pixels, a few sample
 passes), each on one worker thread from start to finish: camera rays, then per bounce one
 Embree query, one call of :func:`bounce` and one occlusion query, then :func:`add_shadowed`,
-and finally :func:`add_samples` into the per-pixel sums. These kernels are therefore serial and
+and finally :func:`accumulate_chunk` into the per-pixel sums. These kernels are therefore serial and
 ``nogil``: two threads run them side by side with Embree, without numba's thread pool (whose
 workers, parked or spinning, competed with Embree's callers: measured ~30 % slower Embree
 queries), without a barrier after every stage, and on chunks small enough to stay in cache.
@@ -369,8 +369,8 @@ def add_shadowed(occluded, sh_slot, sh_c, sh_len, sh_amb, turns_per_m, out_dc, o
 
 
 @njit(**_SERIAL)
-def add_samples(pixels, out_dc, out_amb, out_re, out_im, n, s_dc, ss_dc, s_amb, ss_amb, s_re,
-                s_im, ss_re, ss_im, s_reim):
+def accumulate_chunk(pixels, out_dc, out_amb, out_re, out_im, n, s_dc, ss_dc, s_amb, ss_amb,
+                     s_re, s_im, ss_re, ss_im, s_reim):
     """Add a chunk's per-sample values to the per-pixel sums and sums of squares.
 
     Sample ``r`` belongs to pixel ``pixels[r % len(pixels)]`` (the chunk holds whole passes).

@@ -58,7 +58,13 @@ def test_thread_count_does_not_change_a_scene_with_ambient_light(satellite):
 
 @pytest.mark.parametrize(
     ("pixels", "match"),
-    [([0, 5, 5], "only once"), ([-1], r"\[0, "), ([10**9], r"\[0, ")],
+    [
+        ([0, 5, 5], "only once"),
+        ([-1], r"\[0, "),
+        ([10**9], r"\[0, "),
+        ([True, False, True], "flatnonzero"),
+        ([1.5, 2.0], "integer"),
+    ],
 )
 def test_bad_pixel_requests_name_the_problem_and_add_nothing(satellite, pixels, match):
     r = ProgressiveRenderer(satellite, RenderSettings(spp=1))
@@ -91,3 +97,36 @@ def test_progress_reaches_the_total(satellite):
     render(satellite, RenderSettings(spp=9, seed=2), progress=lambda d, t: seen.append((d, t)))
     assert seen[-1] == (9, 9)
     assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+
+def test_a_non_integer_sample_count_is_refused(satellite):
+    r = ProgressiveRenderer(satellite, RenderSettings(spp=1))
+    with pytest.raises(ValueError, match=r"^n: .*integer"):
+        r.add_samples(2.5)
+    assert r.samples.sum() == 0
+    r.close()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_progress_comes_block_by_block_and_an_exception_from_it_stops_the_render(
+    satellite, threads
+):
+    with RayTracer(satellite.triangles_m, satellite.camera.position_m, threads=threads) as tr:
+        r = ProgressiveRenderer(satellite, RenderSettings(spp=4), tr)
+        seen = []
+        r.add_samples(4, progress=lambda d, t: seen.append(d))
+        assert len(seen) > 2 and seen[-1] == 4  # reported as blocks finish, not once at the end
+
+        class StopError(Exception):
+            pass
+
+        def stop(done, total):
+            raise StopError
+
+        before = int(r.samples.sum())
+        # 64 samples: many blocks, most of them not started at the first report
+        with pytest.raises(StopError):
+            r.add_samples(64, progress=stop)
+        added = int(r.samples.sum()) - before
+        assert 0 < added < 64 * r.npix  # stopped early; what was added stays counted
+        assert set(np.unique(r.samples)) <= {4, 68}  # every pixel has whole requests only

@@ -38,10 +38,11 @@ def test_sincos_turns_is_accurate_to_a_few_ulp_over_a_turn():
 
 
 def test_sincos_turns_is_exact_at_the_quarter_turns():
-    t = np.array([0.0, 0.25, 0.5, 0.75, 1.0, -0.25, -0.5, 3.0, 1e6 + 0.25, -(2.0**40) - 0.75])
+    t = np.array([0.0, 0.25, 0.5, 0.75, 1.0, -0.25, -0.5, 3.0, 1e6 + 0.25, -(2.0**40) - 0.75,
+                  2.0**52 + 1, 1e19, -1e300])  # the last three: whole numbers of turns
     got = _sincos(t)
     want = np.array([[0, 1], [1, 0], [0, -1], [-1, 0], [0, 1], [-1, 0], [0, -1], [0, 1],
-                     [1, 0], [1, 0]], dtype=float)
+                     [1, 0], [1, 0], [0, 1], [0, 1], [0, 1]], dtype=float)
     np.testing.assert_array_equal(np.abs(got - want), 0.0)
 
 
@@ -87,3 +88,7 @@ def test_profile_edges_isotropic_first_angle_and_rounding_past_one():
     np.testing.assert_array_equal(got, [1.0, 1.0, 0.0, 0.0])  # below 5 deg: the first value
     iso = _profile(np.array([1.0, 0.0, -1.0]), 3.0, np.zeros(0), np.zeros(0))
     np.testing.assert_array_equal(iso, 3.0)
+
+
+def test_sincos_turns_of_a_non_finite_angle_is_nan():
+    assert np.isnan(_sincos(np.array([np.nan, np.inf, -np.inf]))).all()
