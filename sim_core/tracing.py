@@ -94,19 +94,15 @@ class RayTracer:
         self.close()
 
     def submit(self, fn, /, *args) -> Future:
-        """Run ``fn(*args)`` on this tracer's thread pool (inline with one thread).
+        """Run ``fn(*args)`` on this tracer's thread pool (only when ``threads > 1``; with one
+        thread callers run their work themselves).
 
         ``fn`` must query Embree only through the ``*_here`` methods: waiting for the pool from
         inside the pool could deadlock.
         """
-        if self._pool is not None:
-            return self._pool.submit(fn, *args)
-        future: Future = Future()
-        try:
-            future.set_result(fn(*args))
-        except Exception as exc:  # delivered by future.result(), like the pool would
-            future.set_exception(exc)
-        return future
+        if self._pool is None:
+            raise RuntimeError("submit: this tracer has one thread and no pool")
+        return self._pool.submit(fn, *args)
 
     def _count(self, rays: int, calls: int, seconds: float) -> None:
         with self._stats_lock:
@@ -150,27 +146,12 @@ class RayTracer:
         prim : (m,) int64
             Triangle index; -1 where the ray escapes.
         """
-        m = origins_rel.shape[0]
-        t = np.full(m, np.inf)
-        prim = np.full(m, -1, dtype=np.int64)
-        if m == 0 or self.n_triangles == 0:
-            self._count(m, 0, 0.0)
-            return t, prim
-        o32 = np.ascontiguousarray(origins_rel, dtype=np.float32)
-        d32 = np.ascontiguousarray(directions, dtype=np.float32)
-        tfar = np.empty(m, dtype=np.float32)
-        pid = np.empty(m, dtype=np.int32)
-
-        def work(a: int, b: int) -> None:
-            res = self._scene.run(o32[a:b], d32[a:b], output=1)
-            tfar[a:b] = res["tfar"]
-            pid[a:b] = res["primID"]
-
-        self._dispatch(work, m)
+        tfar, pid = self.intersect32(
+            np.ascontiguousarray(origins_rel, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+        )
         hit = pid >= 0
-        t[hit] = tfar[hit]
-        prim[hit] = pid[hit]
-        return t, prim
+        return np.where(hit, tfar.astype(np.float64), np.inf), pid.astype(np.int64)
 
     def intersect32(self, o32: np.ndarray, d32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Closest hits of float32 render-frame rays, without conversions.
@@ -185,26 +166,27 @@ class RayTracer:
             return tfar, pid
 
         def work(a: int, b: int) -> None:
-            # embreex fills ``dists`` in place only for query="DISTANCE" (which returns no
-            # primitive ids); the full output dict is the one call that gives both.
-            res = self._scene.run(o32[a:b], d32[a:b], output=1)
-            tfar[a:b] = res["tfar"]
-            pid[a:b] = res["primID"]
+            tfar[a:b], pid[a:b] = self._closest(o32[a:b], d32[a:b])
 
         self._dispatch(work, m)
         return tfar, pid
+
+    def _closest(self, o32: np.ndarray, d32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One embreex closest-hit call: (tfar float32, primID int32 with -1 = miss)."""
+        # embreex fills ``dists`` in place only for query="DISTANCE" (which returns no
+        # primitive ids); the full output dict is the one call that gives both.
+        res = self._scene.run(o32, d32, output=1)
+        return res["tfar"], res["primID"]
 
     def intersect_here(self, o32: np.ndarray, d32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`intersect32` on the calling thread (for work running on :meth:`submit`)."""
         m = o32.shape[0]
         if m == 0 or self.n_triangles == 0:
-            self._count(m, 0, 0.0)
-            return (np.full(m, np.finfo(np.float32).max, dtype=np.float32),
-                    np.full(m, -1, dtype=np.int32))
+            return self.intersect32(o32, d32)  # nothing to trace: its empty answer
         t0 = time.perf_counter()
-        res = self._scene.run(o32, d32, output=1)
+        hits = self._closest(o32, d32)
         self._count(m, 1, time.perf_counter() - t0)
-        return res["tfar"], res["primID"]
+        return hits
 
     def occluded_here(self, o32: np.ndarray, d32: np.ndarray, tmax32: np.ndarray) -> np.ndarray:
         """Embree's occlusion answers on the calling thread: 0 = blocked, -1 = free.
