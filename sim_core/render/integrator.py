@@ -461,7 +461,7 @@ def _trace_block(
     Runs on a worker thread; the caller gives each thread distinct pixels.
     """
     clock = _StageClock()
-    first = acc.n[pixels].copy()
+    first = acc.n[pixels]  # fancy indexing: a copy, unaffected by this task's own additions
     for p0 in range(0, n, passes):
         _trace_chunk(ctx, pixels, first + p0, min(passes, n - p0), acc, clock)
     with lock:
