@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from service import bench_mitsuba as bm
+from service.cli.bench import mitsuba as bm
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -86,7 +86,7 @@ def test_missing_mitsuba_raises_clear_error(monkeypatch):
 def test_unloadable_libllvm_raises_clear_error(tmp_path):
     """A fresh process with a wrong DRJIT_LIBLLVM_PATH: Dr.Jit cannot start its LLVM backend."""
     code = (
-        "from service.bench_mitsuba import load_mitsuba\n"
+        "from service.cli.bench.mitsuba import load_mitsuba\n"
         "try:\n    load_mitsuba()\nexcept RuntimeError as e:\n    print('RTE:', e)\n"
         "else:\n    print('LOADED')\n"
     )

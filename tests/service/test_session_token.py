@@ -2,7 +2,7 @@
 
 import stat
 
-from service.serve_cmd import session_token
+from service.cli.serve import session_token
 
 
 def test_session_token_is_random_private_and_stored(tmp_path):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from drivers.rig import Rig, RigState
-from service.twin_camera import RenderedFrameSource, TwinDifferences, perturb_scene
+from service.lab.simulated_camera import RenderedFrameSource, TwinDifferences, perturb_scene
 from sim_core.camera import pixel_centre_grid, pixel_to_camera_direction
 from sim_core.raw import reconstruct_raw
 from sim_core.render import RenderSettings

@@ -11,7 +11,7 @@ pytestmark = pytest.mark.timeout(120)
 
 def turntable_faults(client):
     """The fault injector of the simulated SMC100's serial port."""
-    return client.app.state.ctx.rig.sims["turntable"].servers["turntable"].faults
+    return client.app.state.lab.lease.rig.sims["turntable"].servers["turntable"].faults
 
 
 def test_a_device_fault_pauses_the_campaign_and_resume_finishes_it(client):

@@ -9,9 +9,9 @@ import pytest
 import trimesh
 from pydantic import ValidationError
 
-from service.config import Settings
-from service.frames import FrameStore
-from service.jobs import make_job, run_job
+from service.compute.jobs import make_job, run_job
+from service.settings import Settings
+from service.store.frame_files import FrameStore
 from sim_core.scene_spec import parse_scene_spec
 
 pytestmark = pytest.mark.timeout(60)

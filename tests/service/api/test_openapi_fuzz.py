@@ -20,7 +20,7 @@ from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, Phase, given, settings
 from schemathesis.checks import not_a_server_error
 
-from service.app import API_PREFIX, create_app
+from service.api.app import API_PREFIX, create_app
 from tests.service.api.conftest import AUTH, make_settings
 
 pytestmark = pytest.mark.timeout(180)

@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
-from service.serve_cmd import _standalone
+from service.cli import app as toftwin_app
 from tests.service.api.conftest import AUTH
 
 pytestmark = pytest.mark.timeout(120)
@@ -147,7 +147,7 @@ def test_compare_cli_prints_table_5_and_writes_json(client, tmp_path):
                        json={"turntable_deg": 45.0, "solar_suns": 1.0}).json()
     frames = tmp_path / "frames"
     out = tmp_path / "cmp.json"
-    res = CliRunner().invoke(_standalone(), [
+    res = CliRunner().invoke(toftwin_app, [
         "compare", str(frames / pose["measured_frame_id"]),
         str(frames / pose["simulated_frame_id"]), "--out", str(out)])
     assert res.exit_code == 0, res.output
@@ -156,7 +156,7 @@ def test_compare_cli_prints_table_5_and_writes_json(client, tmp_path):
     # the CLI's default mask (turntable objects) gives the service's numbers
     assert data["metrics"]["n_pixels"] == pose["metrics"]["n_pixels"]
     assert data["metrics"]["depth"]["ssim"] == pytest.approx(pose["metrics"]["depth"]["ssim"])
-    res = CliRunner().invoke(_standalone(), [
+    res = CliRunner().invoke(toftwin_app, [
         "compare", str(frames / pose["measured_frame_id"]),
         str(frames / pose["simulated_frame_id"]), "--mask", "depth_window", "--out", str(out)])
     assert res.exit_code == 2 and "near_m" in res.output

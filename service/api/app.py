@@ -1,0 +1,111 @@
+"""The FastAPI application: ``create_app(settings)``.
+
+Routes live under ``/api/v1`` (one router per resource in :mod:`service.api.routes`); the OpenAPI
+document is at ``/api/v1/openapi.json`` and the interactive docs at ``/api/v1/docs``.
+Errors map to HTTP as: invalid input (:class:`InvalidInputError`, request validation) 422 with
+a message naming the field and the allowed range; device faults (:class:`DeviceError`) 503 with
+the device's message; :mod:`service.errors` their own codes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+
+from fastapi import APIRouter, FastAPI, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+
+from drivers.errors import DeviceError
+from service.api.routes import campaigns, devices, frames, poses, simulate
+from service.api.schemas import Health
+from service.errors import ServiceError
+from service.lab.lab import open_lab
+from service.lab.scenes import bundled_scenes
+from service.settings import Settings
+from sim_core.errors import InvalidInputError
+from sim_core.pipeline import package_version
+
+API_PREFIX = "/api/v1"
+_log = logging.getLogger(__name__)
+
+
+def _field(loc: tuple | list) -> str:
+    out = ""
+    for part in loc:
+        if part in ("body", "query", "path") and not out:
+            continue
+        out += f"[{part}]" if isinstance(part, int) else ("." if out else "") + str(part)
+    return out or "body"
+
+
+async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:
+    errors = jsonable_encoder(exc.errors(), custom_encoder={Exception: str})
+    messages = []
+    for e in errors:
+        msg = str(e.get("msg", "")).removeprefix("Value error, ")
+        e["msg"] = msg
+        e.pop("url", None)
+        messages.append(f"{_field(e.get('loc', ()))}: {msg}")
+    return JSONResponse(status_code=422, content={"detail": errors, "message": "; ".join(messages)})
+
+
+async def _invalid_input(_: Request, exc: InvalidInputError) -> JSONResponse:
+    detail = [{"loc": ["body", *exc.field.replace("[", ".").replace("]", "").split(".")],
+               "msg": str(exc), "type": "invalid_input"}]
+    return JSONResponse(status_code=422, content={"detail": detail, "message": str(exc)})
+
+
+async def _device_error(_: Request, exc: DeviceError) -> JSONResponse:
+    return JSONResponse(status_code=503, content={"detail": f"{type(exc).__name__}: {exc}"})
+
+
+async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
+    return JSONResponse(status_code=exc.status_code, content={"detail": exc.detail})
+
+
+def create_app(settings: Settings) -> FastAPI:
+    """The application for ``settings``; devices, database and executor open at startup."""
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        app.state.lab = await run_in_threadpool(open_lab, settings)
+        try:
+            yield
+        finally:
+            await run_in_threadpool(app.state.lab.close)
+
+    app = FastAPI(
+        title="toftwin",
+        version=package_version(),
+        description="Hardware-in-the-loop twin of a PMD CamBoard pico flexx: devices, "
+        "simulation, pose comparison and campaigns. Calls that move hardware or change data "
+        "need `Authorization: Bearer <TOFTWIN_TOKEN>`.",
+        lifespan=lifespan,
+        openapi_url=f"{API_PREFIX}/openapi.json",
+        docs_url=f"{API_PREFIX}/docs",
+        redoc_url=None,
+        max_body_size=settings.max_body_bytes,
+    )
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(InvalidInputError, _invalid_input)
+    app.add_exception_handler(DeviceError, _device_error)
+    app.add_exception_handler(ServiceError, _service_error)
+
+    api = APIRouter(prefix=API_PREFIX)
+
+    @api.get("/health", response_model=Health, tags=["service"])
+    def health(request: Request) -> dict:
+        """Liveness and what the service runs on."""
+        lab = request.app.state.lab
+        return {"status": "ok", "version": package_version(), "simulated": settings.simulated,
+                "executor": lab.executor.name, "workers": lab.executor.workers,
+                "scenes": bundled_scenes(settings.examples_dir)}
+
+    for module in (devices, simulate, poses, frames, campaigns):
+        api.include_router(module.router)
+    app.include_router(api)
+    return app

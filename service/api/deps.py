@@ -1,0 +1,112 @@
+"""Dependencies of the routes, as named ``Annotated`` aliases.
+
+``TokenDep`` guards every call that moves hardware or changes data: a bearer token equal to
+``TOFTWIN_TOKEN`` (compared in constant time), else 401. Read-only calls take no token.
+"""
+
+from __future__ import annotations
+
+import secrets
+from collections.abc import Iterator
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request, status
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy.orm import Session, sessionmaker
+
+from service.api.schemas import Message
+from service.compute.executors import Executor
+from service.lab.lab import Lab
+from service.lab.rig_lease import RigLease
+from service.lab.runner import CampaignRunner
+from service.lab.scenes import SceneSource
+from service.settings import Settings
+from service.store.frame_files import FrameStore
+
+_bearer = HTTPBearer(auto_error=False, description="The service token (TOFTWIN_TOKEN).")
+
+
+def get_lab(request: Request) -> Lab:
+    """The running service's lab (assembled at startup)."""
+    return request.app.state.lab
+
+
+LabDep = Annotated[Lab, Depends(get_lab)]
+
+
+def get_settings(lab: LabDep) -> Settings:
+    return lab.settings
+
+
+def get_session(lab: LabDep) -> Iterator[Session]:
+    """A database session for one request."""
+    with lab.session() as session:
+        yield session
+
+
+def get_sessions(lab: LabDep) -> sessionmaker:
+    return lab.sessions
+
+
+def get_store(lab: LabDep) -> FrameStore:
+    return lab.store
+
+
+def get_executor(lab: LabDep) -> Executor:
+    return lab.executor
+
+
+def get_lease(lab: LabDep) -> RigLease:
+    return lab.lease
+
+
+def get_runner(lab: LabDep) -> CampaignRunner:
+    return lab.runner
+
+
+def get_default_scene(lab: LabDep) -> SceneSource:
+    return lab.default_scene
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+SessionDep = Annotated[Session, Depends(get_session)]
+SessionsDep = Annotated[sessionmaker, Depends(get_sessions)]
+StoreDep = Annotated[FrameStore, Depends(get_store)]
+ExecutorDep = Annotated[Executor, Depends(get_executor)]
+LeaseDep = Annotated[RigLease, Depends(get_lease)]
+RunnerDep = Annotated[CampaignRunner, Depends(get_runner)]
+SceneDep = Annotated[SceneSource, Depends(get_default_scene)]
+
+
+def require_token(
+    settings: SettingsDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+) -> None:
+    """401 unless the request carries ``Authorization: Bearer <TOFTWIN_TOKEN>``."""
+    expected = settings.token.get_secret_value().encode()
+    given = credentials.credentials.encode() if credentials is not None else b""
+    if credentials is None or credentials.scheme.lower() != "bearer" or not (
+        secrets.compare_digest(given, expected)
+    ):
+        raise HTTPException(
+            status_code=status.HTTP_401_UNAUTHORIZED,
+            detail="a valid bearer token is required for this call (Authorization: Bearer ...)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+
+
+TokenDep = Annotated[None, Depends(require_token)]
+
+#: documented error responses, shared by the routes
+ERRORS = {
+    401: {"description": "Missing or wrong bearer token."},
+    404: {"description": "No such resource."},
+    409: {"description": "A campaign holds the rig, or the resource is in the wrong state."},
+    422: {"description": "Invalid input; the message names the field and the allowed range."},
+    503: {"description": "A device fault (the device's message) or a device not available."},
+}
+
+
+def errors(*codes: int) -> dict[int | str, dict]:
+    """The ``responses=`` entry of a route for the given error codes."""
+    return {c: {**ERRORS[c], "model": Message} for c in codes if c != 422}

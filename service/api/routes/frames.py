@@ -1,0 +1,92 @@
+"""``/api/v1/frames``: metadata, arrays (npz) and PNG previews of stored frames."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Path, Query
+from fastapi.responses import FileResponse
+
+from service.api.deps import SessionDep, StoreDep, errors
+from service.api.schemas import FramePublic
+from service.errors import NotFoundError
+from service.store import queries
+
+router = APIRouter(prefix="/frames", tags=["frames"])
+FrameIdPath = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A frame id.")]
+
+
+@router.get("", response_model=list[FramePublic])
+def list_frames(
+    store: StoreDep,
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+) -> list[dict]:
+    """Stored frames, newest first."""
+    return [frame_public(store, row, with_metadata=False)
+            for row in queries.list_frames(session, limit, offset)]
+
+
+@router.get("/{frame_id}", response_model=FramePublic, responses=errors(404))
+def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> dict:
+    """A frame's metadata (its ``frame.json``: rig state, effect plan, timings, ...)."""
+    return frame_public(store, _row(session, frame_id))
+
+
+@router.get("/{frame_id}/arrays", response_class=FileResponse, responses={
+    200: {"content": {"application/octet-stream": {}}, "description": "frame.npz"},
+    **errors(404)})
+def frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
+    """``frame.npz``: range, depth, amplitude, intensity, phase, valid mask (units in metadata)."""
+    _row(session, frame_id)
+    return FileResponse(store.path(frame_id) / "frame.npz",
+                        media_type="application/octet-stream", filename=f"{frame_id}.npz")
+
+
+@router.get("/{frame_id}/raw", response_class=FileResponse, responses={
+    200: {"content": {"application/octet-stream": {}}, "description": "raw.npz"},
+    **errors(404)})
+def frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
+    """``raw.npz``: the four-phase raw frame (measured, or a simulated non-ideal sensor's)."""
+    _row(session, frame_id)
+    path = store.path(frame_id) / "raw.npz"
+    if not path.is_file():
+        raise NotFoundError(f"frame {frame_id} has no raw frame (ideal sensor)")
+    return FileResponse(path, media_type="application/octet-stream",
+                        filename=f"{frame_id}-raw.npz")
+
+
+@router.get("/{frame_id}/preview/{kind}.png", response_class=FileResponse, responses={
+    200: {"content": {"image/png": {}}, "description": "PNG preview"}, **errors(404)})
+def frame_preview(
+    frame_id: FrameIdPath, kind: Literal["grey", "depth"], store: StoreDep, session: SessionDep
+) -> FileResponse:
+    """8-bit grey, or 16-bit depth in millimetres (0 where invalid), as the camera tools write."""
+    _row(session, frame_id)
+    return FileResponse(store.path(frame_id) / f"{kind}.png", media_type="image/png")
+
+
+def _row(session, frame_id: str):
+    row = queries.get_frame(session, frame_id)
+    if row is None:
+        raise NotFoundError(f"no frame {frame_id}")
+    return row
+
+
+def frame_public(store, row, with_metadata: bool = True) -> dict:
+    """The public form of a frame row (``metadata``: its frame.json)."""
+    meta = {}
+    if with_metadata:
+        path = store.path(row.id) / "frame.json"
+        meta = json.loads(path.read_text()) if path.is_file() else {}
+    base = f"/api/v1/frames/{row.id}"
+    return queries.json_safe({
+        "id": row.id, "kind": row.kind, "created_at": row.created_at,
+        "campaign_id": row.campaign_id, "scene_name": row.scene_name,
+        "scene_hash": row.scene_hash, "rig": json.loads(row.rig_json),
+        "summary": json.loads(row.summary_json), "metadata": meta,
+        "links": {"self": base, "arrays": f"{base}/arrays", "raw": f"{base}/raw",
+                  "grey": f"{base}/preview/grey.png", "depth": f"{base}/preview/depth.png"},
+    })

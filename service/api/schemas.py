@@ -1,0 +1,208 @@
+"""Response schemas of the REST API (one ``Public`` family per resource) and device commands.
+
+The request bodies of simulations, poses and campaigns are what the lab's use cases take, so they
+live below the API in :mod:`service.lab.requests`; the routes use them as they are.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+from service.lab.requests import Angle, Level, RequestBody
+
+
+class Message(BaseModel):
+    """An error: what went wrong and, for a device, which one."""
+
+    detail: str
+
+
+# -- simulate ----------------------------------------------------------------------------------
+class SimulationPublic(BaseModel):
+    """A simulated frame and the effect plan that produced it."""
+
+    frame_id: str
+    scene_name: str
+    scene_hash: str
+    effect_plan: dict[str, Any]
+    timings_s: dict[str, float]
+    links: dict[str, str]
+
+
+# -- poses -------------------------------------------------------------------------------------
+class PosePublic(BaseModel):
+    """The comparison of one pose: both frames and the metrics of seed Table 5."""
+
+    id: int
+    campaign_id: str | None
+    pose_index: int
+    repeat: int
+    turntable_deg: float
+    solar_suns: float
+    measured_frame_id: str
+    simulated_frame_id: str
+    metrics: dict[str, Any]
+    table: list[list[str]]
+    rig: dict[str, Any]
+    timings_s: dict[str, float]
+    created_at: float
+
+
+# -- campaigns ---------------------------------------------------------------------------------
+class CampaignCreated(BaseModel):
+    """The id of a new campaign."""
+
+    id: str
+    state: str
+    links: dict[str, str]
+
+
+class CurrentPose(BaseModel):
+    """The pose being worked on (running) or next to do (paused, interrupted)."""
+
+    pose_index: int
+    repeat: int
+    turntable_deg: float
+    solar_suns: float
+
+
+CampaignState = Literal[
+    "created", "running", "paused", "interrupted", "completed", "cancelled", "failed"
+]
+
+
+class CampaignPublic(BaseModel):
+    """Where a campaign stands."""
+
+    id: str
+    name: str
+    scene_name: str
+    state: CampaignState
+    poses_done: int
+    poses_total: int
+    pose_count: int
+    current_pose: CurrentPose | None
+    eta_s: float | None
+    error: str | None
+    runs: int
+    created_at: float
+    started_at: float | None
+    updated_at: float
+    finished_at: float | None
+    links: dict[str, str]
+
+
+class ResultPublic(BaseModel):
+    """One row of a campaign's results (a pose and repeat)."""
+
+    pose_index: int
+    repeat: int
+    turntable_deg: float
+    solar_suns: float
+    metrics: dict[str, Any]
+    measured_frame_id: str
+    simulated_frame_id: str
+    created_at: float
+    timings_s: dict[str, float]
+
+
+# -- frames ------------------------------------------------------------------------------------
+class FramePublic(BaseModel):
+    """Metadata of a stored frame."""
+
+    id: str
+    kind: Literal["measured", "simulated"]
+    created_at: float
+    campaign_id: str | None
+    scene_name: str
+    scene_hash: str
+    rig: dict[str, Any] | None
+    summary: dict[str, Any]
+    metadata: dict[str, Any]
+    links: dict[str, str]
+
+
+# -- devices -----------------------------------------------------------------------------------
+class MoveIn(RequestBody):
+    """Target of a turntable move."""
+
+    angle_deg: Angle
+
+
+class LampIn(RequestBody):
+    """Lamp on or off."""
+
+    on: bool
+
+
+class LevelIn(RequestBody):
+    """Solar simulator level."""
+
+    suns: Level
+
+
+class ShutterIn(RequestBody):
+    """Shutter open or closed."""
+
+    open: bool
+
+
+class DeviceStatus(BaseModel):
+    """One device: reachable or not, and what it reports."""
+
+    name: str
+    ok: bool
+    error: str | None = None
+    details: dict[str, Any] = {}
+
+
+class DevicesPublic(BaseModel):
+    """Every device of the rig."""
+
+    simulated: bool
+    campaign_id: str | None = Field(description="The campaign holding the rig, if any.")
+    devices: list[DeviceStatus]
+
+
+class TurntablePosition(BaseModel):
+    """Turntable angle and the range a move may ask for."""
+
+    angle_deg: float
+    limits_deg: tuple[float, float]
+
+
+class SolarPublic(BaseModel):
+    """Solar simulator state."""
+
+    lamp_on: bool
+    suns: float
+    shutter_open: bool
+
+
+class CaptureOut(BaseModel):
+    """A captured (measured) frame."""
+
+    frame_id: str
+    rig: dict[str, Any]
+    links: dict[str, str]
+
+
+class StopOut(BaseModel):
+    """What the emergency stop did."""
+
+    stopped: list[str]
+    errors: dict[str, str]
+    campaign_paused: str | None
+
+
+class Health(BaseModel):
+    """Service status."""
+
+    status: Literal["ok"]
+    version: str
+    simulated: bool
+    executor: str
+    workers: int
+    scenes: list[str]

@@ -1,0 +1,38 @@
+"""The ``toftwin`` command line: one module per command group beside this one.
+
+Exit codes: 0 success, 2 invalid input (the message names the field and the allowed range),
+1 anything else.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from service.cli import compare, devices, serve, simulate
+from service.cli.bench import bench_app
+from service.cli.common import err_console
+from sim_core.errors import InvalidInputError
+
+app = typer.Typer(
+    help="toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+app.command("simulate")(simulate.simulate)
+app.command("preview")(simulate.preview)
+app.command("serve")(serve.serve)
+app.command("compare")(compare.compare)
+app.add_typer(devices.devices_app, name="devices")
+app.command("sim-device")(devices.sim_device)
+app.add_typer(bench_app, name="bench")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    try:
+        app()
+    except InvalidInputError as exc:  # pragma: no cover - commands catch their own
+        err_console.print(f"[bold red]error:[/] {exc}")
+        sys.exit(2)

@@ -1,0 +1,5 @@
+"""``python -m service.cli``: the ``toftwin`` command."""
+
+from service.cli import main
+
+main()

@@ -1,0 +1,89 @@
+"""``toftwin bench ...``: benchmarks that print figures (one module each beside this one)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from service.cli.common import bounded, console, err_console, fail_invalid
+from sim_core.errors import InvalidInputError
+
+bench_app = typer.Typer(help="Benchmarks that print figures.", no_args_is_help=True)
+
+
+@bench_app.command("render")
+def bench_render(
+    scenes: Annotated[
+        list[Path] | None, typer.Argument(help="Scene files (default: the bundled examples).")
+    ] = None,
+    spp: Annotated[list[int] | None, typer.Option(help="Samples per pixel to try.")] = None,
+    bounces: Annotated[list[int] | None, typer.Option(help="Bounce counts to try.")] = None,
+    threads: Annotated[int | None, typer.Option(help="Embree threads.")] = None,
+) -> None:
+    """Seconds per frame, rays per second and the share of time inside Embree."""
+    from service.cli.bench.render import run_render_benchmark
+
+    try:
+        run_render_benchmark(
+            scenes or None, spp or [16, 64, 256], bounces or [1, 2, 3], threads, console
+        )
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+
+
+@bench_app.command("accuracy")
+def bench_accuracy(
+    out: Annotated[Path | None, typer.Option("--out", help="Directory for CSV, PNG, JSON.")] = None,
+    quick: Annotated[bool, typer.Option("--quick", help="Reduced sweep (minutes).")] = False,
+) -> None:
+    """Accuracy against time: error of every setting against a high-quality reference."""
+    from service.cli.bench.accuracy import run_accuracy_benchmark
+
+    run_accuracy_benchmark(out, quick, console)
+
+
+@bench_app.command("mitsuba")
+def bench_mitsuba(
+    quick: Annotated[bool, typer.Option("--quick", help="Tiny sweep (seconds).")] = False,
+) -> None:
+    """Our renderer against Mitsuba 3 on the corner: time ratio, image agreement, time to 2 %."""
+    from service.cli.bench.mitsuba import run_mitsuba_comparison
+
+    try:
+        run_mitsuba_comparison(console, quick=quick)
+    except RuntimeError as exc:
+        err_console.print(f"[bold red]error:[/] {exc}")
+        raise typer.Exit(code=1) from None
+
+
+@bench_app.command("ground-test")
+def bench_ground_test(
+    spp: Annotated[int, typer.Option(help="Samples per pixel.")] = 64,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """Seed Fig. 14: grey and depth statistics with and without solar simulator and SBI."""
+    from service.cli.bench.ground_test import run_ground_test
+
+    run_ground_test(bounded("--spp", spp, 1, 65536), seed, console)
+
+
+@bench_app.command("campaign")
+def bench_campaign(
+    poses: Annotated[int, typer.Option(help="Poses per campaign.")] = 12,
+    repeats: Annotated[int, typer.Option(help="Repeats per pose.")] = 1,
+    spp: Annotated[int, typer.Option(help="Samples per pixel of the simulations.")] = 16,
+    camera_spp: Annotated[int, typer.Option(help="Samples per pixel of the camera twin.")] = 8,
+    workers: Annotated[list[int] | None, typer.Option(help="Local worker counts.")] = None,
+    dask: Annotated[
+        bool, typer.Option("--dask", help="Also on a LocalCluster with 1 and 2 workers.")
+    ] = False,
+    rounds: Annotated[int, typer.Option(help="Timed campaigns per configuration.")] = 1,
+    out: Annotated[Path | None, typer.Option("--out", help="JSON file of the figures.")] = None,
+) -> None:
+    """Poses per minute of a simulated campaign, and where the time goes per pose."""
+    from service.cli.bench.campaign import run_campaign_benchmark
+
+    run_campaign_benchmark(poses, repeats, spp, camera_spp, workers or [1, 2], dask, out,
+                           console, rounds)

@@ -1,0 +1,711 @@
+"""``toftwin bench mitsuba``: our renderer against Mitsuba 3 on the ``corner`` scene.
+
+The same scene, camera, light and material are rendered by our path tracer (``dc_active`` of
+:func:`sim_core.render.render`) and by Mitsuba 3's ``path`` integrator (variant ``llvm_ad_mono``,
+its LLVM backend on all cores), and the benchmark reports:
+
+1. seconds per frame of each and their ratio (ours / Mitsuba) at equal samples per pixel and
+   bounces, both warm: Mitsuba's first render of each setting (kernel compilation by Dr.Jit) is
+   timed separately and left out, and our numba kernels are compiled by a warm-up render. Each
+   figure is the best of a few interleaved repeats, which is robust to other load on the machine;
+2. the agreement of the two DC images after one global scale factor fitted by least squares
+   (``ours ~ scale * mitsuba``, fitted on 8 x 8 pixel block means so that pixel noise does not bias
+   it; 1 when the units match): relative RMSE, max relative error over pixels, and the relative
+   RMSE of the block means, which averages most Monte Carlo noise away and so shows a bias if
+   there is one;
+3. a convergence comparison: a high-spp reference rendered by us, first checked against a
+   high-spp Mitsuba reference, then both renderers swept over spp and the time each needs to
+   reach a target relative RMSE against that reference, interpolated in log-log.
+
+What is matched
+---------------
+- geometry: ``scene.triangles_m`` as one triangle mesh per material (written to a temporary
+  binary PLY and loaded with face normals), so both trace the same float32 triangles;
+- camera: ``perspective`` sensor with ``to_world`` = our ``world_from_camera`` with x and y
+  negated (Mitsuba's camera frame is x left, y up; ours x right, y down), horizontal field of
+  view ``2 atan(W / (2 fx))`` on ``fov_axis = x``, principal point offset from ``cx, cy`` (0 for a
+  centred one), the same resolution; checked by comparing Mitsuba's primary ray directions to
+  ours at pixel centres and corners. Mitsuba has square pixels and no lens distortion, so
+  ``fx != fy`` or distortion are refused;
+- pixel filter: Mitsuba's ``box`` reconstruction filter (radius 0.5 px, a sample only counts in
+  its own pixel) with the ``independent`` sampler = our uniform jitter over the pixel footprint;
+- light: ``point`` emitter at the light position with intensity ``P / (4 pi)`` W/sr;
+- material: ``twosided`` ``diffuse`` with the object's albedo (ours is two-sided Lambertian);
+- integrator: ``path`` with ``max_depth = bounces + 1`` (Mitsuba counts the camera vertex) and
+  ``rr_depth = russian_roulette_from_bounce - 1``: both then apply Russian roulette at the same
+  vertices with the same survival probability for this scene (min(throughput, 0.95) vs.
+  min(1, max(0.05, throughput))), i.e. only when continuing to a third bounce.
+
+What differs
+------------
+- ours also computes the modulation phasor (path lengths) and per-pixel variances, and traces
+  one extra primary ray per pixel for the ground-truth images; Mitsuba computes radiance only;
+- ours does float64 shading arithmetic on float32 rays; Mitsuba is float32 throughout;
+- Mitsuba starts camera rays at its near clip plane (0.01 m; the walls are > 1 m away).
+
+Mitsuba is a benchmark dependency only (extra ``bench``); nothing else in the product imports it,
+and this module imports it lazily, so the CLI works without it.
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+import os
+import re
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from service.settings import EXAMPLES_DIR
+from sim_core.materials.lambertian import Lambertian
+from sim_core.render import RenderSettings, render
+from sim_core.scene import Scene, build_scene
+from sim_core.scene_spec import load_scene_spec
+from sim_core.tracing import RayTracer
+
+CORNER_SCENE = EXAMPLES_DIR / "corner.yaml"
+MITSUBA_VARIANT = "llvm_ad_mono"
+
+#: where Debian and the LLVM apt repository put the shared library; version 19 first
+LIBLLVM_GLOBS = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM-19.so*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so*",
+    "/usr/lib/llvm-19/lib/libLLVM*.so*",
+    "/usr/lib/*-linux-gnu/libLLVM-*.so*",
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+)
+
+INSTALL_HINT = (
+    "Install the benchmark dependencies: `pip install 'toftwin[bench]'` (or `pip install "
+    "'mitsuba>=3.5'`) and Debian's LLVM 19 library `apt-get update && apt-get install -y "
+    "libllvm19`; if Dr.Jit still cannot find it, set DRJIT_LIBLLVM_PATH to the library, e.g. "
+    "DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so"
+)
+
+#: block size of the noise-suppressing comparison [px]
+BLOCK_PX = 8
+#: pixels darker than this fraction of the brightest are left out of the max relative error
+MAX_REL_FLOOR = 1e-3
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Sizes of one benchmark run."""
+
+    spps: tuple[int, ...]
+    bounces: tuple[int, ...]
+    repeats: int
+    reference_spp: int
+    reference_bounces: int
+    sweep_spps: tuple[int, ...]
+    target_rel_rmse: float
+
+
+# -------------------------------------------------------------------------------------------
+# Loading Mitsuba
+# -------------------------------------------------------------------------------------------
+def _llvm_version(path: str) -> tuple[int, ...]:
+    m = re.search(r"libLLVM[-.]?(\d+)", os.path.basename(path)) or re.search(
+        r"llvm-(\d+)", path
+    )
+    return (int(m.group(1)),) if m else (0,)
+
+
+def find_libllvm() -> str | None:
+    """Path of a libLLVM shared library, LLVM 19 preferred, else the newest found; or None."""
+    for pattern in LIBLLVM_GLOBS:
+        found = sorted(
+            (p for p in glob.glob(pattern) if os.path.isfile(p)),
+            key=lambda p: (_llvm_version(p), -len(p)),
+            reverse=True,
+        )
+        if found:
+            return found[0]
+    return None
+
+
+def load_mitsuba(variant: str = MITSUBA_VARIANT):
+    """Import Mitsuba 3 and Dr.Jit and select ``variant``.
+
+    Sets ``DRJIT_LIBLLVM_PATH`` (if unset) to the library :func:`find_libllvm` finds.
+
+    Returns
+    -------
+    (mitsuba module, drjit module, libLLVM path or None)
+
+    Raises
+    ------
+    RuntimeError
+        If Mitsuba is not installed or its LLVM backend cannot be loaded, saying how to install.
+    """
+    llvm = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if not llvm:
+        llvm = find_libllvm()
+        if llvm:
+            os.environ["DRJIT_LIBLLVM_PATH"] = llvm
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError as exc:
+        raise RuntimeError(
+            f"The Mitsuba comparison needs Mitsuba 3, which is not installed ({exc}). "
+            f"{INSTALL_HINT}"
+        ) from exc
+    try:
+        mi.set_variant(variant)
+        ok = bool(dr.has_backend(dr.JitBackend.LLVM))
+    except Exception as exc:  # ImportError from Dr.Jit's LLVM init, AttributeError, ...
+        raise RuntimeError(
+            f"Mitsuba is installed but its variant {variant!r} could not be loaded "
+            f"(DRJIT_LIBLLVM_PATH={os.environ.get('DRJIT_LIBLLVM_PATH')!r}): {exc}. "
+            f"{INSTALL_HINT}"
+        ) from exc
+    if not ok:
+        raise RuntimeError(
+            "Mitsuba is installed but Dr.Jit's LLVM backend is inactive (libLLVM not loaded, "
+            f"DRJIT_LIBLLVM_PATH={os.environ.get('DRJIT_LIBLLVM_PATH')!r}). {INSTALL_HINT}"
+        )
+    return mi, dr, os.environ.get("DRJIT_LIBLLVM_PATH")
+
+
+# -------------------------------------------------------------------------------------------
+# The Mitsuba scene
+# -------------------------------------------------------------------------------------------
+def write_ply(path: Path, triangles: np.ndarray) -> None:
+    """Binary little-endian PLY of unshared float32 triangles ``(n, 3, 3)``."""
+    tris = np.asarray(triangles, dtype="<f4").reshape(-1, 3)
+    n = tris.shape[0] // 3
+    faces = np.empty(n, dtype=[("k", "u1"), ("i", "<i4", (3,))])
+    faces["k"] = 3
+    faces["i"] = np.arange(3 * n, dtype="<i4").reshape(n, 3)
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {3 * n}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {n}\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(tris.tobytes())
+        fh.write(faces.tobytes())
+
+
+def mitsuba_sensor_dict(mi, scene: Scene, spp: int = 16) -> dict:
+    """Perspective sensor matching our pinhole camera (see the module docstring)."""
+    intr = scene.camera.intrinsics
+    if intr.has_distortion:
+        raise ValueError("Mitsuba's perspective sensor has no lens distortion; use k = 0")
+    if not math.isclose(intr.fx_px, intr.fy_px, rel_tol=1e-9):
+        raise ValueError(
+            f"Mitsuba's perspective sensor has square pixels; fx = {intr.fx_px} != "
+            f"fy = {intr.fy_px}"
+        )
+    w, h = intr.width_px, intr.height_px
+    # Mitsuba's camera frame: x left, y up, z forward; ours: x right, y down, z forward.
+    to_world = scene.camera.world_from_camera @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    return {
+        "type": "perspective",
+        "fov": float(2.0 * np.degrees(np.arctan(0.5 * w / intr.fx_px))),
+        "fov_axis": "x",
+        # film position (u + 0.5) / W of our pixel u; Mitsuba adds the offset to it
+        "principal_point_offset_x": float(0.5 - (intr.cx_px + 0.5) / w),
+        "principal_point_offset_y": float(0.5 - (intr.cy_px + 0.5) / h),
+        "to_world": mi.ScalarTransform4f(to_world.tolist()),
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "film": {
+            "type": "hdrfilm",
+            "width": w,
+            "height": h,
+            "pixel_format": "luminance",
+            "component_format": "float32",
+            "rfilter": {"type": "box"},
+        },
+    }
+
+
+def mitsuba_scene_dict(mi, scene: Scene, workdir: Path) -> dict:
+    """Mitsuba scene dictionary of ``scene`` (Lambertian materials, isotropic light only).
+
+    The meshes are written as PLY files into ``workdir``, which must exist until the
+    dictionary has been loaded.
+    """
+    light = scene.light
+    if light.profile_angle_rad is not None:
+        raise ValueError("only an isotropic point source is translated to Mitsuba")
+    d: dict = {
+        "type": "scene",
+        "sensor": mitsuba_sensor_dict(mi, scene),
+        "light": {
+            "type": "point",
+            "position": [float(x) for x in light.position_m],
+            "intensity": float(light.power_w / (4.0 * np.pi)),
+        },
+    }
+    for m_idx, material in enumerate(scene.materials):
+        sel = scene.material_index == m_idx
+        if not sel.any():
+            continue
+        if not isinstance(material, Lambertian):
+            raise ValueError(
+                f"material {m_idx} is {type(material).__name__}; only Lambertian is translated"
+            )
+        path = Path(workdir) / f"material_{m_idx}.ply"
+        write_ply(path, scene.triangles_m[sel])
+        d[f"mesh_{m_idx}"] = {
+            "type": "ply",
+            "filename": str(path),
+            "face_normals": True,
+            "bsdf": {
+                "type": "twosided",
+                "material": {"type": "diffuse", "reflectance": float(material.albedo)},
+            },
+        }
+    return d
+
+
+def mitsuba_integrator(mi, bounces: int, rr_from_bounce: int):
+    """Mitsuba ``path`` integrator equivalent to our ``bounces`` and Russian roulette start."""
+    return mi.load_dict(
+        {
+            "type": "path",
+            "max_depth": int(bounces) + 1,
+            "rr_depth": max(1, int(rr_from_bounce) - 1),
+        }
+    )
+
+
+def camera_mismatch_deg(mi, mscene, scene: Scene) -> float:
+    """Largest angle between Mitsuba's and our primary rays at pixel centres and corners [deg]."""
+    intr = scene.camera.intrinsics
+    w, h = intr.width_px, intr.height_px
+    us = np.array([-0.5, 0.0, w / 2 - 0.5, w - 1.0, w - 0.5])
+    vs = np.array([-0.5, 0.0, h / 2 - 0.5, h - 1.0, h - 0.5])
+    u, v = (a.ravel() for a in np.meshgrid(us, vs))
+    sensor = mscene.sensors()[0]
+    pos = mi.Point2f(((u + 0.5) / w).astype(np.float32), ((v + 0.5) / h).astype(np.float32))
+    ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+    dm = np.asarray(ray.d, dtype=np.float64)
+    if dm.shape[0] == 3 and dm.shape[1] != 3:
+        dm = dm.T
+    do = scene.camera.pixel_directions_world(u, v)
+    # atan2 of |cross| and dot: accurate for tiny angles, unlike arccos of the dot
+    ang = np.arctan2(np.linalg.norm(np.cross(dm, do), axis=1), np.einsum("ij,ij->i", dm, do))
+    return float(np.degrees(ang.max()))
+
+
+# -------------------------------------------------------------------------------------------
+# Image comparison
+# -------------------------------------------------------------------------------------------
+def fit_scale(ours: np.ndarray, theirs: np.ndarray) -> float:
+    """Least-squares ``s`` minimising ``sum (ours - s * theirs)^2``."""
+    den = float(np.sum(theirs * theirs))
+    return float(np.sum(ours * theirs) / den) if den > 0.0 else float("nan")
+
+
+def rel_rmse(img: np.ndarray, ref: np.ndarray) -> float:
+    """``||img - ref|| / ||ref||`` over all pixels (RMS error relative to the RMS signal)."""
+    den = float(np.sqrt(np.sum(ref * ref)))
+    return float(np.sqrt(np.sum((img - ref) ** 2)) / den) if den > 0.0 else float("nan")
+
+
+def block_means(img: np.ndarray, k: int = BLOCK_PX) -> np.ndarray:
+    """Means of ``k x k`` pixel blocks (rows and columns beyond a multiple of k dropped)."""
+    h, w = (img.shape[0] // k) * k, (img.shape[1] // k) * k
+    return img[:h, :w].reshape(h // k, k, w // k, k).mean(axis=(1, 3))
+
+
+def agreement(ours: np.ndarray, theirs: np.ndarray) -> dict:
+    """Scale fit of ``theirs`` onto ``ours`` and the residual errors (relative to ours).
+
+    The scale is the least-squares fit on :func:`block_means` of the images: fitted on single
+    noisy pixels it would come out low by about the squared relative noise (noise in the
+    regressor, "attenuation bias": 1.3 % at 16 % per-pixel noise), which is not a unit mismatch.
+    """
+    s = fit_scale(block_means(ours), block_means(theirs))
+    fitted = s * theirs
+    floor = MAX_REL_FLOOR * float(np.max(ours)) if ours.size else 0.0
+    lit = ours > floor
+    max_rel = (
+        float(np.max(np.abs(ours[lit] - fitted[lit]) / ours[lit])) if lit.any() else float("nan")
+    )
+    return {
+        "scale": s,
+        "rel_rmse": rel_rmse(fitted, ours),
+        "max_rel_err": max_rel,
+        "rel_rmse_blocks": rel_rmse(block_means(fitted), block_means(ours)),
+    }
+
+
+def loglog_crossing(x, y, target: float) -> tuple[float, bool]:
+    """``x`` at which the decreasing ``y(x)`` reaches ``target``, interpolated in log-log.
+
+    Between the two sweep points that bracket ``target`` it interpolates; otherwise it
+    extrapolates the least-squares line through all points (second value True). NaN if ``y``
+    does not decrease with ``x``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    ok = (x > 0) & (y > 0) & np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size == 0 or not target > 0:
+        return float("nan"), True
+    order = np.argsort(x)
+    lx, ly, lt = np.log(x[order]), np.log(y[order]), math.log(target)
+    for i in range(lx.size - 1):
+        y0, y1 = ly[i], ly[i + 1]
+        if y0 >= lt >= y1 and y0 > y1:
+            f = (y0 - lt) / (y0 - y1)
+            return float(np.exp(lx[i] + f * (lx[i + 1] - lx[i]))), False
+    if lx.size < 2 or np.ptp(lx) == 0.0:
+        return float("nan"), True
+    slope, icpt = np.polyfit(lx, ly, 1)
+    if not slope < 0.0:
+        return float("nan"), True
+    return float(np.exp((lt - icpt) / slope)), True
+
+
+# -------------------------------------------------------------------------------------------
+# The two renderers behind one interface
+# -------------------------------------------------------------------------------------------
+class _Ours:
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self.tracer = RayTracer(scene.triangles_m, scene.camera.position_m)
+        self.rr = RenderSettings().russian_roulette_from_bounce
+
+    def settings(self, spp: int, bounces: int, seed: int) -> RenderSettings:
+        return RenderSettings(
+            integrator="direct" if bounces == 1 else "path",
+            spp=spp, max_bounces=bounces, seed=seed, ambient=False,
+        )
+
+    def render(self, spp: int, bounces: int, seed: int):
+        """(dc_active image, per-pixel variance of the mean, seconds)."""
+        t0 = time.perf_counter()
+        res = render(self.scene, self.settings(spp, bounces, seed), self.tracer)
+        dt = time.perf_counter() - t0
+        lf = res.light_field
+        return lf.dc_active, lf.dc_active_var / spp, dt
+
+    def close(self) -> None:
+        self.tracer.close()
+
+
+class _Mitsuba:
+    def __init__(self, mi, scene: Scene, rr_from_bounce: int) -> None:
+        self.mi = mi
+        with tempfile.TemporaryDirectory(prefix="toftwin-mitsuba-") as tmp:
+            self.scene = mi.load_dict(mitsuba_scene_dict(mi, scene, Path(tmp)))
+        self.rr = rr_from_bounce
+        self.integrators: dict[int, object] = {}
+
+    def integrator(self, bounces: int):
+        if bounces not in self.integrators:
+            self.integrators[bounces] = mitsuba_integrator(self.mi, bounces, self.rr)
+        return self.integrators[bounces]
+
+    def render(self, spp: int, bounces: int, seed: int):
+        """(radiance image float64, seconds); the readback forces the lazy evaluation."""
+        integ = self.integrator(bounces)
+        t0 = time.perf_counter()
+        img = np.asarray(self.mi.render(self.scene, integrator=integ, spp=int(spp), seed=seed))
+        dt = time.perf_counter() - t0
+        return img.reshape(img.shape[0], img.shape[1], -1)[..., 0].astype(np.float64), dt
+
+
+# -------------------------------------------------------------------------------------------
+# The benchmark
+# -------------------------------------------------------------------------------------------
+def _plan(spps, bounces, quick: bool, target, reference_spp, repeats) -> _Plan:
+    spps = tuple(sorted({int(s) for s in spps}))
+    bounces = tuple(sorted({int(b) for b in bounces}))
+    if not spps or spps[0] < 1:
+        raise ValueError(f"spps must be positive integers, got {spps}")
+    if not bounces or bounces[0] < 1:
+        raise ValueError(f"bounces must be integers >= 1, got {bounces}")
+    if quick:
+        spps = tuple(sorted({min(s, 4) for s in spps}))
+        bounces = tuple(sorted({min(b, 2) for b in bounces}))
+    ref_b = max(bounces)
+    return _Plan(
+        spps=spps,
+        bounces=bounces,
+        repeats=int(repeats or (1 if quick else 3)),
+        reference_spp=int(reference_spp or (64 if quick else 2048)),
+        reference_bounces=ref_b,
+        sweep_spps=(1, 2, 4, 8) if quick else (16, 32, 64, 128, 256, 512),
+        target_rel_rmse=float(target or (0.10 if quick else 0.02)),
+    )
+
+
+def _fmt(x: float, spec: str = ".3f") -> str:
+    return "-" if x is None or not np.isfinite(x) else format(x, spec)
+
+
+def run_mitsuba_comparison(
+    console: Console,
+    spps=(16, 64, 256),
+    bounces=(1, 2, 3),
+    quick: bool = False,
+    *,
+    target_rel_rmse: float | None = None,
+    reference_spp: int | None = None,
+    repeats: int | None = None,
+) -> dict:
+    """Render ``corner`` in our renderer and in Mitsuba 3; print and return the comparison.
+
+    Parameters
+    ----------
+    console : rich Console
+    spps, bounces : iterables of int
+        Samples per pixel and bounce counts of the speed and agreement table (direct = 1).
+    quick : bool
+        Smoke run: spp capped at 4, bounces at 2, one repeat, a 64-spp reference, a sweep over
+        1-8 spp and a 10 % target (the default is a 2048-spp reference, 16-512 spp, 2 %).
+    target_rel_rmse, reference_spp, repeats : optional overrides of those choices.
+
+    Returns
+    -------
+    dict with ``rows`` (one per spp and bounce count), ``reference`` (the high-spp check),
+    ``time_to_error`` (sweeps and the interpolated times) and the setup (versions, threads,
+    camera check).
+
+    Raises
+    ------
+    RuntimeError
+        If Mitsuba or its LLVM backend cannot be loaded (the message says how to install them).
+    """
+    mi, dr, llvm_path = load_mitsuba()
+    plan = _plan(spps, bounces, quick, target_rel_rmse, reference_spp, repeats)
+    load_before = os.getloadavg()
+    spec = load_scene_spec(CORNER_SCENE)
+    scene = build_scene(spec, base_dir=CORNER_SCENE.parent)
+    ours = _Ours(scene)
+    try:
+        theirs = _Mitsuba(mi, scene, ours.rr)
+        cam_deg = camera_mismatch_deg(mi, theirs.scene, scene)
+        intr = scene.camera.intrinsics
+        setup = {
+            "scene": spec.name,
+            "resolution": (intr.width_px, intr.height_px),
+            "triangles": scene.n_triangles,
+            "light_power_w": float(scene.light.power_w),
+            "mitsuba_version": getattr(mi, "__version__", "?"),
+            "drjit_version": getattr(dr, "__version__", "?"),
+            "variant": MITSUBA_VARIANT,
+            "libllvm": llvm_path,
+            "threads_ours": ours.tracer.threads,
+            "threads_mitsuba": int(dr.thread_count()),
+            "camera_mismatch_deg": cam_deg,
+            "repeats": plan.repeats,
+            "quick": quick,
+        }
+        console.print(
+            f"[bold]{spec.name}[/]: {scene.n_triangles} triangles, {intr.width_px} x "
+            f"{intr.height_px} px, light {scene.light.power_w:g} W | Mitsuba "
+            f"{setup['mitsuba_version']} ({MITSUBA_VARIANT}, Dr.Jit {setup['drjit_version']}, "
+            f"{setup['threads_mitsuba']} threads, libLLVM {llvm_path or 'found by Dr.Jit'}) | "
+            f"ours {setup['threads_ours']} threads | camera rays differ by <= {cam_deg:.1e} deg"
+        )
+        rows = _speed_and_agreement(console, ours, theirs, plan)
+        reference = _reference_check(console, ours, theirs, plan)
+        tte = _time_to_error(console, ours, theirs, plan, reference)
+    finally:
+        ours.close()
+    load_after = os.getloadavg()
+    setup["load_avg_1min_before_after"] = (load_before[0], load_after[0])
+    console.print(
+        f"Load average (1 min) before / after: {load_before[0]:.2f} / {load_after[0]:.2f} "
+        f"on {os.cpu_count()} cores; times are the best of {plan.repeats} interleaved repeat(s)."
+    )
+    reference.pop("_image", None)
+    reference.pop("_var", None)
+    return {**setup, "rows": rows, "reference": reference, "time_to_error": tte}
+
+
+def _speed_and_agreement(console: Console, ours: _Ours, theirs: _Mitsuba, plan: _Plan):
+    table = Table(title="Speed and DC agreement at equal spp (ours / Mitsuba, warm, s per frame)")
+    for col in ("bounces", "max_depth", "spp", "ours s", "Mitsuba s", "Mitsuba 1st s",
+                "ours/Mitsuba", "scale", "rel RMSE", "max rel", f"rel RMSE {BLOCK_PX}x{BLOCK_PX}"):
+        table.add_column(col, justify="right")
+    rows = []
+    for b in plan.bounces:
+        ours.render(1, b, seed=0)  # compiles (or loads) the numba kernels of this path
+        for spp in plan.spps:
+            _, first = theirs.render(spp, b, seed=0)  # kernel compilation, not counted
+            t_ours, t_mi = [], []
+            for r in range(plan.repeats):
+                img_o, _, dt = ours.render(spp, b, seed=1000 + r)
+                t_ours.append(dt)
+                img_m, dt = theirs.render(spp, b, seed=1000 + r)
+                t_mi.append(dt)
+            agr = agreement(img_o, img_m)
+            row = {
+                "bounces": b,
+                "mitsuba_max_depth": b + 1,
+                "spp": spp,
+                "ours_s": min(t_ours),
+                "mitsuba_s": min(t_mi),
+                "mitsuba_first_s": first,
+                "ratio_ours_over_mitsuba": min(t_ours) / min(t_mi),
+                **agr,
+            }
+            rows.append(row)
+            table.add_row(
+                str(b), str(b + 1), str(spp), _fmt(row["ours_s"]), _fmt(row["mitsuba_s"]),
+                _fmt(first), _fmt(row["ratio_ours_over_mitsuba"], ".2f"),
+                _fmt(agr["scale"], ".4f"), _fmt(100 * agr["rel_rmse"], ".2f") + " %",
+                _fmt(100 * agr["max_rel_err"], ".1f") + " %",
+                _fmt(100 * agr["rel_rmse_blocks"], ".2f") + " %",
+            )
+    console.print(table)
+    console.print(
+        "scale: least-squares s in ours = s * Mitsuba (1 when radiance units and light match); "
+        "rel RMSE = ||ours - s*Mitsuba|| / ||ours||, noise of both renderers included; max rel "
+        f"over pixels brighter than {MAX_REL_FLOOR:g} of the maximum; the {BLOCK_PX}x{BLOCK_PX} "
+        "block figure averages noise away; the scale is fitted on those block means (on noisy "
+        "pixels it would be biased low). 'Mitsuba 1st' is its first render of the setting, "
+        "which compiles the kernels of a new integrator (Dr.Jit may load them from its disk "
+        "cache); it is excluded from the ratio."
+    )
+    return rows
+
+
+def _reference_check(console: Console, ours: _Ours, theirs: _Mitsuba, plan: _Plan) -> dict:
+    n, b = plan.reference_spp, plan.reference_bounces
+    ours.render(1, b, seed=0)
+    ref, ref_var, t_ref = ours.render(n, b, seed=7)
+    # Mitsuba in 8 independent chunks: their spread gives its per-pixel noise
+    chunks = 8 if n >= 8 else 1
+    per = max(1, n // chunks)
+    theirs.render(per, b, seed=0)
+    imgs, t_mi = [], 0.0
+    for k in range(chunks):
+        img, dt = theirs.render(per, b, seed=10_000 + k)
+        imgs.append(img)
+        t_mi += dt
+    stack = np.stack(imgs)
+    mref = stack.mean(axis=0)
+    mvar = stack.var(axis=0, ddof=1) / chunks if chunks > 1 else np.zeros_like(mref)
+    agr = agreement(ref, mref)
+    s = agr["scale"]
+    norm = float(np.linalg.norm(ref))
+    ref_noise = float(np.sqrt(ref_var.sum()) / norm)
+    mi_noise = float(s * np.sqrt(mvar.sum()) / norm)
+    expected = math.hypot(ref_noise, mi_noise)
+    out = {
+        "spp": n,
+        "bounces": b,
+        "mitsuba_spp": per * chunks,
+        "ours_s": t_ref,
+        "mitsuba_s": t_mi,
+        **agr,
+        "ours_noise_rel": ref_noise,
+        "mitsuba_noise_rel": mi_noise,
+        "rel_rmse_over_noise": agr["rel_rmse"] / expected if expected > 0 else float("nan"),
+        "_image": ref,
+        "_var": ref_var,
+    }
+    table = Table(title=f"High-spp reference check ({n} spp, {b} bounce(s))")
+    for col in ("ours s", "Mitsuba s", "scale", "rel RMSE", f"rel RMSE {BLOCK_PX}x{BLOCK_PX}",
+                "max rel", "noise ours", "noise Mitsuba", "RMSE / noise"):
+        table.add_column(col, justify="right")
+    table.add_row(
+        _fmt(t_ref, ".2f"), _fmt(t_mi, ".2f"), _fmt(s, ".5f"),
+        _fmt(100 * agr["rel_rmse"], ".3f") + " %", _fmt(100 * agr["rel_rmse_blocks"], ".3f") + " %",
+        _fmt(100 * agr["max_rel_err"], ".1f") + " %", _fmt(100 * ref_noise, ".3f") + " %",
+        _fmt(100 * mi_noise, ".3f") + " %", _fmt(out["rel_rmse_over_noise"], ".2f"),
+    )
+    console.print(table)
+    verdict = (
+        "agree within Monte Carlo noise" if out["rel_rmse_over_noise"] < 1.3
+        else "differ by more than their Monte Carlo noise"
+    )
+    console.print(
+        f"The references {verdict} (RMSE / noise = {out['rel_rmse_over_noise']:.2f}; ~1 means "
+        f"the difference is noise alone). Scale {s:.5f}: "
+        + ("units match." if abs(s - 1.0) < 0.01 else
+           "NOT 1: a radiance unit, light intensity or albedo convention differs between the "
+           "two; the errors above are after removing it.")
+    )
+    return out
+
+
+def _time_to_error(
+    console: Console, ours: _Ours, theirs: _Mitsuba, plan: _Plan, reference: dict
+) -> dict:
+    ref, ref_var = reference["_image"], reference["_var"]
+    scale = reference["scale"]
+    b = plan.reference_bounces
+    norm = float(np.linalg.norm(ref))
+    ref_noise = float(np.sqrt(ref_var.sum()) / norm)
+    target = plan.target_rel_rmse
+
+    def corrected(err: float) -> float:
+        # the reference's own noise adds in quadrature to every error measured against it
+        return math.sqrt(max(err * err - ref_noise * ref_noise, 0.0))
+
+    sweep = {"ours": {"spp": [], "seconds": [], "rel_rmse_raw": [], "rel_rmse": []},
+             "mitsuba": {"spp": [], "seconds": [], "rel_rmse_raw": [], "rel_rmse": []}}
+    for spp in plan.sweep_spps:
+        theirs.render(spp, b, seed=0)
+        t = {"ours": [], "mitsuba": []}
+        e = {"ours": [], "mitsuba": []}
+        for r in range(plan.repeats):
+            img, _, dt = ours.render(spp, b, seed=2000 + r)
+            t["ours"].append(dt)
+            e["ours"].append(rel_rmse(img, ref))
+            img, dt = theirs.render(spp, b, seed=2000 + r)
+            t["mitsuba"].append(dt)
+            e["mitsuba"].append(rel_rmse(scale * img, ref))
+        for who in ("ours", "mitsuba"):
+            raw = float(np.sqrt(np.mean(np.square(e[who]))))
+            sweep[who]["spp"].append(spp)
+            sweep[who]["seconds"].append(min(t[who]))
+            sweep[who]["rel_rmse_raw"].append(raw)
+            sweep[who]["rel_rmse"].append(corrected(raw))
+    result: dict = {"target_rel_rmse": target, "bounces": b, "reference_noise_rel": ref_noise}
+    for who, sw in sweep.items():
+        secs, ext_t = loglog_crossing(sw["seconds"], sw["rel_rmse"], target)
+        spp_at, ext_s = loglog_crossing(sw["spp"], sw["rel_rmse"], target)
+        result[who] = {**sw, "seconds_to_target": secs, "spp_to_target": spp_at,
+                       "extrapolated": ext_t or ext_s}
+    o, m = result["ours"]["seconds_to_target"], result["mitsuba"]["seconds_to_target"]
+    result["ratio_ours_over_mitsuba"] = o / m if m and np.isfinite(m) and m > 0 else float("nan")
+
+    table = Table(title=f"DC error against our {reference['spp']}-spp reference, {b} bounce(s)")
+    for col in ("spp", "ours s", "ours rel RMSE", "Mitsuba s", "Mitsuba rel RMSE"):
+        table.add_column(col, justify="right")
+    for i, spp in enumerate(plan.sweep_spps):
+        table.add_row(
+            str(spp), _fmt(sweep["ours"]["seconds"][i]),
+            _fmt(100 * sweep["ours"]["rel_rmse"][i], ".2f") + " %",
+            _fmt(sweep["mitsuba"]["seconds"][i]),
+            _fmt(100 * sweep["mitsuba"]["rel_rmse"][i], ".2f") + " %",
+        )
+    for who, label in (("ours", "ours"), ("mitsuba", "Mitsuba")):
+        r = result[who]
+        table.add_row(
+            f"{label} @ {100 * target:g} %",
+            _fmt(r["seconds_to_target"]) if who == "ours" else "",
+            f"{_fmt(r['spp_to_target'], '.0f')} spp" if who == "ours" else "",
+            _fmt(r["seconds_to_target"]) if who == "mitsuba" else "",
+            f"{_fmt(r['spp_to_target'], '.0f')} spp" if who == "mitsuba" else "",
+        )
+    console.print(table)
+    ext = [w for w in ("ours", "mitsuba") if result[w]["extrapolated"]]
+    console.print(
+        f"Time to {100 * target:g} % relative RMSE: ours {_fmt(o)} s, Mitsuba {_fmt(m)} s, "
+        f"ratio ours/Mitsuba {_fmt(result['ratio_ours_over_mitsuba'], '.2f')}"
+        + (f" (extrapolated for {', '.join(ext)})" if ext else "")
+        + f". Errors are ||img - ref|| / ||ref|| with the reference's own noise "
+        f"({100 * ref_noise:.2f} %) removed in quadrature; Mitsuba's images are scaled by the "
+        f"reference-fitted {scale:.5f}; interpolated in log-log between sweep points."
+    )
+    return result

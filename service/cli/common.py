@@ -1,0 +1,49 @@
+"""What every command shares: the consoles, exit code 2 for invalid input, bounded options."""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from sim_core.errors import InvalidInputError
+
+err_console = Console(stderr=True)
+#: in a pipe (CI logs, ``| tee``) rich would squeeze the benchmark tables into 80 columns
+console = Console() if sys.stdout.isatty() else Console(width=120)
+
+
+def fail_invalid(exc: InvalidInputError) -> None:
+    """Print the message (it names the field and the allowed range) and exit with code 2."""
+    err_console.print(f"[bold red]error:[/] {exc}")
+    raise typer.Exit(code=2)
+
+
+def bounded(name: str, value: int, lo: int, hi: int) -> int:
+    """``value`` if it is in [lo, hi], else an input error naming the option."""
+    if not lo <= value <= hi:
+        raise InvalidInputError(name, f"{value} is outside [{lo}, {hi}]")
+    return value
+
+
+def choice(name: str, value: str, allowed: tuple[str, ...]) -> str:
+    """``value`` if it is one of ``allowed``, else an input error naming the option."""
+    if value not in allowed:
+        raise InvalidInputError(name, f"'{value}' is not one of {list(allowed)}")
+    return value
+
+
+def progress_bar(quiet: bool) -> Progress:
+    """A progress bar on stderr (off in a pipe or with ``quiet``)."""
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} spp"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        disable=quiet or not err_console.is_terminal,
+        transient=True,
+    )

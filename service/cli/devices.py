@@ -1,0 +1,96 @@
+"""``toftwin devices`` and ``toftwin sim-device``: what is connected, and simulators to try."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from collections.abc import Iterator
+from typing import Annotated
+
+import typer
+
+from drivers.devices_cli import check_devices, list_devices
+from service.cli.common import console
+
+devices_app = typer.Typer(help="Devices of the rig: list and check them.", no_args_is_help=True)
+
+
+@contextlib.contextmanager
+def _simulated_ports() -> Iterator[dict]:
+    """Serial simulators on pseudo-terminals and a simulated USB camera, for ``--simulated``."""
+    from drivers.sim.pty_server import start_simulator
+    from drivers.sim.usb_camera import UsbCameraSim
+
+    with start_simulator("turntable", [], instant=True) as tt, \
+            start_simulator("solar-simulator", [], instant=True) as solar:
+        lamp, shutter = solar.ports
+        yield {"usb_backend": UsbCameraSim(), "turntable_port": tt.ports[0],
+               "lamp_port": lamp, "shutter_port": shutter, "probe_camera_wire": True}
+
+
+@devices_app.command("list")
+def list_cmd(
+    simulated: bool = typer.Option(False, "--simulated", help="List the simulated camera."),
+    as_json: bool = typer.Option(False, "--json", help="JSON instead of text."),
+) -> None:
+    """PMD cameras on USB, with serial number, product, USB speed and accessibility."""
+    backend = None
+    if simulated:
+        from drivers.sim.usb_camera import UsbCameraSim
+
+        backend = UsbCameraSim()
+    found = list_devices(backend)
+    if as_json:
+        console.print_json(json.dumps(found))
+        return
+    if not found:
+        console.print("no PMD camera (USB vendor 0x1C28) found")
+    for d in found:
+        console.print(", ".join(f"{k}: {v}" for k, v in d.items()), markup=False)
+
+
+@devices_app.command("check")
+def check_cmd(
+    simulated: bool = typer.Option(False, "--simulated", help="Check against the simulators."),
+    turntable_port: str | None = typer.Option(None, help="SMC100 serial port."),
+    turntable_address: int = typer.Option(1, help="SMC100 address (1-31)."),
+    lamp_port: str | None = typer.Option(None, help="Oriel lamp supply port."),
+    shutter_port: str | None = typer.Option(None, help="Oriel exposure controller port."),
+    camera_serial: str | None = typer.Option(None, help="Which camera (default: first)."),
+    as_json: bool = typer.Option(False, "--json", help="JSON instead of text."),
+) -> None:
+    """Talk to every device and report ok / warning / error with a fix; exit 1 on error."""
+    with contextlib.ExitStack() as stack:
+        if simulated:
+            kw = stack.enter_context(_simulated_ports())
+        else:
+            kw = {"turntable_port": turntable_port, "lamp_port": lamp_port,
+                  "shutter_port": shutter_port}
+        report = check_devices(turntable_address=turntable_address,
+                               camera_serial=camera_serial, **kw)
+    if as_json:
+        console.print_json(json.dumps(report.to_dict()))
+    else:
+        console.print(str(report), markup=False, highlight=False)
+    if not report.ok:
+        raise typer.Exit(code=1)
+
+
+def sim_device(
+    kind: str = typer.Argument(..., help="turntable or solar-simulator"),
+    fault: Annotated[
+        list[str] | None, typer.Option("--fault", help="Fault to inject: name[:count][@skip].")
+    ] = None,
+    transport: str = typer.Option("pty", help="pty (a pseudo-terminal) or tcp (socket://)."),
+    instant: bool = typer.Option(False, "--instant", help="Moves and warm-up finish at once."),
+) -> None:
+    """Serve one serial device simulator; prints its port first, serves until stopped."""
+    from drivers.sim.pty_server import serve
+
+    if kind not in ("turntable", "solar-simulator"):
+        console.print(f"error: KIND '{kind}' is not one of ['turntable', 'solar-simulator']")
+        raise typer.Exit(code=2)
+    if transport not in ("pty", "tcp"):
+        console.print(f"error: --transport '{transport}' is not one of ['pty', 'tcp']")
+        raise typer.Exit(code=2)
+    serve(kind, list(fault or []), transport=transport, instant=instant)

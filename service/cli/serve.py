@@ -1,0 +1,79 @@
+"""``toftwin serve``, ``toftwin compare`` and ``toftwin bench campaign``: typer command functions.
+
+``service/cli.py`` registers them (see :func:`register`). ``python -m service.cli.serve`` runs the
+same commands without it.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import secrets
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from service.cli.common import err_console
+
+
+def serve(
+    host: Annotated[str | None, typer.Option(help="Address to bind (default 127.0.0.1).")] = None,
+    port: Annotated[int | None, typer.Option(help="TCP port (default 8000).")] = None,
+    data_dir: Annotated[
+        Path | None,
+        typer.Option("--data-dir", help="Frames and database (default ./toftwin-data)."),
+    ] = None,
+    simulated: Annotated[
+        bool, typer.Option("--simulated", help="Run on the device simulators.")
+    ] = False,
+    executor: Annotated[
+        str | None, typer.Option(help="local (process pool), thread, or dask://HOST:PORT.")
+    ] = None,
+    workers: Annotated[int | None, typer.Option(help="Local executor workers.")] = None,
+    settings_file: Annotated[
+        Path | None, typer.Option("--settings", help="Settings file (dotenv, TOFTWIN_* keys).")
+    ] = None,
+    log_level: Annotated[str, typer.Option(help="debug, info, warning, error.")] = "info",
+) -> None:
+    """Start the REST API (uvicorn); --simulated runs on the simulators and the satellite scene."""
+    import uvicorn
+    from pydantic import ValidationError
+
+    from service.api.app import create_app
+    from service.settings import Settings
+
+    token = None
+    if simulated and "TOFTWIN_TOKEN" not in os.environ and settings_file is None:
+        token = session_token(data_dir or Path("toftwin-data"))
+    try:
+        settings = Settings.load(
+            settings_file, host=host, port=port, data_dir=data_dir,
+            simulated=simulated or None, executor=executor, workers=workers, token=token,
+        )
+    except ValidationError as exc:
+        for e in exc.errors():
+            field = ".".join(str(p) for p in e["loc"]) or "settings"
+            err_console.print(f"[bold red]error:[/] TOFTWIN_{field.upper()}: {e['msg']}")
+        raise typer.Exit(code=2) from None
+    logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(name)s %(message)s")
+    if settings.host not in ("127.0.0.1", "localhost", "::1"):
+        err_console.print(f"[yellow]warning:[/] listening on {settings.host}, not loopback")
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
+                log_level=log_level.lower())
+
+
+def session_token(data_dir: Path) -> str:
+    """A random bearer token for a simulated service started without one.
+
+    Written to ``DATA_DIR/token`` (mode 0600) and printed once, so that the first command of the
+    README works on a fresh machine without a placeholder secret; a real rig needs TOFTWIN_TOKEN.
+    """
+    data_dir.mkdir(parents=True, exist_ok=True)
+    path = data_dir / "token"
+    token = secrets.token_urlsafe(24)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(token + "\n")
+    err_console.print(f"simulated rig: no TOFTWIN_TOKEN given, this session's token is in {path}")
+    return token

@@ -1,0 +1,222 @@
+"""Simulation jobs: everything a worker needs travels with the job; arrays come back.
+
+A :class:`SimulationJob` holds the scene spec as JSON-able data, the bytes of every mesh file
+it references, the rig state to pose it for and the render settings. :func:`run_job` runs in a
+worker process (a local pool or a Dask worker on another machine): it writes the meshes to a
+temporary folder, builds the scene, simulates, and returns a :class:`SimulationResult`: the
+frame's files as :func:`~sim_core.pipeline.save_frame` writes them (compressed ``.npz`` arrays,
+``frame.json``, PNG previews - compressing on the worker keeps that cost off the service) and
+the arrays the comparison needs (the reconstructed image and the object ids).
+
+The same job gives the same frame bit for bit on any worker: the seed is in the job and the
+renderer's results do not depend on the number of threads.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sim_core.scene_spec import SceneSpec
+
+#: One render at a time per process: every render in this process - jobs on a threaded executor
+#: or a multi-threaded Dask worker, and the simulated camera's frames
+#: (:func:`service.lab.lab.open_rig`) - takes this lock. A render already uses all cores, so two
+#: at once would only compete. (sim_core is thread-safe on its own: its few parallel numba
+#: kernels, which numba's ``workqueue`` layer cannot run from two threads at once, take
+#: ``PARALLEL_KERNEL_LOCK``.)
+RENDER_LOCK = threading.Lock()
+
+
+@dataclass(frozen=True)
+class SimulationJob:
+    """One frame to simulate.
+
+    Attributes
+    ----------
+    scene : dict
+        ``SceneSpec.model_dump(mode="json")``; file mesh paths are keys of ``meshes``.
+    meshes : dict of str to bytes
+        Contents of every mesh file, keyed by the path as written in the spec.
+    turntable_deg : float or None
+        Turntable angle to pose the scene for [deg] (None: the spec's).
+    solar_suns : float or None
+        Solar simulator level reaching the scene [sun]; 0 with the shutter closed.
+    integrator, spp, max_bounces, seed, russian_roulette_from_bounce : render settings
+    threads : int or None
+        Render threads on the worker (None: all its cores).
+    effects : "auto" or "all"
+    ideal : bool
+        Ideal sensor (no noise, SBI, ADC).
+    scene_name : str
+    extra : dict
+        Written into the frame's ``frame.json`` (rig state, object names, ...).
+    """
+
+    scene: dict[str, Any]
+    meshes: dict[str, bytes]
+    turntable_deg: float | None
+    solar_suns: float | None
+    integrator: str
+    spp: int
+    max_bounces: int
+    seed: int
+    russian_roulette_from_bounce: int = 3
+    threads: int | None = None
+    effects: str = "auto"
+    ideal: bool = False
+    scene_name: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def make_job(
+    spec: SceneSpec,
+    base_dir: Path,
+    *,
+    turntable_deg: float | None,
+    solar_suns: float | None,
+    spp: int,
+    seed: int,
+    threads: int | None = None,
+    effects: str = "auto",
+    ideal: bool = False,
+    scene_name: str = "",
+    extra: dict[str, Any] | None = None,
+) -> SimulationJob:
+    """A job for ``spec`` posed at the given rig state, with its mesh files packed in."""
+    meshes: dict[str, bytes] = {}
+    for obj in spec.objects:
+        if obj.mesh.kind == "file":
+            p = Path(obj.mesh.path)
+            meshes[obj.mesh.path] = (p if p.is_absolute() else Path(base_dir) / p).read_bytes()
+    r = spec.render
+    return SimulationJob(
+        scene=spec.model_dump(mode="json"),
+        meshes=meshes,
+        turntable_deg=turntable_deg,
+        solar_suns=solar_suns,
+        integrator=r.integrator,
+        spp=spp,
+        max_bounces=r.max_bounces,
+        seed=seed,
+        russian_roulette_from_bounce=r.russian_roulette_from_bounce,
+        threads=threads,
+        effects=effects,
+        ideal=ideal,
+        scene_name=scene_name,
+        extra=dict(extra or {}),
+    )
+
+
+@dataclass
+class SimulationResult:
+    """What comes back from a worker.
+
+    Attributes
+    ----------
+    files : dict of str to bytes
+        ``frame.npz``, ``frame.json``, ``grey.png``, ``depth.png`` and ``raw.npz``.
+    image : ToFImage
+        The simulated frame's reconstruction (compared with the measured one).
+    object_id : (H, W) int32
+        Object index per pixel (-1: none), for the simulator's object mask.
+    scene_hash : str
+    effect_plan : dict
+    timings_s : dict
+        The simulation's stage timings (``total`` included) and ``save`` (writing the files).
+    worker : str
+        Host and process that ran the job.
+    """
+
+    files: dict[str, bytes]
+    image: Any
+    object_id: Any
+    scene_hash: str
+    effect_plan: dict[str, Any]
+    timings_s: dict[str, float]
+    worker: str
+
+
+def run_job(job: SimulationJob) -> SimulationResult:
+    """Simulate ``job`` on this worker."""
+    import socket
+    import time
+
+    from sim_core.pipeline import save_frame, simulate
+    from sim_core.render import RenderSettings
+    from sim_core.scene import build_scene
+    from sim_core.scene_spec import parse_scene_spec
+
+    with tempfile.TemporaryDirectory(prefix="toftwin-job-") as tmp:
+        scene = dict(job.scene)
+        if job.meshes:
+            objects = []
+            for i, obj in enumerate(scene.get("objects", [])):
+                mesh = obj.get("mesh", {})
+                if mesh.get("kind") == "file":
+                    local = Path(tmp) / f"{i}_{Path(mesh['path']).name}"
+                    local.write_bytes(job.meshes[mesh["path"]])
+                    obj = {**obj, "mesh": {**mesh, "path": local.name}}
+                objects.append(obj)
+            scene["objects"] = objects
+        spec = parse_scene_spec(scene)
+        built = build_scene(
+            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns
+        )
+    settings = RenderSettings(
+        integrator=job.integrator,
+        spp=job.spp,
+        max_bounces=job.max_bounces,
+        seed=job.seed,
+        russian_roulette_from_bounce=job.russian_roulette_from_bounce,
+        threads=job.threads,
+    )
+    with RENDER_LOCK:
+        frame = simulate(built, settings, effects=job.effects, ideal=job.ideal)
+    worker = f"{socket.gethostname()}:{os.getpid()}"
+    frame.extra.update({"kind": "simulated", **job.extra, "worker": worker})
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="toftwin-frame-") as out:
+        save_frame(out, frame, scene_name=job.scene_name)
+        files = {p.name: p.read_bytes() for p in sorted(Path(out).iterdir()) if p.is_file()}
+    timings = {k: float(v) for k, v in frame.timings_s.items()}
+    timings["save"] = time.perf_counter() - t0
+    return SimulationResult(
+        files=files, image=frame.image, object_id=frame.light_field.object_id,
+        scene_hash=frame.scene_hash, effect_plan=frame.plan.to_dict(), timings_s=timings,
+        worker=worker,
+    )
+
+
+def warm_up() -> int:
+    """Import the renderer and load its compiled kernels (the first frame would otherwise pay)."""
+    from sim_core.pipeline import simulate
+    from sim_core.render import RenderSettings
+    from sim_core.scene import build_scene
+    from sim_core.scene_spec import parse_scene_spec
+
+    spec = parse_scene_spec(
+        {
+            "camera": {
+                "pose": {"position_m": [0, 0, 0], "look_at_m": [0, 0, 1], "up": [0, -1, 0]},
+                "width_px": 16,
+                "height_px": 12,
+            },
+            "objects": [
+                {
+                    "name": "plane",
+                    "mesh": {"kind": "rectangle", "size_m": [2, 2]},
+                    "material": {"kind": "lambertian", "params": {"albedo": 0.5}},
+                    "pose": {"position_m": [0, 0, 1], "rotation_deg": [180, 0, 0]},
+                }
+            ],
+        }
+    )
+    with RENDER_LOCK:
+        simulate(build_scene(spec),
+                 RenderSettings(integrator="path", spp=1, max_bounces=2, threads=1))
+    return os.getpid()

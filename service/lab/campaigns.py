@@ -1,0 +1,91 @@
+"""Creating campaigns and reading where they stand.
+
+A campaign is validated completely before anything is stored: the scene, every pose's angle
+against the stage's software limits and its solar level, the repeats, the number of poses and
+the samples per pixel. A bad campaign is a 422 naming the field (``poses[3].turntable_deg``)
+and leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import uuid
+from typing import Any
+
+from sqlalchemy.orm import sessionmaker
+
+from drivers.rig import Rig
+from service.errors import NotFoundError
+from service.lab.poses import check_angle, check_spp
+from service.lab.requests import CampaignCreate
+from service.lab.runner import CampaignRunner
+from service.lab.scenes import scene_from_request
+from service.settings import Settings
+from service.store import queries
+from sim_core.errors import InvalidInputError
+
+
+def create_campaign(
+    req: CampaignCreate, *, sessions: sessionmaker, settings: Settings, rig: Rig | None
+) -> str:
+    """Validate and store ``req``; returns the new campaign's id.
+
+    ``rig`` gives the stage's software limits the angles are checked against (None: the rig is
+    not available, the angles are checked when the campaign runs).
+    """
+    scene = scene_from_request(settings, req.scene)
+    spp = check_spp(req.spp, settings)
+    if len(req.poses) > settings.max_poses:
+        raise InvalidInputError(
+            "poses", f"{len(req.poses)} poses; allowed: 1 to {settings.max_poses} (max_poses)")
+    for i, pose in enumerate(req.poses):
+        if pose.repeats > settings.max_repeats:
+            raise InvalidInputError(
+                f"poses[{i}].repeats",
+                f"got {pose.repeats}; allowed: 1 to {settings.max_repeats} (max_repeats)")
+        if rig is not None:
+            check_angle(rig, pose.turntable_deg, f"poses[{i}].turntable_deg")
+    campaign_id = uuid.uuid4().hex
+    with sessions() as s:
+        queries.create_campaign(
+            s, campaign_id=campaign_id, name=req.name, scene_name=scene.name,
+            scene_json=scene.to_json(), scene_base_dir=str(scene.base_dir),
+            mask=req.mask.model_dump(mode="json"), seed=req.seed, spp=spp,
+            poses=[(p.turntable_deg, p.solar_suns, p.repeats) for p in req.poses],
+        )
+    return campaign_id
+
+
+def campaign_status(
+    sessions: sessionmaker, runner: CampaignRunner, campaign_id: str
+) -> dict[str, Any]:
+    """Everything ``GET /campaigns/{id}`` shows: state, progress, current pose, time left."""
+    with sessions() as s:
+        row = queries.get_campaign(s, campaign_id)
+        if row is None:
+            raise NotFoundError(f"no campaign {campaign_id}")
+        poses = queries.planned_poses(s, campaign_id)
+        done = queries.done_units(s, campaign_id)
+    live = runner.live(campaign_id)
+    remaining = row.poses_total - len(done)
+    current, eta = None, None
+    if live is not None and row.state == "running":
+        current = live["current"]
+        if live["done_in_run"] > 0:
+            eta = remaining * live["elapsed_s"] / live["done_in_run"]
+    elif row.state not in queries.TERMINAL:
+        current = next(
+            ({"pose_index": p.pose_index, "repeat": r, "turntable_deg": p.turntable_deg,
+              "solar_suns": p.solar_suns}
+             for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done),
+            None,
+        )
+    base = f"/api/v1/campaigns/{campaign_id}"
+    return {
+        "id": row.id, "name": row.name, "scene_name": row.scene_name, "state": row.state,
+        "poses_done": len(done), "poses_total": row.poses_total, "pose_count": len(poses),
+        "current_pose": current, "eta_s": eta, "error": row.error, "runs": row.runs,
+        "created_at": row.created_at, "started_at": row.started_at,
+        "updated_at": row.updated_at, "finished_at": row.finished_at,
+        "links": {k: f"{base}/{k}" for k in ("events", "results", "report", "documents")}
+        | {"self": base},
+    }

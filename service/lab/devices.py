@@ -1,0 +1,148 @@
+"""Manual device operations behind ``/api/v1/devices``.
+
+Commands hold the rig (:meth:`RigLease.manual`: 409 while a campaign runs). Status
+reads do not take the rig lock - each serial exchange is atomic in its transport, so a read
+between a campaign's commands is safe - and the camera, which is not thread-safe, reports only
+what its driver has cached. The emergency stop takes no lock at all: it must never wait.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy.orm import sessionmaker
+
+from drivers.errors import DeviceError, DeviceTimeoutError
+from service.lab.poses import check_angle
+from service.lab.rig_lease import RigLease
+from service.lab.runner import CampaignRunner
+from service.lab.scenes import SceneSource, camera_of, for_use_case
+from service.store import queries
+from service.store.frame_files import FrameStore
+
+
+def _read(name: str, read) -> dict[str, Any]:
+    try:
+        return {"name": name, "ok": True, "details": read()}
+    except DeviceError as exc:
+        return {"name": name, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+
+
+def status(lease: RigLease, simulated: bool) -> dict[str, Any]:
+    """Every device with what it reports, or its error."""
+    rig = lease.rig
+    if rig is None:
+        devices = [{"name": n, "ok": False, "error": lease.error or "not configured"}
+                   for n in ("turntable", "solar_simulator", "camera")]
+    else:
+        devices = [
+            _read("turntable", lambda: {**turntable_position(lease),
+                                        "status": rig.turntable.status().describe()}),
+            _read("solar_simulator", lambda: {**solar_state(lease),
+                                              "status": rig.solar.status().describe()}),
+            _read("camera", lambda: {**rig.camera.identity().to_dict(),
+                                     "use_case": rig.camera.use_case.name}),
+        ]
+    return {"simulated": simulated, "campaign_id": lease.campaign_id,
+            "devices": devices}
+
+
+def turntable_position(lease: RigLease) -> dict[str, Any]:
+    rig = lease.require()
+    low, high = rig.turntable.limits_deg
+    return {"angle_deg": rig.turntable.position_deg(), "limits_deg": (low, high)}
+
+
+def home(lease: RigLease) -> dict[str, Any]:
+    with lease.manual() as rig:
+        rig.turntable.home()
+    return turntable_position(lease)
+
+
+def move(lease: RigLease, angle_deg: float) -> dict[str, Any]:
+    rig = lease.require()
+    check_angle(rig, angle_deg, "angle_deg")  # 422 before the rig is even asked for
+    with lease.manual() as rig:
+        rig.turntable.move_to(angle_deg)
+    return turntable_position(lease)
+
+
+def solar_state(lease: RigLease) -> dict[str, Any]:
+    solar = lease.require().solar
+    return {"lamp_on": solar.is_lamp_on(), "suns": solar.read_suns(),
+            "shutter_open": solar.shutter_is_open()}
+
+
+def set_lamp(lease: RigLease, on: bool) -> dict[str, Any]:
+    with lease.manual() as rig:
+        if on:
+            rig.solar.lamp_on()
+        else:
+            rig.solar.lamp_off()
+    return solar_state(lease)
+
+
+def set_level(lease: RigLease, suns: float) -> dict[str, Any]:
+    with lease.manual() as rig:
+        rig.solar.set_suns(suns)
+    return solar_state(lease)
+
+
+def set_shutter(lease: RigLease, open_: bool) -> dict[str, Any]:
+    with lease.manual() as rig:
+        if open_:
+            rig.solar.open_shutter()
+        else:
+            rig.solar.close_shutter()
+    return solar_state(lease)
+
+
+def capture(
+    lease: RigLease, *, store: FrameStore, sessions: sessionmaker, scene: SceneSource
+) -> dict[str, Any]:
+    """Capture one frame, reconstruct it with ``scene``'s camera (the default), store it."""
+    with lease.manual() as rig:
+        state = rig.state()
+        raw = rig.capture(1)[0]
+        use_case = rig.camera.use_case
+    camera = camera_of(for_use_case(scene.spec, use_case))
+    extra = {"rig": state.to_dict(), "use_case": use_case.name, "scene_name": ""}
+    frame_id, image = store.save_measured(raw, camera, extra)
+    with sessions() as s:
+        queries.add_frame(s, queries.frame_row(frame_id, "measured", rig=state.to_dict(),
+                                         summary={"valid_pixels": int(image.valid.sum())}))
+    return {"frame_id": frame_id, "rig": state.to_dict(),
+            "links": {"self": f"/api/v1/frames/{frame_id}"}}
+
+
+def emergency_stop(lease: RigLease, runner: CampaignRunner) -> dict[str, Any]:
+    """Halt the turntable and close the shutter now; pause a running campaign.
+
+    The commands go out at once, without the rig lock. A campaign (or a manual call) may be in
+    the middle of a rig stage and would open the shutter again, so once that stage has ended -
+    the campaign, told to pause, starts no other - both commands are sent again with the rig
+    held: when this returns, the stage is halted and the shutter closed.
+    """
+    rig = lease.require()
+    paused = runner.emergency_stop()
+    errors: dict[str, str] = {}
+
+    def halt() -> list[str]:
+        done = []
+        for name, action in (("turntable", rig.turntable.stop),
+                             ("shutter", rig.solar.close_shutter)):
+            try:
+                action()
+                done.append(name)
+            except DeviceError as exc:
+                errors[name] = f"{type(exc).__name__}: {exc}"
+        return done
+
+    stopped = halt()
+    try:
+        with rig.hold(timeout_s=lease.wait_s):
+            errors.clear()
+            stopped = halt()
+    except DeviceTimeoutError as exc:
+        errors["rig"] = f"commands sent once; the rig stayed busy: {exc}"
+    return {"stopped": stopped, "errors": errors, "campaign_paused": paused}

@@ -1,0 +1,138 @@
+"""The lab: everything a running service holds, assembled in one place.
+
+:func:`open_lab` builds it (the app's lifespan and the campaign benchmark call it), in this
+order: the database (and every campaign a crash left ``running`` becomes ``interrupted``), the
+frame store (frames no row names are swept away), the executor, the rig (simulated or real; a
+real rig that cannot be opened leaves the service up with the devices reporting 503), the
+campaign runner. Each part gets what it uses, not the lab: the runner its sessions, rig lease,
+store, executor and settings; the routes ask for the one part they need.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
+
+from drivers.errors import DeviceError
+from drivers.rig import Rig
+from service.compute.executors import Executor, make_executor
+from service.errors import UnavailableError
+from service.lab.rig_lease import RigLease
+from service.lab.runner import CampaignRunner
+from service.lab.scenes import SceneSource, resolve_scene
+from service.settings import Settings
+from service.store import queries
+from service.store.database import init_db, make_engine
+from service.store.frame_files import FrameStore
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass
+class Lab:
+    """The state of one running service (``app.state.lab``)."""
+
+    settings: Settings
+    engine: Engine
+    sessions: sessionmaker
+    store: FrameStore
+    executor: Executor
+    default_scene: SceneSource
+    lease: RigLease
+    runner: CampaignRunner
+    recovered: dict[str, list[str]] = field(default_factory=dict)
+
+    @contextlib.contextmanager
+    def session(self) -> Iterator[Session]:
+        """A database session."""
+        with self.sessions() as s:
+            yield s
+
+    def close(self) -> None:
+        """Stop the runner, the executor and the rig; dispose of the engine."""
+        self.runner.shutdown()
+        with contextlib.suppress(Exception):
+            self.executor.close()
+        self.lease.close()
+        self.engine.dispose()
+
+
+def open_rig(settings: Settings, scene: SceneSource) -> Rig:
+    """The simulated rig (rendering ``scene``) or the real one on the configured ports."""
+    if settings.simulated:
+        from service.compute.jobs import RENDER_LOCK
+        from service.lab.simulated_camera import RenderedFrameSource
+        from sim_core.render import RenderSettings
+
+        source = RenderedFrameSource(
+            scene.spec, scene.base_dir,
+            RenderSettings(integrator=settings.camera_integrator, spp=settings.camera_spp,
+                           max_bounces=2),
+        )
+
+        def frame_source(request):
+            with RENDER_LOCK:  # never two renders at once in this process (see RENDER_LOCK)
+                return source(request)
+
+        return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed)
+    from drivers.camera import UsbCamera
+    from drivers.solar_simulator import SolarSimulator
+    from drivers.turntable import Turntable
+
+    missing = [n for n in ("turntable_port", "lamp_port", "shutter_port")
+               if getattr(settings, n) is None]
+    if missing:
+        raise UnavailableError(
+            f"no {', '.join('TOFTWIN_' + m.upper() for m in missing)} set (or use --simulated)"
+        )
+    opened: list = []
+    try:
+        turntable = Turntable(settings.turntable_port, address=settings.turntable_address)
+        turntable.connect()
+        opened.append(turntable)
+        solar = SolarSimulator(settings.lamp_port, settings.shutter_port)
+        solar.connect()
+        opened.append(solar)
+        camera = UsbCamera(settings.camera_serial)
+        camera.connect()
+    except BaseException:
+        for device in reversed(opened):
+            with contextlib.suppress(Exception):
+                device.close()
+        raise
+    return Rig(turntable, solar, camera)
+
+
+def open_lab(settings: Settings) -> Lab:
+    """Build the service state; see the module docstring for the order."""
+    data = Path(settings.data_dir)
+    data.mkdir(parents=True, exist_ok=True)
+    engine = make_engine(settings.database)
+    sessions = init_db(engine)
+    with sessions() as s:
+        interrupted = queries.mark_interrupted(s)
+        known = queries.all_frame_ids(s)
+    store = FrameStore(data / "frames")
+    swept = store.sweep(known)
+    if interrupted or swept:
+        _log.warning("recovered after a crash: interrupted campaigns %s, %d orphan frame(s)",
+                     interrupted, len(swept))
+    scene = resolve_scene(settings.scene, settings.examples_dir, settings.max_scene_objects)
+    executor = make_executor(settings.executor, settings.workers, settings.threads_per_job,
+                             settings.dask_address)
+    executor.warm_up(wait=False)  # start the workers and load the renderer now, not at pose 1
+    try:
+        rig, rig_error = open_rig(settings, scene), None
+    except (DeviceError, UnavailableError, OSError) as exc:
+        rig, rig_error = None, str(exc)
+        _log.error("rig not available: %s", exc)
+    lease = RigLease(rig, rig_error, settings.rig_wait_s)
+    runner = CampaignRunner(sessions, lease, store, executor, settings)
+    return Lab(settings, engine, sessions, store, executor, scene, lease, runner,
+               recovered={"interrupted": interrupted, "swept_frames": swept})

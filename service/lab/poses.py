@@ -1,0 +1,231 @@
+"""The pose loop in three stages: measure (rig), simulate (executor), finish (compare, commit).
+
+1. :func:`measure` - with the rig held only for the moves and the capture: turn the table, set
+   the solar simulator, capture one frame; then, rig released, reconstruct and store it. The
+   rig state read back, not the one asked for, is what the simulation poses the scene at.
+2. :func:`submit` - send the simulation job for that state to the executor.
+3. :func:`finish` - wait for the simulated frame, store it, compare, and commit the result and
+   both frame rows in one transaction.
+
+A campaign overlaps stage 1 of the next pose with stage 2 of the previous ones; an ad-hoc pose
+(``POST /api/v1/poses``) runs them in a row. Timings of every stage go into the result:
+``move``, ``capture``, ``store`` (both frames' files), ``simulate`` (the worker's render and
+files), ``simulate_files`` (of which writing the files, ``save_frame``), ``simulate_wait`` (how
+long the loop waited for it), ``compare``, ``total``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sqlalchemy.orm import sessionmaker
+
+from drivers.errors import LimitError
+from drivers.rig import Rig, RigState
+from service.compute.executors import Executor, JobFuture
+from service.compute.jobs import make_job
+from service.lab.comparison import build_mask, compare
+from service.lab.requests import MaskSpec, PoseCreate
+from service.lab.rig_lease import RigLease
+from service.lab.scenes import SceneSource, camera_of, for_use_case, scene_from_request
+from service.settings import Settings
+from service.store import queries
+from service.store.frame_files import FrameStore, new_frame_id
+from service.store.tables import FrameRow, PoseResultRow
+from sim_core.errors import InvalidInputError
+from sim_core.tof import ToFImage
+
+
+def unit_seed(seed: int, pose_index: int, repeat: int) -> int:
+    """The render seed of one pose and repeat: independent streams, reproducible."""
+    ss = np.random.SeedSequence([seed, pose_index, repeat])
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+@dataclass(frozen=True)
+class PosePlan:
+    """One pose and repeat to measure and simulate."""
+
+    scene: SceneSource
+    turntable_deg: float
+    solar_suns: float
+    mask: MaskSpec
+    seed: int
+    spp: int
+    campaign_id: str | None = None
+    pose_index: int = 0
+    repeat: int = 0
+
+    @property
+    def target(self) -> RigState:
+        """The rig state to drive to (shutter open whenever the lamp is lit)."""
+        return RigState(self.turntable_deg, self.solar_suns, shutter_open=self.solar_suns > 0)
+
+
+@dataclass
+class Measurement:
+    """Stage 1's result: the stored measured frame (row not yet committed) and the rig state."""
+
+    row: FrameRow
+    image: ToFImage
+    rig: RigState
+    use_case: Any
+    timings_s: dict[str, float] = field(default_factory=dict)
+    started: float = 0.0
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Stage 3's result: the committed row, the stage timings and the commit's duration."""
+
+    row: PoseResultRow
+    timings_s: dict[str, float]
+    commit_s: float
+
+
+def check_angle(rig: Rig, angle_deg: float, field_name: str) -> None:
+    """Raise a 422-mapped :class:`LimitError` if the stage may not go to ``angle_deg``."""
+    low, high = rig.turntable.limits_deg
+    if not low <= angle_deg <= high:
+        raise LimitError(field_name, angle_deg, low, high, "deg", "turntable software limits")
+
+
+def check_spp(spp: int | None, settings: Settings) -> int:
+    """The samples per pixel to render: the request's (at most ``max_spp``) or the default."""
+    if spp is None:
+        return min(settings.sim_spp, settings.max_spp)
+    if spp > settings.max_spp:
+        raise InvalidInputError("spp", f"got {spp}; allowed: 1 to {settings.max_spp} (max_spp)")
+    return spp
+
+
+def measure(
+    rig: Rig, store: FrameStore, plan: PosePlan, stable_timeout_s: float | None
+) -> Measurement:
+    """Stage 1. Holds the rig for the moves and the capture; device faults propagate."""
+    t0 = time.perf_counter()
+    with rig.hold():
+        wait = stable_timeout_s if plan.solar_suns > 0 else None
+        state = rig.apply(plan.target, wait_stable_s=wait)
+        t1 = time.perf_counter()
+        raw = rig.capture(1)[0]
+        use_case = rig.camera.use_case
+    t2 = time.perf_counter()
+    camera = camera_of(for_use_case(plan.scene.spec, use_case))
+    extra = {
+        "rig": state.to_dict(), "scene_name": plan.scene.name, "campaign_id": plan.campaign_id,
+        "pose_index": plan.pose_index, "repeat": plan.repeat, "use_case": use_case.name,
+    }
+    frame_id, image = store.save_measured(raw, camera, extra)
+    t3 = time.perf_counter()
+    row = queries.frame_row(
+        frame_id, "measured", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
+        rig=state.to_dict(), summary=_summary(image),
+    )
+    return Measurement(row, image, state, use_case,
+                       {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0)
+
+
+def submit(
+    executor: Executor, plan: PosePlan, m: Measurement, threads: int | None
+) -> tuple[str, Any]:
+    """Stage 2: simulate the scene at the measured rig state; returns (frame id, future)."""
+    spec = for_use_case(plan.scene.spec, m.use_case)
+    frame_id = new_frame_id()
+    job = make_job(
+        spec, plan.scene.base_dir,
+        turntable_deg=m.rig.turntable_angle_deg,
+        solar_suns=m.rig.irradiance_suns,
+        spp=plan.spp,
+        seed=unit_seed(plan.seed, plan.pose_index, plan.repeat),
+        threads=threads,
+        scene_name=plan.scene.name,
+        extra={
+            "frame_id": frame_id, "rig": m.rig.to_dict(), "campaign_id": plan.campaign_id,
+            "pose_index": plan.pose_index, "repeat": plan.repeat,
+            "object_names": [o.name for o in plan.scene.spec.objects],
+            "turntable_object_ids": plan.scene.turntable_object_ids,
+            "measured_frame_id": m.row.id,
+        },
+    )
+    return frame_id, executor.submit(job)
+
+
+def finish(
+    sessions: sessionmaker, store: FrameStore, plan: PosePlan, m: Measurement,
+    job: tuple[str, JobFuture], timeout_s: float,
+) -> Outcome:
+    """Stage 3: store the simulated frame, compare, commit the result and both frame rows."""
+    sim_id, future = job
+    t0 = time.perf_counter()
+    result = future.result(timeout=timeout_s)
+    t1 = time.perf_counter()
+    store.save_files(sim_id, result.files)
+    t2 = time.perf_counter()
+    names = [o.name for o in plan.scene.spec.objects]
+    try:
+        mask = build_mask(plan.mask, m.image, result.object_id, names,
+                          plan.scene.turntable_object_ids)
+        report = compare(m.image, result.image, mask)
+        metrics: dict[str, Any] = report.to_dict()
+        metrics["table"] = [list(r) for r in report.table_rows()]
+    except InvalidInputError as exc:  # e.g. no pixel valid in both frames: recorded, not fatal
+        metrics = {"error": str(exc), "table": []}
+    t3 = time.perf_counter()
+    sim_row = queries.frame_row(
+        sim_id, "simulated", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
+        scene_hash=result.scene_hash, rig=m.rig.to_dict(), summary=_summary(result.image),
+    )
+    timings = {
+        **m.timings_s,
+        "simulate": result.timings_s.get("total", 0.0) + result.timings_s.get("save", 0.0),
+        "simulate_files": result.timings_s.get("save", 0.0),
+        "simulate_wait": t1 - t0,
+        "compare": t3 - t2,
+    }
+    timings["store"] += t2 - t1
+    timings["total"] = t3 - m.started  # the commit below is not included
+    try:
+        with sessions() as session:
+            row = queries.add_result(
+                session, campaign_id=plan.campaign_id, pose_index=plan.pose_index,
+                repeat=plan.repeat, turntable_deg=plan.turntable_deg,
+                solar_suns=plan.solar_suns, measured=m.row, simulated=sim_row,
+                metrics=metrics, rig=m.rig.to_dict(), timings_s=timings,
+            )
+    except Exception:
+        store.delete([m.row.id, sim_id])
+        raise
+    return Outcome(row, timings, time.perf_counter() - t3)
+
+
+def run_single_pose(
+    req: PoseCreate, *, lease: RigLease, sessions: sessionmaker, store: FrameStore,
+    executor: Executor, settings: Settings,
+) -> Outcome:
+    """``POST /poses``: the three stages in a row for one pose."""
+    scene = scene_from_request(settings, req.scene)
+    spp = check_spp(req.spp, settings)
+    check_angle(lease.require(), req.turntable_deg, "turntable_deg")
+    plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp)
+    with lease.manual() as rig:
+        m = measure(rig, store, plan, settings.solar_stable_timeout_s)
+    try:
+        job = submit(executor, plan, m, settings.threads_per_job)
+        return finish(sessions, store, plan, m, job, settings.job_timeout_s)
+    except BaseException:
+        store.delete([m.row.id])
+        raise
+
+
+def _summary(image: ToFImage) -> dict[str, Any]:
+    valid = np.asarray(image.valid)
+    rng = image.range_m[valid]
+    return {
+        "shape": list(valid.shape),
+        "valid_pixels": int(valid.sum()),
+        "median_range_m": float(np.median(rng)) if rng.size else None,
+    }

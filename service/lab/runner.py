@@ -1,0 +1,269 @@
+"""The campaign runner: one background thread works through a campaign's poses.
+
+Life cycle (states stored in the database)::
+
+    created --start--> running --(all done)--> completed
+                       running --pause / device fault / emergency stop--> paused
+                       running --cancel--> cancelled       running --(bug)--> failed
+                       running --(service stopped or killed)--> interrupted
+    paused | interrupted | failed --resume--> running      created | paused | interrupted --cancel
+
+The unit of work is one pose and repeat. Its result and both frame rows are committed in one
+transaction the moment it is finished, and always in order; ``UNIQUE(campaign, pose, repeat)``
+forbids a second one. ``resume`` (and a start after a crash) recomputes the units still missing
+from the database, so no unit is repeated and none is skipped, whatever happened before.
+
+Up to ``settings.depth`` units are in flight: the rig stage (move, capture) of the next unit
+overlaps the simulation of the previous ones. With depth 1 (``TOFTWIN_PIPELINE_DEPTH=1``) a unit
+is committed before the next one begins. Work in flight when the process dies has no row and is
+simply done again on resume; its frame folders are swept at the next start.
+
+One campaign runs at a time and holds the rig for each unit's rig stage; manual device calls are
+refused with 409 while it runs (:class:`~service.lab.rig_lease.RigLease`). A device fault pauses the
+campaign with the device's message; the operator fixes the rig and resumes.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from sqlalchemy.orm import sessionmaker
+
+from drivers.errors import DeviceError
+from service.compute.executors import Executor
+from service.errors import ConflictError, NotFoundError
+from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
+from service.lab.requests import MaskSpec
+from service.lab.rig_lease import RigLease
+from service.lab.scenes import SceneSource
+from service.settings import Settings
+from service.store import queries
+from service.store.frame_files import FrameStore
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass
+class _Run:
+    """In-memory state of the campaign being run."""
+
+    campaign_id: str
+    thread: threading.Thread | None = None
+    stop: threading.Event = field(default_factory=threading.Event)
+    stop_to: str = "paused"
+    stop_error: str | None = None
+    current: dict[str, Any] | None = None
+    started: float = field(default_factory=time.monotonic)
+    done: int = 0
+    outcomes: list[Outcome] = field(default_factory=list)
+
+
+class CampaignRunner:
+    """Starts, pauses, resumes and cancels campaigns; runs one at a time.
+
+    Parameters
+    ----------
+    sessions : sessionmaker
+        Database sessions (campaign rows, results).
+    lease : RigLease
+        The rig; the runner claims it for the campaign it runs.
+    store : FrameStore
+    executor : Executor
+        Where the simulations run.
+    settings : Settings
+        ``depth``, ``threads_per_job``, ``job_timeout_s``, ``solar_stable_timeout_s``,
+        ``stop_wait_s``.
+    """
+
+    def __init__(self, sessions: sessionmaker, lease: RigLease, store: FrameStore,
+                 executor: Executor, settings: Settings) -> None:
+        self.sessions = sessions
+        self.lease = lease
+        self.store = store
+        self.executor = executor
+        self.settings = settings
+        self._lock = threading.Lock()
+        self._run: _Run | None = None
+        #: per-unit outcomes of the last run (benchmarks read them)
+        self.last_outcomes: list[Outcome] = []
+
+    # -- queries --------------------------------------------------------------------------------
+    @property
+    def active_id(self) -> str | None:
+        """The campaign that is running (holding the rig), if any."""
+        run = self._run
+        return run.campaign_id if run is not None else None
+
+    def live(self, campaign_id: str) -> dict[str, Any] | None:
+        """Current pose and throughput of ``campaign_id`` if it is the one running."""
+        run = self._run
+        if run is None or run.campaign_id != campaign_id:
+            return None
+        elapsed = time.monotonic() - run.started
+        return {"current": run.current, "done_in_run": run.done, "elapsed_s": elapsed}
+
+    def wait(self, timeout_s: float | None = None) -> None:
+        """Block until the running campaign's thread ends (benchmarks, tests)."""
+        run = self._run
+        if run is not None and run.thread is not None:
+            run.thread.join(timeout_s)
+
+    # -- commands -------------------------------------------------------------------------------
+    def start(self, campaign_id: str, resume: bool = False) -> None:
+        """Start (``created``) or resume (``paused``, ``interrupted``, ``failed``) a campaign."""
+        allowed = queries.RESUMABLE if resume else ("created",)
+        with self._lock:
+            if self._run is not None:
+                raise ConflictError(
+                    f"campaign {self._run.campaign_id} is running; one campaign at a time"
+                )
+            self.lease.require()
+            with self.sessions() as s:
+                row = queries.get_campaign(s, campaign_id)
+                if row is None:
+                    raise NotFoundError(f"no campaign {campaign_id}")
+                if not queries.transition(s, campaign_id, allowed, "running", started=True,
+                                       count_run=True):
+                    verb = "resume" if resume else "start"
+                    raise ConflictError(
+                        f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
+                        f"allowed from: {', '.join(allowed)}"
+                    )
+            self.lease.claim(campaign_id)
+            run = _Run(campaign_id)
+            run.thread = threading.Thread(
+                target=self._work, args=(run,), name=f"campaign-{campaign_id[:8]}", daemon=True
+            )
+            self._run = run
+            run.thread.start()
+
+    def stop(self, campaign_id: str, to: str, error: str | None = None) -> bool:
+        """Ask the running campaign to stop after the units in flight (``paused``/``cancelled``).
+
+        Returns False if ``campaign_id`` is not running. Waits up to ``settings.stop_wait_s``.
+        """
+        with self._lock:
+            run = self._run
+            if run is None or run.campaign_id != campaign_id:
+                return False
+            if not run.stop.is_set():
+                run.stop_to, run.stop_error = to, error
+                run.stop.set()
+            thread = run.thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=self.settings.stop_wait_s)
+        return True
+
+    def pause(self, campaign_id: str) -> None:
+        if not self.stop(campaign_id, "paused"):
+            self._require_state(campaign_id, ("running",), "pause")
+
+    def cancel(self, campaign_id: str) -> None:
+        if self.stop(campaign_id, "cancelled"):
+            return
+        with self.sessions() as s:
+            if queries.get_campaign(s, campaign_id) is None:
+                raise NotFoundError(f"no campaign {campaign_id}")
+            if not queries.transition(s, campaign_id, ("created", "paused", "interrupted"),
+                                   "cancelled", finished=True):
+                self._require_state(campaign_id, ("created", "paused", "interrupted"), "cancel")
+
+    def emergency_stop(self) -> str | None:
+        """Pause the running campaign (if any) without waiting; returns its id."""
+        run = self._run
+        if run is None:
+            return None
+        with self._lock:
+            if not run.stop.is_set():
+                run.stop_to, run.stop_error = "paused", "emergency stop"
+                run.stop.set()
+        return run.campaign_id
+
+    def shutdown(self) -> None:
+        """Service shutdown: the running campaign stops and becomes ``interrupted``."""
+        run = self._run
+        if run is not None:
+            self.stop(run.campaign_id, "interrupted", "the service was shut down")
+
+    def _require_state(self, campaign_id: str, allowed: tuple[str, ...], verb: str) -> None:
+        with self.sessions() as s:
+            row = queries.get_campaign(s, campaign_id)
+        if row is None:
+            raise NotFoundError(f"no campaign {campaign_id}")
+        raise ConflictError(
+            f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
+            f"allowed from: {', '.join(allowed)}"
+        )
+
+    # -- the worker thread ---------------------------------------------------------------------
+    def _work(self, run: _Run) -> None:
+        to, error = "completed", None
+        try:
+            to, error = self._units(run)
+        except Exception as exc:  # a bug or a broken executor: record it, never lose the thread
+            _log.exception("campaign %s failed", run.campaign_id)
+            to, error = "failed", f"{type(exc).__name__}: {exc}"
+        finally:
+            # One critical section with start(): whoever sees the final state in the database
+            # also sees the rig free, and the next campaign cannot start before it is written.
+            with self._lock:
+                self.last_outcomes = run.outcomes
+                self._run = None
+                self.lease.release(run.campaign_id)
+                with self.sessions() as s:
+                    queries.transition(s, run.campaign_id, ("running",), to, error=error,
+                                    finished=to in queries.TERMINAL)
+
+    def _units(self, run: _Run) -> tuple[str, str | None]:
+        settings = self.settings
+        with self.sessions() as s:
+            camp = queries.get_campaign(s, run.campaign_id)
+            poses = queries.planned_poses(s, run.campaign_id)
+            done = queries.done_units(s, run.campaign_id)
+        scene = SceneSource.from_json(camp.scene_json, camp.scene_base_dir, camp.scene_name)
+        mask = MaskSpec.model_validate_json(camp.mask_json)
+        todo = [(p, r) for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done]
+        in_flight: collections.deque[tuple[PosePlan, Measurement, Any]] = collections.deque()
+        to, error = "completed", None
+        try:
+            for pose, repeat in todo:
+                if run.stop.is_set():
+                    to, error = run.stop_to, run.stop_error
+                    break
+                plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,
+                                camp.spp, run.campaign_id, pose.pose_index, repeat)
+                run.current = {"pose_index": pose.pose_index, "repeat": repeat,
+                               "turntable_deg": pose.turntable_deg,
+                               "solar_suns": pose.solar_suns}
+                try:
+                    m = measure(self.lease.require(), self.store, plan,
+                                settings.solar_stable_timeout_s)
+                except DeviceError as exc:
+                    _log.warning("campaign %s paused: device fault: %s", run.campaign_id, exc)
+                    if run.stop.is_set():  # an emergency stop made the move fail
+                        to, error = run.stop_to, run.stop_error
+                    else:
+                        to, error = "paused", f"device fault ({type(exc).__name__}): {exc}"
+                    break
+                in_flight.append((plan, m, submit(self.executor, plan, m,
+                                                  settings.threads_per_job)))
+                while len(in_flight) >= settings.depth:
+                    self._finish(run, *in_flight.popleft())
+            while in_flight:
+                self._finish(run, *in_flight.popleft())
+        except BaseException:
+            for _plan, m, _job in in_flight:  # frames of unfinished units: not kept
+                self.store.delete([m.row.id])
+            raise
+        return to, error
+
+    def _finish(self, run: _Run, plan: PosePlan, m: Measurement, job: Any) -> None:
+        outcome = finish(self.sessions, self.store, plan, m, job, self.settings.job_timeout_s)
+        run.done += 1
+        run.outcomes.append(outcome)
+

@@ -1,0 +1,48 @@
+"""``POST /api/v1/simulate``: one simulated frame of a scene at a rig state, no hardware."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy.orm import sessionmaker
+
+from service.compute.executors import Executor
+from service.compute.jobs import make_job
+from service.lab.poses import check_spp
+from service.lab.requests import SimulationCreate
+from service.lab.scenes import scene_from_request
+from service.settings import Settings
+from service.store import queries
+from service.store.frame_files import FrameStore, new_frame_id
+
+
+def simulate_frame(
+    req: SimulationCreate, *, sessions: sessionmaker, store: FrameStore, executor: Executor,
+    settings: Settings,
+) -> dict[str, Any]:
+    """Run ``req`` on the executor, store the frame, return its id."""
+    scene = scene_from_request(settings, req.scene)
+    spp = check_spp(req.spp, settings)
+    frame_id = new_frame_id()
+    job = make_job(
+        scene.spec, scene.base_dir, turntable_deg=req.turntable_deg, solar_suns=req.solar_suns,
+        spp=spp, seed=req.seed, threads=settings.threads_per_job, effects=req.effects,
+        ideal=req.ideal, scene_name=scene.name,
+        extra={"frame_id": frame_id, "object_names": [o.name for o in scene.spec.objects],
+               "turntable_object_ids": scene.turntable_object_ids},
+    )
+    result = executor.submit(job).result(timeout=settings.job_timeout_s)
+    store.save_files(frame_id, result.files)
+    rig = {"turntable_deg": req.turntable_deg, "solar_suns": req.solar_suns}
+    with sessions() as s:
+        queries.add_frame(s, queries.frame_row(
+            frame_id, "simulated", scene_name=scene.name, scene_hash=result.scene_hash, rig=rig,
+            summary={"valid_pixels": int(result.image.valid.sum())},
+        ))
+    return queries.json_safe({
+        "frame_id": frame_id, "scene_name": scene.name, "scene_hash": result.scene_hash,
+        "effect_plan": result.effect_plan,
+        "timings_s": result.timings_s,
+        "links": {"self": f"/api/v1/frames/{frame_id}",
+                  "arrays": f"/api/v1/frames/{frame_id}/arrays"},
+    })

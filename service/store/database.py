@@ -1,0 +1,36 @@
+"""The database: the engine (SQLite in WAL mode by default) and its sessions."""
+
+from __future__ import annotations
+
+from sqlalchemy import Engine, create_engine, event
+from sqlalchemy.orm import sessionmaker
+
+from service.store.tables import Base
+
+
+def make_engine(url: str) -> Engine:
+    """Engine for ``url``; SQLite gets WAL, full fsync, foreign keys and a busy timeout.
+
+    ``synchronous=FULL`` makes a commit durable against power loss as well as a killed process
+    (WAL with NORMAL only survives the latter).
+    """
+    if not url.startswith("sqlite"):
+        return create_engine(url, pool_pre_ping=True)
+    engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30.0})
+
+    @event.listens_for(engine, "connect")
+    def _pragmas(dbapi_conn, _record) -> None:
+        cur = dbapi_conn.cursor()
+        cur.execute("PRAGMA journal_mode=WAL")
+        cur.execute("PRAGMA synchronous=FULL")
+        cur.execute("PRAGMA foreign_keys=ON")
+        cur.execute("PRAGMA busy_timeout=30000")
+        cur.close()
+
+    return engine
+
+
+def init_db(engine: Engine) -> sessionmaker:
+    """Create the tables (if missing) and return a session factory."""
+    Base.metadata.create_all(engine)
+    return sessionmaker(engine, expire_on_commit=False)

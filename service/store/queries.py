@@ -1,0 +1,233 @@
+"""Queries and writes, kept out of the routes. Every function takes a ``Session``.
+
+Writes that must be atomic commit themselves: :func:`add_result` writes a result and the two
+frame rows it names in one transaction; :func:`transition` changes a campaign's state only from
+the states it names (a compare-and-set), so two requests cannot both start a campaign.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Iterable
+from typing import Any
+
+from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
+
+from service.store.tables import CampaignRow, FrameRow, PlannedPoseRow, PoseResultRow
+
+#: states from which a campaign can be (re)started by its runner
+RESUMABLE = ("paused", "interrupted", "failed")
+TERMINAL = ("completed", "cancelled", "failed")
+
+
+def now() -> float:
+    """Seconds since the epoch."""
+    return time.time()
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with non-finite floats as the strings "inf", "-inf", "nan" (as in metrics)."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    return obj
+
+
+def dumps(obj: Any) -> str:
+    """Strict JSON for a text column."""
+    return json.dumps(json_safe(obj), sort_keys=True, allow_nan=False)
+
+
+# -- frames ----------------------------------------------------------------------------------
+def frame_row(
+    frame_id: str,
+    kind: str,
+    *,
+    campaign_id: str | None = None,
+    scene_name: str = "",
+    scene_hash: str = "",
+    rig: dict | None = None,
+    summary: dict | None = None,
+) -> FrameRow:
+    """A new (not yet added) frame row."""
+    return FrameRow(
+        id=frame_id, kind=kind, campaign_id=campaign_id, scene_name=scene_name,
+        scene_hash=scene_hash, rig_json=dumps(rig), summary_json=dumps(summary or {}),
+        created_at=now(),
+    )
+
+
+def add_frame(session: Session, row: FrameRow) -> FrameRow:
+    """Commit a frame row (a frame stored on its own: a capture, a simulation)."""
+    session.add(row)
+    session.commit()
+    return row
+
+
+def get_frame(session: Session, frame_id: str) -> FrameRow | None:
+    return session.get(FrameRow, frame_id)
+
+
+def list_frames(session: Session, limit: int, offset: int) -> list[FrameRow]:
+    q = select(FrameRow).order_by(FrameRow.created_at.desc()).limit(limit).offset(offset)
+    return list(session.scalars(q))
+
+
+def all_frame_ids(session: Session) -> set[str]:
+    return set(session.scalars(select(FrameRow.id)))
+
+
+def count_frames(session: Session) -> int:
+    return int(session.scalar(select(func.count()).select_from(FrameRow)) or 0)
+
+
+# -- campaigns -------------------------------------------------------------------------------
+def create_campaign(
+    session: Session,
+    *,
+    campaign_id: str,
+    name: str,
+    scene_name: str,
+    scene_json: str,
+    scene_base_dir: str,
+    mask: dict,
+    seed: int,
+    spp: int,
+    poses: Iterable[tuple[float, float, int]],
+) -> CampaignRow:
+    """Store a new campaign (state ``created``) with its poses; one transaction."""
+    poses = list(poses)
+    t = now()
+    row = CampaignRow(
+        id=campaign_id, name=name, scene_name=scene_name, scene_json=scene_json,
+        scene_base_dir=scene_base_dir, mask_json=dumps(mask), seed=seed, spp=spp,
+        state="created", error=None, poses_total=sum(p[2] for p in poses), runs=0,
+        created_at=t, started_at=None, updated_at=t, finished_at=None,
+    )
+    session.add(row)
+    session.flush()
+    for i, (angle, suns, repeats) in enumerate(poses):
+        session.add(PlannedPoseRow(
+            campaign_id=campaign_id, pose_index=i, turntable_deg=angle, solar_suns=suns,
+            repeats=repeats,
+        ))
+    session.commit()
+    return row
+
+
+def get_campaign(session: Session, campaign_id: str) -> CampaignRow | None:
+    return session.get(CampaignRow, campaign_id)
+
+
+def list_campaigns(session: Session, limit: int, offset: int) -> list[CampaignRow]:
+    q = select(CampaignRow).order_by(CampaignRow.created_at.desc()).limit(limit).offset(offset)
+    return list(session.scalars(q))
+
+
+def count_campaigns(session: Session) -> int:
+    return int(session.scalar(select(func.count()).select_from(CampaignRow)) or 0)
+
+
+def planned_poses(session: Session, campaign_id: str) -> list[PlannedPoseRow]:
+    q = (select(PlannedPoseRow).where(PlannedPoseRow.campaign_id == campaign_id)
+         .order_by(PlannedPoseRow.pose_index))
+    return list(session.scalars(q))
+
+
+def transition(
+    session: Session,
+    campaign_id: str,
+    allowed_from: Iterable[str],
+    to: str,
+    *,
+    error: str | None = None,
+    started: bool = False,
+    finished: bool = False,
+    count_run: bool = False,
+) -> bool:
+    """Set the state to ``to`` if it is one of ``allowed_from``; True if it changed."""
+    t = now()
+    values: dict[str, Any] = {"state": to, "updated_at": t, "error": error}
+    if started:
+        values["started_at"] = func.coalesce(CampaignRow.started_at, t)
+        values["finished_at"] = None
+    if finished:
+        values["finished_at"] = t
+    if count_run:
+        values["runs"] = CampaignRow.runs + 1
+    stmt = (update(CampaignRow)
+            .where(CampaignRow.id == campaign_id, CampaignRow.state.in_(list(allowed_from)))
+            .values(**values))
+    changed = session.execute(stmt).rowcount == 1
+    session.commit()
+    return changed
+
+
+def mark_interrupted(session: Session) -> list[str]:
+    """At startup: every campaign left ``running`` by a crash becomes ``interrupted``."""
+    ids = list(session.scalars(select(CampaignRow.id).where(CampaignRow.state == "running")))
+    for cid in ids:
+        transition(session, cid, ("running",), "interrupted",
+                   error="the service stopped while the campaign was running")
+    return ids
+
+
+# -- results ---------------------------------------------------------------------------------
+def done_units(session: Session, campaign_id: str) -> set[tuple[int, int]]:
+    q = select(PoseResultRow.pose_index, PoseResultRow.repeat).where(
+        PoseResultRow.campaign_id == campaign_id)
+    return {(int(p), int(r)) for p, r in session.execute(q)}
+
+
+def count_results(session: Session, campaign_id: str) -> int:
+    q = select(func.count()).select_from(PoseResultRow).where(
+        PoseResultRow.campaign_id == campaign_id)
+    return int(session.scalar(q) or 0)
+
+
+def campaign_results(session: Session, campaign_id: str) -> list[PoseResultRow]:
+    q = (select(PoseResultRow).where(PoseResultRow.campaign_id == campaign_id)
+         .order_by(PoseResultRow.pose_index, PoseResultRow.repeat))
+    return list(session.scalars(q))
+
+
+def get_result(session: Session, result_id: int) -> PoseResultRow | None:
+    return session.get(PoseResultRow, result_id)
+
+
+def add_result(
+    session: Session,
+    *,
+    campaign_id: str | None,
+    pose_index: int,
+    repeat: int,
+    turntable_deg: float,
+    solar_suns: float,
+    measured: FrameRow,
+    simulated: FrameRow,
+    metrics: dict,
+    rig: dict,
+    timings_s: dict,
+) -> PoseResultRow:
+    """Commit a result and its two frame rows in one transaction."""
+    row = PoseResultRow(
+        campaign_id=campaign_id, pose_index=pose_index, repeat=repeat,
+        turntable_deg=turntable_deg, solar_suns=solar_suns,
+        measured_frame_id=measured.id, simulated_frame_id=simulated.id,
+        metrics_json=dumps(metrics), rig_json=dumps(rig), timings_json=dumps(timings_s),
+        created_at=now(),
+    )
+    session.add_all([measured, simulated])
+    session.flush()
+    session.add(row)
+    if campaign_id is not None:
+        session.execute(update(CampaignRow).where(CampaignRow.id == campaign_id)
+                        .values(updated_at=row.created_at))
+    session.commit()
+    return row

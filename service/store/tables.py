@@ -1,0 +1,95 @@
+"""The service's tables.
+
+``campaigns`` and their planned ``campaign_poses``; ``pose_results`` (one row per pose and repeat
+of a campaign, or one per ad-hoc pose comparison), each naming its two ``frames``. Frame pixels
+live in files under the data directory (:mod:`service.store.frame_files`); a ``frames`` row is
+written in the same transaction as the result that uses it, so a frame without a row is an
+orphan of a crash.
+
+``UNIQUE(campaign_id, pose_index, repeat)`` makes a repeated result impossible, not just unlikely.
+Times are seconds since the epoch (floats), as in Bluesky documents. Every change to these
+classes comes with a migration (:mod:`service.store.migrations`).
+"""
+
+from __future__ import annotations
+
+from sqlalchemy import Float, ForeignKey, Integer, String, Text, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+
+class Base(DeclarativeBase):
+    """Declarative base of the service's tables."""
+
+
+class CampaignRow(Base):
+    """A campaign: a scene, a list of poses, and where it stands."""
+
+    __tablename__ = "campaigns"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    scene_name: Mapped[str] = mapped_column(String(200))
+    scene_json: Mapped[str] = mapped_column(Text)
+    scene_base_dir: Mapped[str] = mapped_column(Text)
+    mask_json: Mapped[str] = mapped_column(Text)
+    seed: Mapped[int] = mapped_column(Integer)
+    spp: Mapped[int] = mapped_column(Integer)
+    state: Mapped[str] = mapped_column(String(16), index=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    poses_total: Mapped[int] = mapped_column(Integer)
+    runs: Mapped[int] = mapped_column(Integer, default=0)
+    created_at: Mapped[float] = mapped_column(Float)
+    started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    updated_at: Mapped[float] = mapped_column(Float)
+    finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class PlannedPoseRow(Base):
+    """One pose of a campaign as planned: rig state and number of repeats."""
+
+    __tablename__ = "campaign_poses"
+    __table_args__ = (UniqueConstraint("campaign_id", "pose_index"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    campaign_id: Mapped[str] = mapped_column(ForeignKey("campaigns.id"), index=True)
+    pose_index: Mapped[int] = mapped_column(Integer)
+    turntable_deg: Mapped[float] = mapped_column(Float)
+    solar_suns: Mapped[float] = mapped_column(Float)
+    repeats: Mapped[int] = mapped_column(Integer)
+
+
+class FrameRow(Base):
+    """A measured or simulated frame; its files are in ``<data_dir>/frames/<id>/``."""
+
+    __tablename__ = "frames"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    campaign_id: Mapped[str | None] = mapped_column(String(32), nullable=True, index=True)
+    scene_name: Mapped[str] = mapped_column(String(200), default="")
+    scene_hash: Mapped[str] = mapped_column(String(64), default="")
+    rig_json: Mapped[str] = mapped_column(Text, default="null")
+    summary_json: Mapped[str] = mapped_column(Text, default="{}")
+    created_at: Mapped[float] = mapped_column(Float)
+
+
+class PoseResultRow(Base):
+    """The comparison of one measured and one simulated frame (a pose and repeat)."""
+
+    __tablename__ = "pose_results"
+    __table_args__ = (UniqueConstraint("campaign_id", "pose_index", "repeat"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    campaign_id: Mapped[str | None] = mapped_column(
+        ForeignKey("campaigns.id"), nullable=True, index=True
+    )
+    pose_index: Mapped[int] = mapped_column(Integer)
+    repeat: Mapped[int] = mapped_column(Integer)
+    turntable_deg: Mapped[float] = mapped_column(Float)
+    solar_suns: Mapped[float] = mapped_column(Float)
+    measured_frame_id: Mapped[str] = mapped_column(ForeignKey("frames.id"))
+    simulated_frame_id: Mapped[str] = mapped_column(ForeignKey("frames.id"))
+    metrics_json: Mapped[str] = mapped_column(Text)
+    rig_json: Mapped[str] = mapped_column(Text)
+    timings_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[float] = mapped_column(Float)
