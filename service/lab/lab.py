@@ -13,7 +13,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from sqlalchemy import Engine
@@ -46,7 +46,6 @@ class Lab:
     default_scene: SceneSource
     lease: RigLease
     runner: CampaignRunner
-    recovered: dict[str, list[str]] = field(default_factory=dict)
 
     @contextlib.contextmanager
     def session(self) -> Iterator[Session]:
@@ -134,5 +133,4 @@ def open_lab(settings: Settings) -> Lab:
         _log.error("rig not available: %s", exc)
     lease = RigLease(rig, rig_error, settings.rig_wait_s)
     runner = CampaignRunner(sessions, lease, store, executor, settings)
-    return Lab(settings, engine, sessions, store, executor, scene, lease, runner,
-               recovered={"interrupted": interrupted, "swept_frames": swept})
+    return Lab(settings, engine, sessions, store, executor, scene, lease, runner)

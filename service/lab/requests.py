@@ -76,7 +76,6 @@ SceneRef = Annotated[
 ]
 Seed = Annotated[int, Field(ge=0, le=2**31 - 1, description="Seed of the simulation's noise.")]
 Spp = Annotated[int, Field(ge=1, le=65536, description="Samples per pixel (<= max_spp).")]
-FrameId = Annotated[str, Field(pattern=r"^[0-9a-f]{32}$")]
 PixelIndex = Annotated[int, Field(ge=0, le=4096)]
 PixelRange = tuple[PixelIndex, PixelIndex]
 

@@ -93,12 +93,6 @@ class CampaignRunner:
         self.last_outcomes: list[Outcome] = []
 
     # -- queries --------------------------------------------------------------------------------
-    @property
-    def active_id(self) -> str | None:
-        """The campaign that is running (holding the rig), if any."""
-        run = self._run
-        return run.campaign_id if run is not None else None
-
     def live(self, campaign_id: str) -> dict[str, Any] | None:
         """Current pose and throughput of ``campaign_id`` if it is the one running."""
         run = self._run

@@ -83,10 +83,6 @@ def all_frame_ids(session: Session) -> set[str]:
     return set(session.scalars(select(FrameRow.id)))
 
 
-def count_frames(session: Session) -> int:
-    return int(session.scalar(select(func.count()).select_from(FrameRow)) or 0)
-
-
 # -- campaigns -------------------------------------------------------------------------------
 def create_campaign(
     session: Session,
@@ -128,10 +124,6 @@ def get_campaign(session: Session, campaign_id: str) -> CampaignRow | None:
 def list_campaigns(session: Session, limit: int, offset: int) -> list[CampaignRow]:
     q = select(CampaignRow).order_by(CampaignRow.created_at.desc()).limit(limit).offset(offset)
     return list(session.scalars(q))
-
-
-def count_campaigns(session: Session) -> int:
-    return int(session.scalar(select(func.count()).select_from(CampaignRow)) or 0)
 
 
 def planned_poses(session: Session, campaign_id: str) -> list[PlannedPoseRow]:
@@ -183,12 +175,6 @@ def done_units(session: Session, campaign_id: str) -> set[tuple[int, int]]:
     q = select(PoseResultRow.pose_index, PoseResultRow.repeat).where(
         PoseResultRow.campaign_id == campaign_id)
     return {(int(p), int(r)) for p, r in session.execute(q)}
-
-
-def count_results(session: Session, campaign_id: str) -> int:
-    q = select(func.count()).select_from(PoseResultRow).where(
-        PoseResultRow.campaign_id == campaign_id)
-    return int(session.scalar(q) or 0)
 
 
 def campaign_results(session: Session, campaign_id: str) -> list[PoseResultRow]:

@@ -50,7 +50,8 @@ def _commands() -> list[str]:
 def test_every_toftwin_command_in_the_table_exists_with_its_options(command):
     words = shlex.split(command)[1:]
     options = [w for w in words if w.startswith("--")]
-    res = CliRunner().invoke(app, [w for w in words if not w.startswith("-")][:2] + ["--help"])
+    command_path = [w for w in words if not w.startswith("-")][:2]
+    res = CliRunner().invoke(app, [*command_path, "--help"])
     assert res.exit_code == 0, res.output
     for option in options:  # every option the table uses is one the command knows
         assert option in res.output, f"{command}: {option} is not an option"
