@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from drivers.camera import Camera, UsbCamera, UsbCameraSettings
+from drivers.camera import CameraProtocol, UsbCamera, UsbCameraSettings
 from drivers.errors import DeviceInputError, DeviceTimeoutError
 from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
@@ -87,7 +87,7 @@ class Rig:
     ----------
     turntable : TurntableProtocol
     solar : SolarSimulatorProtocol
-    camera : Camera
+    camera : CameraProtocol
     on_close : iterable of callables
         Called (in order) by :meth:`close` after the devices are closed, e.g. to stop simulators.
 
@@ -106,7 +106,7 @@ class Rig:
         self,
         turntable: TurntableProtocol,
         solar: SolarSimulatorProtocol,
-        camera: Camera,
+        camera: CameraProtocol,
         *,
         on_close: Iterable[Callable[[], None]] = (),
     ) -> None:

@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from drivers.devices_cli import check_devices, list_devices
+from drivers.diagnostics import check_devices, list_devices
 
 devices_app = typer.Typer(help="Devices of the rig: list and check them.", no_args_is_help=True)
 console = Console()

@@ -12,7 +12,7 @@ The device presents 0x1C28:0xC012, product ``"pico flexx (simulated)"``, a seria
 configuration with one vendor-specific interface and a bulk IN endpoint 0x81 (512-byte packets,
 high speed). Frames come from ``frame_source(CameraRequest) -> RawFrame`` (the renderer, later;
 :func:`plane_source` for tests), are quantised to 12 bits and encoded with
-:func:`drivers.camera_wire.encode_raw_frame`; every frame is one bulk transfer, delivered in
+:func:`drivers.camera.wire.encode_raw_frame`; every frame is one bulk transfer, delivered in
 whole packets to reads of any multiple of the packet size and ended by a short packet (or a
 zero-length packet when its length is a multiple of 512).
 
@@ -39,7 +39,7 @@ import numpy as np
 import usb.backend
 import usb.core
 
-from drivers.camera_wire import (
+from drivers.camera.wire import (
     REQ_GET_STATUS,
     REQ_SET_USE_CASE,
     REQ_START,
