@@ -5,8 +5,10 @@
 - Solar simulator: an Oriel arc-lamp supply (69907 family) and a 68945 exposure controller
   (shutter), two RS-232 ports (:class:`SolarSimulatorProtocol`, :class:`SolarSimulator`).
 - The ToF camera: a PMD pico flexx over USB, through royale where installed
-  (:class:`drivers.royale_backend.RoyaleCamera`) or our own bulk-transfer wire format
-  (:class:`drivers.camera.UsbCamera`), behind one :class:`drivers.camera.Camera` protocol.
+  (:class:`drivers.camera.RoyaleCamera`) or our own bulk-transfer wire format
+  (:class:`drivers.camera.UsbCamera`), behind one :class:`drivers.camera.CameraProtocol`;
+  :mod:`drivers.camera` holds discovery, the wire format and both backends.
+- :mod:`drivers.diagnostics` lists the cameras present and checks every device of the rig.
 - :class:`drivers.rig.Rig` composes the three behind one lock.
 
 The byte-level simulators live in :mod:`drivers.sim` (serial devices on a pseudo-terminal or a

@@ -5,6 +5,7 @@
 threads (the service's pose loop, a status poll). Rig methods take the lock themselves unless the
 calling thread already holds it, so they work both inside and outside ``hold()``.
 
+:meth:`Rig.open` connects the real devices on their ports (and the camera on USB).
 :meth:`Rig.simulated` starts the three simulators - the SMC100 and the Oriel units on
 pseudo-terminals (:func:`drivers.sim.pty_server.start_simulator`), the camera as a pyusb backend
 (:class:`drivers.sim.usb_camera.UsbCameraSim`) - and returns a rig whose *real* drivers are
@@ -25,7 +26,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from drivers.camera import Camera, UsbCamera, UsbCameraSettings
+from drivers.camera import CameraProtocol, UsbCamera, UsbCameraSettings
 from drivers.errors import DeviceInputError, DeviceTimeoutError
 from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
@@ -87,7 +88,7 @@ class Rig:
     ----------
     turntable : TurntableProtocol
     solar : SolarSimulatorProtocol
-    camera : Camera
+    camera : CameraProtocol
     on_close : iterable of callables
         Called (in order) by :meth:`close` after the devices are closed, e.g. to stop simulators.
 
@@ -106,7 +107,7 @@ class Rig:
         self,
         turntable: TurntableProtocol,
         solar: SolarSimulatorProtocol,
-        camera: Camera,
+        camera: CameraProtocol,
         *,
         on_close: Iterable[Callable[[], None]] = (),
     ) -> None:
@@ -219,6 +220,57 @@ class Rig:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    # -- the real rig -------------------------------------------------------------------------
+    @classmethod
+    def open(
+        cls,
+        turntable_port: str,
+        lamp_port: str,
+        shutter_port: str,
+        *,
+        turntable_address: int = 1,
+        camera_serial: str | None = None,
+        usb_backend: Any = None,
+    ) -> Rig:
+        """Open and connect the three devices of the real rig and return it.
+
+        Connects, in this order, the :class:`Turntable` (SMC100 on ``turntable_port`` at RS-485
+        address ``turntable_address``), the :class:`SolarSimulator` (lamp supply on
+        ``lamp_port``, exposure controller on ``shutter_port``) and the :class:`UsbCamera`
+        (``camera_serial``, the first pico flexx when None), each with its default settings. If
+        one fails, the devices opened so far (and the one that failed) are closed and the error
+        propagates (:class:`~drivers.errors.DeviceDisconnectedError` for a port that cannot be
+        opened, :class:`drivers.camera.CameraNotFoundError`, ...).
+
+        Parameters
+        ----------
+        turntable_port, lamp_port, shutter_port : str
+            Device paths or pyserial URLs.
+        turntable_address : int
+            The SMC100's RS-485 address.
+        camera_serial : str or None
+            USB serial number of the camera.
+        usb_backend : pyusb backend or None
+            libusb when None; a :class:`drivers.sim.usb_camera.UsbCameraSim` for the simulator.
+        """
+        opened: list[Any] = []
+        try:
+            turntable = Turntable(turntable_port, address=turntable_address)
+            opened.append(turntable)
+            turntable.connect()
+            solar = SolarSimulator(lamp_port, shutter_port)
+            opened.append(solar)
+            solar.connect()
+            camera = UsbCamera(camera_serial, backend=usb_backend)
+            opened.append(camera)
+            camera.connect()
+        except BaseException:
+            for device in reversed(opened):
+                with contextlib.suppress(Exception):
+                    device.close()
+            raise
+        return cls(turntable, solar, camera)
 
     # -- the simulated rig --------------------------------------------------------------------
     @classmethod

@@ -47,7 +47,6 @@ T = TypeVar("T")
 XON = 0x11
 XOFF = 0x13
 _FLOW_BYTES = bytes([XON, XOFF])
-_TERMINATORS = b"\r\n"
 
 # What a port that went away raises: pyserial's exception, the OS's, and termios.error (not an
 # OSError) from tcflush on a pty whose other side closed.

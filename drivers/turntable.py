@@ -112,7 +112,6 @@ HOMING_STATES = frozenset({"1E", "1F"})
 MOVING_STATES = frozenset({"28"})
 READY_STATES = frozenset({"32", "33", "34", "35"})
 DISABLE_STATES = frozenset({"3C", "3D", "3E"})
-JOGGING_STATES = frozenset({"46", "47"})
 
 #: ``TE`` error letters (``@`` = no error).
 TE_ERRORS: dict[str, str] = {

@@ -12,7 +12,7 @@ The device presents 0x1C28:0xC012, product ``"pico flexx (simulated)"``, a seria
 configuration with one vendor-specific interface and a bulk IN endpoint 0x81 (512-byte packets,
 high speed). Frames come from ``frame_source(CameraRequest) -> RawFrame`` (the renderer, later;
 :func:`plane_source` for tests), are quantised to 12 bits and encoded with
-:func:`drivers.camera_wire.encode_raw_frame`; every frame is one bulk transfer, delivered in
+:func:`drivers.camera.wire.encode_raw_frame`; every frame is one bulk transfer, delivered in
 whole packets to reads of any multiple of the packet size and ended by a short packet (or a
 zero-length packet when its length is a multiple of 512).
 
@@ -39,7 +39,7 @@ import numpy as np
 import usb.backend
 import usb.core
 
-from drivers.camera_wire import (
+from drivers.camera.wire import (
     REQ_GET_STATUS,
     REQ_SET_USE_CASE,
     REQ_START,
@@ -60,7 +60,6 @@ from sim_core.raw import PHASE_OFFSETS_RAD, RawFrame
 
 __all__ = [
     "CAMERA_FAULTS",
-    "CameraFault",
     "CameraFaultInjector",
     "CameraRequest",
     "FrameSource",
@@ -183,11 +182,9 @@ CAMERA_FAULTS: dict[str, str] = {
     "disconnect": "the device leaves the bus for 'downtime_s' (default 0.3 s; inf: for good) "
     "and comes back with a new address in power-on state (event: a frame)",
 }
-#: A camera fault is a :class:`drivers.sim.faults.FaultSpec` whose name is a camera fault.
-CameraFault = FaultSpec
 
 
-def parse_camera_fault(text: str) -> CameraFault:
+def parse_camera_fault(text: str) -> FaultSpec:
     """Parse ``name[:count][@skip]`` for the camera (see :data:`CAMERA_FAULTS`).
 
     >>> parse_camera_fault("drop:2@3")
@@ -199,7 +196,7 @@ def parse_camera_fault(text: str) -> CameraFault:
 class CameraFaultInjector(FaultInjector):
     """Armed camera faults: the serial simulators' injector, restricted to camera faults."""
 
-    def __init__(self, faults: Iterable[CameraFault | str] = ()) -> None:
+    def __init__(self, faults: Iterable[FaultSpec | str] = ()) -> None:
         super().__init__(list(faults), allowed=CAMERA_FAULT_NAMES)
 
 
@@ -270,7 +267,7 @@ class SimulatedUsbCamera:
         ``wMaxPacketSize`` of the bulk IN endpoint.
     instant : bool
         Produce frames as fast as the host reads (True) or at the use case's frame rate.
-    faults : iterable of str or CameraFault
+    faults : iterable of str or FaultSpec
         Armed at construction (see :data:`CAMERA_FAULTS`).
     state_provider : callable or None
         Called for every frame; its value goes to ``CameraRequest.rig_state``.
@@ -303,7 +300,7 @@ class SimulatedUsbCamera:
         firmware_bcd: int = 0x0100,
         max_packet_size: int = 512,
         instant: bool = True,
-        faults: Iterable[str | CameraFault] = (),
+        faults: Iterable[str | FaultSpec] = (),
         state_provider: Callable[[], Any] | None = None,
         access: str = "ok",
         kernel_driver_active: bool = False,
@@ -396,7 +393,7 @@ class SimulatedUsbCamera:
                 self._replug_at = time.monotonic()
                 self._update()
 
-    def inject(self, fault: str | CameraFault, **params: float) -> CameraFault:
+    def inject(self, fault: str | FaultSpec, **params: float) -> FaultSpec:
         """Arm a fault at run time (``"truncated:1"``, ``"disconnect:1"`` with downtime_s=...)."""
         return self.faults.inject(fault, **params)
 
@@ -741,7 +738,7 @@ class UsbCameraSim(usb.backend.IBackend):
         """The first device (the camera of the single-device case)."""
         return self.devices[0]
 
-    def inject(self, fault: str | CameraFault, **params: float) -> CameraFault:
+    def inject(self, fault: str | FaultSpec, **params: float) -> FaultSpec:
         """Arm a fault on the first device."""
         return self.device.inject(fault, **params)
 

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from drivers.devices_cli import check_devices, list_devices
+from drivers.diagnostics import check_devices, list_devices
 from service.cli.common import console
 
 devices_app = typer.Typer(help="Devices of the rig: list and check them.", no_args_is_help=True)

@@ -80,32 +80,15 @@ def open_rig(settings: Settings, scene: SceneSource) -> Rig:
                 return source(request)
 
         return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed)
-    from drivers.camera import UsbCamera
-    from drivers.solar_simulator import SolarSimulator
-    from drivers.turntable import Turntable
-
     missing = [n for n in ("turntable_port", "lamp_port", "shutter_port")
                if getattr(settings, n) is None]
     if missing:
         raise UnavailableError(
             f"no {', '.join('TOFTWIN_' + m.upper() for m in missing)} set (or use --simulated)"
         )
-    opened: list = []
-    try:
-        turntable = Turntable(settings.turntable_port, address=settings.turntable_address)
-        turntable.connect()
-        opened.append(turntable)
-        solar = SolarSimulator(settings.lamp_port, settings.shutter_port)
-        solar.connect()
-        opened.append(solar)
-        camera = UsbCamera(settings.camera_serial)
-        camera.connect()
-    except BaseException:
-        for device in reversed(opened):
-            with contextlib.suppress(Exception):
-                device.close()
-        raise
-    return Rig(turntable, solar, camera)
+    return Rig.open(settings.turntable_port, settings.lamp_port, settings.shutter_port,
+                    turntable_address=settings.turntable_address,
+                    camera_serial=settings.camera_serial)
 
 
 def open_lab(settings: Settings) -> Lab:

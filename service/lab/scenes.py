@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drivers.camera_wire import UseCase
+from drivers.camera import UseCase
 from sim_core.camera import Camera
 from sim_core.errors import InvalidInputError
 from sim_core.scene import build_camera

@@ -1,4 +1,4 @@
-"""Shared helpers of the driver tests: fast port settings and a scripted peer on a real pty.
+"""Shared helpers of the driver tests: fast port settings, a scripted peer on a real pty.
 
 :class:`ScriptedPeer` is the far end of an ``os.openpty()`` pair: it records the exact bytes a
 driver writes and answers with scripted bytes (taken from the manuals' examples), for the
@@ -26,6 +26,12 @@ FAST_SMC100 = dataclasses.replace(
 FAST_LAMP = dataclasses.replace(LAMP_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0)
 FAST_SHUTTER = dataclasses.replace(
     SHUTTER_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0
+)
+
+#: The pico flexx line of royale's udev rules file 10-royale-ubuntu.rules.
+ROYALE_RULE = (
+    'SUBSYSTEMS=="usb", ATTRS{idVendor}=="1c28", ATTRS{idProduct}=="c012", MODE="0666", '
+    'SYMLINK+="camboard_pico_flexx-%k", GROUP="plugdev"'
 )
 
 

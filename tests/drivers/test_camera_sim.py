@@ -9,7 +9,7 @@ import pytest
 import usb.core
 import usb.util
 
-from drivers.camera_wire import (
+from drivers.camera.wire import (
     REQ_GET_STATUS,
     REQ_SET_USE_CASE,
     REQ_START,

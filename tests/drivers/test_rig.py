@@ -8,10 +8,15 @@ import time
 
 import pytest
 
-from drivers.camera import UsbCamera
-from drivers.errors import DeviceInputError, DeviceTimeoutError, LimitError
+from drivers.camera import CameraNotFoundError, UsbCamera
+from drivers.errors import (
+    DeviceDisconnectedError,
+    DeviceInputError,
+    DeviceTimeoutError,
+    LimitError,
+)
 from drivers.rig import Rig, RigState
-from drivers.sim.usb_camera import CameraRequest, plane_source
+from drivers.sim.usb_camera import CameraRequest, UsbCameraSim, plane_source
 from drivers.solar_simulator import SolarSimulator
 from drivers.turntable import Turntable
 
@@ -144,3 +149,73 @@ def test_close_tears_everything_down_and_is_idempotent():
     rig.close()
     assert not any(os.path.exists(p) for p in ports)
     assert not rig.camera.is_connected and not rig.sims["camera"].device.claimed
+
+
+# -- Rig.open: the real rig, here on the serial simulators and the simulated USB camera ------
+def _fds_on(port: str) -> int:
+    """How many file descriptors of this process are open on the device behind ``port``."""
+    target = os.path.realpath(port)
+    fds = os.listdir("/proc/self/fd")
+    return sum(os.path.realpath(f"/proc/self/fd/{fd}") == target for fd in fds)
+
+
+@pytest.fixture
+def camera_sim() -> UsbCameraSim:
+    return UsbCameraSim(plane_source(1.0), seed=2, serial="0005-RIG-OPEN")
+
+
+needs_proc = pytest.mark.skipif(
+    not os.path.isdir("/proc/self/fd"), reason="counts open descriptors in /proc"
+)
+
+
+@needs_proc
+def test_open_connects_the_real_drivers_and_close_releases_them(
+    turntable_sim, solar_sim, camera_sim
+):
+    ports = [turntable_sim.ports[0], *solar_sim.ports]
+    before = [_fds_on(p) for p in ports]
+    rig = Rig.open(
+        *ports, turntable_address=1, camera_serial="0005-RIG-OPEN", usb_backend=camera_sim
+    )
+    with rig:
+        assert isinstance(rig.turntable, Turntable) and isinstance(rig.solar, SolarSimulator)
+        assert isinstance(rig.camera, UsbCamera)
+        assert rig.camera.identity().serial == "0005-RIG-OPEN"
+        assert [_fds_on(p) for p in ports] == [n + 1 for n in before]
+        assert rig.sims == {}
+        state = rig.apply(RigState(15.0, 0.0, True))
+        assert state.turntable_angle_deg == pytest.approx(15.0, abs=0.01) and state.shutter_open
+        assert turntable_sim.models["turntable"].current_position() == pytest.approx(15.0, abs=0.01)
+        frames = rig.capture(1)
+        assert frames[0].meta["rig"]["turntable_angle_deg"] == pytest.approx(15.0, abs=0.01)
+    assert [_fds_on(p) for p in ports] == before
+    assert not rig.camera.is_connected and not camera_sim.device.claimed
+
+
+@needs_proc
+def test_open_with_a_bad_lamp_port_closes_the_turntable_and_raises(
+    turntable_sim, solar_sim, camera_sim, tmp_path
+):
+    port = turntable_sim.ports[0]
+    before = _fds_on(port)
+    bad = str(tmp_path / "no-such-lamp-port")
+    refused = r"^cannot open port '.*no-such-lamp-port'"
+    with pytest.raises(DeviceDisconnectedError, match=refused) as exc:
+        Rig.open(port, bad, solar_sim.ports[1], usb_backend=camera_sim)
+    # closed by Rig.open, not by the garbage collector: the traceback keeps its locals alive
+    assert "turntable" in exc.tb.tb_next.tb_frame.f_locals
+    assert _fds_on(port) == before
+    assert not camera_sim.device.claimed
+
+
+@needs_proc
+def test_open_without_the_camera_closes_the_serial_devices_and_raises(
+    turntable_sim, solar_sim, camera_sim
+):
+    ports = [turntable_sim.ports[0], *solar_sim.ports]
+    before = [_fds_on(p) for p in ports]
+    with pytest.raises(CameraNotFoundError, match=r"serial 'no-such-serial'") as exc:
+        Rig.open(*ports, camera_serial="no-such-serial", usb_backend=camera_sim)
+    assert {"turntable", "solar"} <= set(exc.tb.tb_next.tb_frame.f_locals)
+    assert [_fds_on(p) for p in ports] == before

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.camera_wire import (
+from drivers.camera.wire import (
     HEADER_SIZE,
     USE_CASES,
     CorruptFrameError,

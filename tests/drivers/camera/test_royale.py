@@ -14,11 +14,9 @@ import types
 import numpy as np
 import pytest
 
-from drivers import royale_backend
-from drivers.camera import Camera, CameraNotFoundError
-from drivers.camera_wire import USE_CASES, quantize_frame, raw_to_wire_values
-from drivers.errors import DeviceInputError, DeviceTimeoutError
-from drivers.royale_backend import (
+from drivers.camera import USE_CASES, CameraNotFoundError, CameraProtocol
+from drivers.camera import royale as royale_backend
+from drivers.camera.royale import (
     RoyaleCamera,
     RoyaleDataError,
     RoyaleNotInstalledError,
@@ -27,6 +25,8 @@ from drivers.royale_backend import (
     royale_to_raw_frame,
     split_raw_buffer,
 )
+from drivers.camera.wire import quantize_frame, raw_to_wire_values
+from drivers.errors import DeviceInputError, DeviceTimeoutError
 from drivers.sim.usb_camera import CameraRequest, plane_source
 
 pytestmark = pytest.mark.timeout(20)
@@ -331,7 +331,7 @@ def test_royale_camera_glue_captures_converted_frames(monkeypatch):
     cam = _StandInCamera(layout=True)
     monkeypatch.setattr(royale_backend, "roypy", _stand_in_roypy(cam))
     with RoyaleCamera(use_case="MODE_9_5FPS_2000", frame_timeout_s=1.0) as royale:
-        assert isinstance(royale, Camera) and cam.use_case == "MODE_9_5FPS_2000"
+        assert isinstance(royale, CameraProtocol) and cam.use_case == "MODE_9_5FPS_2000"
         frames = royale.capture(2)
         ident = royale.identity()
     assert all(f.phase_images.shape == (2, 4, H, W) for f in frames)

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from drivers.camera import (
-    Camera,
     CameraAccessError,
     CameraError,
     CameraNotFoundError,
+    CameraProtocol,
     UsbCamera,
     UsbCameraSettings,
 )
-from drivers.camera_wire import (
+from drivers.camera.wire import (
     REQ_SET_USE_CASE,
     REQ_START,
     REQ_STOP,
@@ -156,7 +156,7 @@ def test_paced_stream_delivers_frames_at_the_use_case_rate():
 
 def test_identity_comes_from_the_usb_descriptors(camera):
     ident = camera.identity()
-    assert isinstance(camera, Camera)
+    assert isinstance(camera, CameraProtocol)
     assert (ident.model, ident.serial, ident.product) == (
         "pico flexx",
         "0005-4804-0050-1827",

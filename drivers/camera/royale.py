@@ -43,8 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from drivers.camera import CameraError, CameraIdentity, CameraNotFoundError
-from drivers.camera_wire import MAX_RAW, N_PHASES, RAW_OFFSET, UseCase, get_use_case
+from drivers.camera.protocol import CameraError, CameraIdentity, CameraNotFoundError
+from drivers.camera.wire import MAX_RAW, N_PHASES, RAW_OFFSET, UseCase, get_use_case
 from drivers.errors import DeviceInputError, DeviceTimeoutError, ProtocolError
 from sim_core.raw import RawFrame
 
@@ -380,7 +380,7 @@ def _strings(values: Any) -> list[str]:
 
 
 class RoyaleCamera:
-    """A pico flexx streamed through royale, implementing :class:`drivers.camera.Camera`.
+    """A pico flexx streamed through royale, implementing :class:`~drivers.camera.CameraProtocol`.
 
     Parameters
     ----------
@@ -436,7 +436,7 @@ class RoyaleCamera:
         if not ids:
             raise CameraNotFoundError(
                 "royale sees no camera; is the pico flexx plugged in and accessible? "
-                "(drivers.devices_cli.list_devices() shows permission problems with the fix)"
+                "(drivers.diagnostics.list_devices() shows permission problems with the fix)"
             )
         if self.camera_id is not None and self.camera_id not in ids:
             raise CameraNotFoundError(f"royale camera {self.camera_id!r} not among {ids}")

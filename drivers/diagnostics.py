@@ -1,4 +1,4 @@
-"""What the CLI's device commands call: list the cameras present, check the rig's devices.
+"""Device diagnostics: list the cameras present, check every device of the rig.
 
 - :func:`list_devices` lists PMD cameras on the USB bus as plain dicts (one per device): ids,
   model, serial number, product string, USB speed and version, bus / address / port, and whether
@@ -8,7 +8,8 @@
   streaming, turntable, solar simulator) and returns a :class:`DeviceReport`; every check is
   bounded by the drivers' timeouts and none raises.
 
-Neither function prints; the CLI formats ``report.to_dict()`` or ``str(report)``.
+Neither function prints; the CLI (``toftwin devices``) formats
+``report.to_dict()`` or ``str(report)``.
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ from drivers.camera import (
     UsbCameraSettings,
     discover,
 )
+from drivers.camera.royale import INSTALL_HINT, royale_available
 from drivers.errors import DeviceError
-from drivers.royale_backend import INSTALL_HINT, royale_available
 
 __all__ = ["DeviceCheck", "DeviceReport", "check_devices", "list_devices"]
 

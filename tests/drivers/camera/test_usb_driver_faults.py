@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from drivers.camera import FrameDroppedError, UsbCamera, UsbCameraSettings
-from drivers.camera_wire import USE_CASES, CorruptFrameError, TruncatedFrameError, quantize_frame
+from drivers.camera.wire import USE_CASES, CorruptFrameError, TruncatedFrameError, quantize_frame
 from drivers.errors import DeviceDisconnectedError, DeviceTimeoutError
 from drivers.sim.usb_camera import CameraRequest, UsbCameraSim, plane_source
 

@@ -1,24 +1,18 @@
-"""ToF camera: the :class:`Camera` protocol, USB discovery, and the pyusb streaming driver.
+"""The pyusb streaming driver :class:`UsbCamera`: our USB wire format, over pyusb.
 
-Two backends implement :class:`Camera` and return :class:`~sim_core.raw.RawFrame` s:
+:class:`UsbCamera` implements :class:`~drivers.camera.protocol.CameraProtocol` for a device
+speaking *our* wire format (:mod:`drivers.camera.wire`, ``docs/devices.md`` "Camera (USB)"):
+vendor control requests to configure a use case and to start / stop streaming, one bulk IN
+transfer per raw frame, reassembled from packets and checked (sequence numbers, lengths, CRC32).
+The simulator :class:`drivers.sim.usb_camera.UsbCameraSim` is a pyusb backend that speaks it; a
+real pico flexx does **not** (it streams through PMD's royale SDK:
+:class:`drivers.camera.royale.RoyaleCamera`).
 
-- :class:`UsbCamera` (this module): pyusb, speaking *our* wire format (:mod:`drivers.camera_wire`,
-  ``docs/devices.md`` "Camera (USB)"): vendor control requests to configure a use case and to
-  start / stop streaming, one bulk IN transfer per raw frame, reassembled from packets and
-  checked (sequence numbers, lengths, CRC32). The simulator :class:`drivers.sim.usb_camera.
-  UsbCameraSim` is a pyusb backend that speaks it; a real pico flexx does **not** (it streams
-  through PMD's royale SDK: :class:`drivers.royale_backend.RoyaleCamera`).
-- :class:`drivers.royale_backend.RoyaleCamera`: royale's Python module ``roypy``.
-
-Discovery (:func:`discover`) is plain pyusb and works on real hardware: every device with PMD's
-vendor id 0x1C28 is listed with serial number, product and USB speed, and a device that is present
-but cannot be opened (permissions / a missing udev rule, a kernel driver, another program holding
-it) is reported with the fix.
-
-Errors: :class:`CameraError` (a :class:`~drivers.errors.DeviceError`) and its subclasses; bad
-frames raise :class:`~drivers.camera_wire.FrameError` subclasses (a ProtocolError); a missing
-frame stream raises :class:`~drivers.errors.DeviceTimeoutError`; a camera that was unplugged and
-did not come back raises :class:`~drivers.errors.DeviceDisconnectedError`.
+Errors: :class:`~drivers.camera.protocol.CameraError` and its subclasses; bad frames raise
+:class:`~drivers.camera.wire.FrameError` subclasses (a ProtocolError), a sequence gap
+:class:`FrameDroppedError`; a missing frame stream raises
+:class:`~drivers.errors.DeviceTimeoutError`; a camera that was unplugged and did not come back
+raises :class:`~drivers.errors.DeviceDisconnectedError`.
 """
 
 from __future__ import annotations
@@ -29,13 +23,36 @@ import errno
 import logging
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import Any
 
 import usb.core
 import usb.util
 
-from drivers.camera_wire import (
+from drivers.camera.discovery import (
+    BUSY_FIX,
+    INTERFACE,
+    KNOWN_PRODUCTS,
+    LIBUSB_ACCESS,
+    LIBUSB_BUSY,
+    LIBUSB_NO_DEVICE,
+    LIBUSB_PIPE,
+    PICO_FLEXX_PRODUCT_ID,
+    PMD_VENDOR_ID,
+    USB_SPEEDS,
+    bcd,
+    find_backend,
+    is_usb_error,
+    open_probe,
+    permission_fix,
+)
+from drivers.camera.protocol import (
+    CameraAccessError,
+    CameraError,
+    CameraIdentity,
+    CameraNotFoundError,
+)
+from drivers.camera.wire import (
     REQ_GET_STATUS,
     REQ_SET_USE_CASE,
     REQ_START,
@@ -43,7 +60,6 @@ from drivers.camera_wire import (
     REQUEST_IN,
     REQUEST_OUT,
     STATUS_SIZE,
-    USE_CASES,
     WIRE_VERSION,
     CorruptFrameError,
     DeviceStatus,
@@ -63,82 +79,12 @@ from drivers.errors import (
 )
 from sim_core.raw import RawFrame
 
-__all__ = [
-    "KNOWN_PRODUCTS",
-    "PICO_FLEXX_PRODUCT_ID",
-    "PMD_VENDOR_ID",
-    "USB_SPEEDS",
-    "USE_CASES",
-    "Camera",
-    "CameraAccessError",
-    "CameraError",
-    "CameraIdentity",
-    "CameraNotFoundError",
-    "CameraProtocol",
-    "CaptureStats",
-    "FrameDroppedError",
-    "UsbBackendError",
-    "UsbCamera",
-    "UsbCameraSettings",
-    "UsbDeviceInfo",
-    "UseCase",
-    "discover",
-    "udev_rule",
-]
+__all__ = ["CaptureStats", "FrameDroppedError", "UsbCamera", "UsbCameraSettings"]
 
 _log = logging.getLogger(__name__)
 
-#: USB vendor id of pmdtechnologies ag (all PMD camera modules).
-PMD_VENDOR_ID = 0x1C28
-#: USB product id of the CamBoard pico flexx.
-PICO_FLEXX_PRODUCT_ID = 0xC012
-#: PMD product ids we know a name for (from royale's udev rules file 10-royale-ubuntu.rules).
-KNOWN_PRODUCTS: dict[int, str] = {0xC012: "pico flexx", 0xC00F: "pico s"}
-#: libusb speed codes (``usb.core.Device.speed``) -> text.
-USB_SPEEDS: dict[int, str] = {
-    0: "unknown",
-    1: "low (1.5 Mbit/s)",
-    2: "full (12 Mbit/s)",
-    3: "high (480 Mbit/s)",
-    4: "super (5 Gbit/s)",
-    5: "super+ (10 Gbit/s)",
-}
-
-_INTERFACE = 0
+#: The camera's bulk IN endpoint: one transfer per raw frame.
 _BULK_IN = 0x81
-
-# libusb error codes as pyusb's libusb1 backend reports them in ``backend_error_code``.
-_LIBUSB_ACCESS = -3
-_LIBUSB_NO_DEVICE = -4
-_LIBUSB_BUSY = -6
-_LIBUSB_PIPE = -9
-
-
-# -- errors --------------------------------------------------------------------------------
-class CameraError(DeviceError):
-    """The camera, its USB connection or its SDK did not do what was asked."""
-
-
-class CameraNotFoundError(CameraError):
-    """No matching camera is enumerated on the bus."""
-
-
-class CameraAccessError(CameraError):
-    """The camera is present but cannot be opened or claimed.
-
-    Attributes
-    ----------
-    fix : str
-        What to do about it (a udev rule, closing another program, ...).
-    """
-
-    def __init__(self, message: str, fix: str) -> None:
-        self.fix = fix
-        super().__init__(f"{message}. Fix: {fix}")
-
-
-class UsbBackendError(CameraError):
-    """pyusb has no usable backend (libusb is not installed)."""
 
 
 class FrameDroppedError(FrameError):
@@ -153,290 +99,6 @@ class FrameDroppedError(FrameError):
     def __init__(self, message: str, sequence: int, missing: int) -> None:
         self.missing = missing
         super().__init__("dropped", message, sequence)
-
-
-# -- identity and discovery ----------------------------------------------------------------
-@dataclass(frozen=True)
-class CameraIdentity:
-    """Who the camera is.
-
-    Attributes
-    ----------
-    model : str
-        ``"pico flexx"`` (from the product id) or royale's camera name.
-    serial : str
-        USB serial number string or royale camera id.
-    product, manufacturer : str or None
-        USB string descriptors.
-    vendor_id, product_id : int or None
-    firmware : str or None
-        ``bcdDevice`` as ``"1.00"``, or what the SDK reports.
-    usb_speed : str or None
-        Text from :data:`USB_SPEEDS`.
-    bus, address : int or None
-    backend : str
-        ``"pyusb"`` or ``"royale"``.
-    extra : dict
-        Anything else the backend knows (royale's camera info pairs, wire version, ...).
-    """
-
-    model: str
-    serial: str
-    product: str | None = None
-    manufacturer: str | None = None
-    vendor_id: int | None = None
-    product_id: int | None = None
-    firmware: str | None = None
-    usb_speed: str | None = None
-    bus: int | None = None
-    address: int | None = None
-    backend: str = "pyusb"
-    extra: dict[str, str] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-
-@dataclass(frozen=True)
-class UsbDeviceInfo:
-    """One PMD device found on the bus (see :func:`discover`).
-
-    ``accessible`` is False when the device cannot be opened or its interface claimed;
-    ``problem`` says why and ``fix`` what to do. A kernel driver bound to the interface is
-    reported in ``notes`` (the driver detaches it when it connects).
-    """
-
-    vendor_id: int
-    product_id: int
-    model: str
-    bus: int | None
-    address: int | None
-    port_path: str | None
-    speed: str
-    usb_version: str
-    firmware: str
-    serial: str | None
-    product: str | None
-    manufacturer: str | None
-    accessible: bool
-    problem: str | None = None
-    fix: str | None = None
-    kernel_driver_active: bool | None = None
-    notes: tuple[str, ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able dict; ids as 4 hex digits (``"1c28"``) as lsusb prints them."""
-        data = dataclasses.asdict(self)
-        data["vendor_id"] = f"{self.vendor_id:04x}"
-        data["product_id"] = f"{self.product_id:04x}"
-        data["notes"] = list(self.notes)
-        return data
-
-
-def udev_rule(product_id: int = PICO_FLEXX_PRODUCT_ID, vendor_id: int = PMD_VENDOR_ID) -> str:
-    """The udev rule line that lets users of group ``plugdev`` open the camera.
-
-    The line royale's ``10-royale-ubuntu.rules`` has for the pico flexx.
-
-    >>> udev_rule().split(", ")[:3]
-    ['SUBSYSTEMS=="usb"', 'ATTRS{idVendor}=="1c28"', 'ATTRS{idProduct}=="c012"']
-    """
-    name = KNOWN_PRODUCTS.get(product_id, f"pmd_{product_id:04x}").replace(" ", "_")
-    return (
-        f'SUBSYSTEMS=="usb", ATTRS{{idVendor}}=="{vendor_id:04x}", '
-        f'ATTRS{{idProduct}}=="{product_id:04x}", MODE="0666", '
-        f'SYMLINK+="camboard_{name}-%k", GROUP="plugdev"'
-    )
-
-
-def _permission_fix(product_id: int) -> str:
-    return (
-        "add the udev rule line\n    " + udev_rule(product_id) + "\nto "
-        "/etc/udev/rules.d/10-royale-ubuntu.rules, run 'sudo udevadm control --reload-rules "
-        "&& sudo udevadm trigger', make sure you are in group plugdev, and replug the camera"
-    )
-
-
-_BUSY_FIX = (
-    "close the other program that has the camera open (royaleviewer, another toftwin process, "
-    "a sample), then retry"
-)
-
-
-def _kernel_driver_fix(product_id: int) -> str:
-    return (
-        "let the driver detach it when it connects (UsbCameraSettings.detach_kernel_driver, the "
-        "default), or unbind it: echo -n '<bus>-<port>:1.0' | sudo tee "
-        f"/sys/bus/usb/drivers/<driver>/unbind (device 1c28:{product_id:04x})"
-    )
-
-
-def _find_backend(backend: Any) -> Any:
-    """The pyusb backend to use: ``backend`` or the first of libusb1, openusb, libusb0."""
-    if backend is not None:
-        return backend
-    import usb.backend.libusb0 as libusb0
-    import usb.backend.libusb1 as libusb1
-    import usb.backend.openusb as openusb
-
-    for module in (libusb1, openusb, libusb0):
-        found = module.get_backend()
-        if found is not None:
-            return found
-    raise UsbBackendError(
-        "cannot list USB devices: pyusb found no backend (libusb is not installed). "
-        "Fix: install libusb 1.0 (Debian/Ubuntu: sudo apt-get install libusb-1.0-0; "
-        "macOS: brew install libusb)"
-    )
-
-
-def _is_error(exc: BaseException, code: int, err: int) -> bool:
-    return isinstance(exc, usb.core.USBError) and (
-        getattr(exc, "backend_error_code", None) == code or exc.errno == err
-    )
-
-
-def _bcd(value: int) -> str:
-    return f"{value >> 8:x}.{value & 0xFF:02x}"
-
-
-def _open_probe(dev: Any) -> bool | None:
-    """Open the device and ask whether a kernel driver holds interface 0.
-
-    Opening is what fails without permission, with LIBUSB_ERROR_ACCESS (reading the string
-    descriptors first would only give pyusb's vaguer "no langid"). None where the platform
-    cannot tell (libusb on Windows and macOS).
-    """
-    try:
-        return bool(dev.is_kernel_driver_active(_INTERFACE))
-    except NotImplementedError:
-        return None
-
-
-def _describe_device(dev: Any) -> UsbDeviceInfo:
-    """Identity and accessibility of one enumerated device (opens it to read the strings)."""
-    vid, pid = int(dev.idVendor), int(dev.idProduct)
-    model = (
-        KNOWN_PRODUCTS.get(pid, f"PMD device {pid:04x}")
-        if vid == PMD_VENDOR_ID
-        else (f"device {vid:04x}:{pid:04x}")
-    )
-    ports = getattr(dev, "port_numbers", None)
-    port_path = (
-        f"{dev.bus}-{'.'.join(str(p) for p in ports)}" if ports and dev.bus is not None else None
-    )
-    serial = product = manufacturer = None
-    accessible, problem, fix = True, None, None
-    kernel: bool | None = None
-    notes: list[str] = []
-    try:
-        kernel = _open_probe(dev)
-        serial = dev.serial_number
-        product = dev.product
-        manufacturer = dev.manufacturer
-    except usb.core.USBError as exc:
-        accessible = False
-        if _is_error(exc, _LIBUSB_ACCESS, errno.EACCES):
-            problem = f"permission denied opening the device ({exc})"
-            fix = _permission_fix(pid)
-        elif _is_error(exc, _LIBUSB_BUSY, errno.EBUSY):
-            problem = f"device busy ({exc})"
-            fix = _BUSY_FIX
-        else:
-            problem = f"cannot open the device or read its string descriptors ({exc})"
-            fix = "replug the camera; if it persists, check 'dmesg' for USB errors"
-    except ValueError as exc:  # pyusb: "The device has no langid (permission issue, ...)"
-        accessible = False
-        problem = f"cannot read the string descriptors ({exc})"
-        fix = _permission_fix(pid)
-    if kernel:
-        notes.append(
-            f"a kernel driver is bound to interface {_INTERFACE}; fix: " + _kernel_driver_fix(pid)
-        )
-    with contextlib.suppress(usb.core.USBError):
-        usb.util.dispose_resources(dev)
-    return UsbDeviceInfo(
-        vendor_id=vid,
-        product_id=pid,
-        model=model,
-        bus=dev.bus,
-        address=dev.address,
-        port_path=port_path,
-        speed=USB_SPEEDS.get(dev.speed or 0, f"code {dev.speed}"),
-        usb_version=_bcd(int(dev.bcdUSB)),
-        firmware=_bcd(int(dev.bcdDevice)),
-        serial=serial,
-        product=product,
-        manufacturer=manufacturer,
-        accessible=accessible,
-        problem=problem,
-        fix=fix,
-        kernel_driver_active=kernel,
-        notes=tuple(notes),
-    )
-
-
-def discover(
-    backend: Any = None, *, vendor_id: int = PMD_VENDOR_ID, product_id: int | None = None
-) -> list[UsbDeviceInfo]:
-    """Every USB device with ``vendor_id`` (PMD by default), sorted by bus and address.
-
-    Works on real hardware (libusb) and on a simulated backend. Raises
-    :class:`UsbBackendError` with the fix when pyusb has no backend.
-    """
-    be = _find_backend(backend)
-    match: dict[str, int] = {"idVendor": vendor_id}
-    if product_id is not None:
-        match["idProduct"] = product_id
-    devices = list(usb.core.find(find_all=True, backend=be, **match))
-    infos = [_describe_device(dev) for dev in devices]
-    return sorted(infos, key=lambda i: (i.bus or 0, i.address or 0))
-
-
-# -- the interface the rest of the code depends on ------------------------------------------
-@runtime_checkable
-class Camera(Protocol):
-    """What the service and the pose loop need from a ToF camera.
-
-    ``capture(n)`` returns ``n`` complete, checked raw frames of the configured use case. When
-    the camera is not streaming it is started for the capture and stopped afterwards, so every
-    frame was exposed after the call; when it is streaming, the next ``n`` frames are returned.
-    Bad frames are skipped and counted, or raise, as the backend is configured; a missing stream
-    raises :class:`~drivers.errors.DeviceTimeoutError` - ``capture`` never hangs.
-    """
-
-    @property
-    def use_case(self) -> UseCase:
-        """The configured use case."""
-        ...
-
-    def configure(self, use_case: str | UseCase) -> None:
-        """Select a use case by royale name (``"MODE_9_5FPS_2000"``); restarts a running stream."""
-        ...
-
-    def start(self) -> None:
-        """Start streaming (no-op if streaming)."""
-        ...
-
-    def stop(self) -> None:
-        """Stop streaming (no-op if stopped)."""
-        ...
-
-    def capture(self, n: int = 1) -> list[RawFrame]:
-        """The next ``n`` raw frames (phase images as C = raw - 2048 DN, float32)."""
-        ...
-
-    def identity(self) -> CameraIdentity:
-        """Model, serial number, firmware, connection."""
-        ...
-
-    def close(self) -> None:
-        """Stop streaming and release the device; safe to call twice."""
-        ...
-
-
-#: Same interface under the naming of the other drivers (``TurntableProtocol``, ...).
-CameraProtocol = Camera
 
 
 # -- the pyusb streaming driver -------------------------------------------------------------
@@ -587,7 +249,7 @@ class UsbCamera:
         """
         if self._dev is not None:
             return
-        self._backend = _find_backend(self._backend_arg)
+        self._backend = find_backend(self._backend_arg)
         # once identified, stay with that camera (a reconnect must not pick up another one)
         serial = self.serial or (self._identity.serial if self._identity else None)
         dev = self._find(serial)
@@ -648,33 +310,33 @@ class UsbCamera:
         pid = int(dev.idProduct)
         where = f"camera {self.vendor_id:04x}:{pid:04x} on bus {dev.bus} address {dev.address}"
         try:
-            kernel = _open_probe(dev)
+            kernel = open_probe(dev)
             serial = dev.serial_number
             if kernel and self.settings.detach_kernel_driver:
                 _log.info("%s: detaching kernel driver from interface 0", where)
-                dev.detach_kernel_driver(_INTERFACE)
+                dev.detach_kernel_driver(INTERFACE)
             try:
                 cfg = dev.get_active_configuration()
             except usb.core.USBError:
                 cfg = None
             if cfg is None or cfg.bConfigurationValue != 1:
                 dev.set_configuration(1)
-            usb.util.claim_interface(dev, _INTERFACE)
-            intf = dev.get_active_configuration()[(_INTERFACE, 0)]
+            usb.util.claim_interface(dev, INTERFACE)
+            intf = dev.get_active_configuration()[(INTERFACE, 0)]
             ep = usb.util.find_descriptor(intf, bEndpointAddress=_BULK_IN)
         except usb.core.USBError as exc:
             with contextlib.suppress(usb.core.USBError):
                 usb.util.dispose_resources(dev)
-            if _is_error(exc, _LIBUSB_ACCESS, errno.EACCES):
+            if is_usb_error(exc, LIBUSB_ACCESS, errno.EACCES):
                 raise CameraAccessError(
-                    f"{where}: permission denied ({exc})", _permission_fix(pid)
+                    f"{where}: permission denied ({exc})", permission_fix(pid)
                 ) from exc
-            if _is_error(exc, _LIBUSB_BUSY, errno.EBUSY):
-                raise CameraAccessError(f"{where}: interface busy ({exc})", _BUSY_FIX) from exc
+            if is_usb_error(exc, LIBUSB_BUSY, errno.EBUSY):
+                raise CameraAccessError(f"{where}: interface busy ({exc})", BUSY_FIX) from exc
             raise CameraError(f"{where}: cannot open: {exc}") from exc
         except ValueError as exc:
             raise CameraAccessError(
-                f"{where}: cannot read string descriptors ({exc})", _permission_fix(pid)
+                f"{where}: cannot read string descriptors ({exc})", permission_fix(pid)
             ) from exc
         if ep is None:
             usb.util.dispose_resources(dev)
@@ -688,11 +350,11 @@ class UsbCamera:
             status = self.status()
         except (usb.core.USBError, DeviceError) as exc:
             self._release()
-            if _is_error(exc, _LIBUSB_PIPE, errno.EPIPE):
+            if is_usb_error(exc, LIBUSB_PIPE, errno.EPIPE):
                 raise CameraError(
                     f"{self.name}: stalls our GET_STATUS request, so it does not speak the "
                     "toftwin USB wire protocol; a real pico flexx streams through royale "
-                    "(drivers.royale_backend.RoyaleCamera)"
+                    "(drivers.camera.royale.RoyaleCamera)"
                 ) from exc
             raise CameraError(f"{self.name}: GET_STATUS failed: {exc}") from exc
         if status.wire_version != WIRE_VERSION:
@@ -713,7 +375,7 @@ class UsbCamera:
             bus=dev.bus,
             address=dev.address,
             backend="pyusb",
-            extra={"wire_version": str(status.wire_version), "usb_version": _bcd(dev.bcdUSB)},
+            extra={"wire_version": str(status.wire_version), "usb_version": bcd(dev.bcdUSB)},
         )
         if status.streaming:  # left running by an earlier session
             self._ctrl_out(REQ_STOP, 0, "STOP")
@@ -724,7 +386,7 @@ class UsbCamera:
         dev, self._dev = self._dev, None
         if dev is not None:
             with contextlib.suppress(usb.core.USBError):
-                usb.util.release_interface(dev, _INTERFACE)
+                usb.util.release_interface(dev, INTERFACE)
             with contextlib.suppress(usb.core.USBError):
                 usb.util.dispose_resources(dev)
 
@@ -735,7 +397,7 @@ class UsbCamera:
 
     def _gone(self, exc: BaseException) -> bool:
         """True if ``exc`` means the device went away (unplugged, reset)."""
-        if _is_error(exc, _LIBUSB_NO_DEVICE, errno.ENODEV):
+        if is_usb_error(exc, LIBUSB_NO_DEVICE, errno.ENODEV):
             return True
         if isinstance(exc, usb.core.USBError) and exc.errno == errno.EIO:
             serial = self._identity.serial if self._identity is not None else None
@@ -783,7 +445,7 @@ class UsbCamera:
                 REQUEST_OUT, request, value, 0, None, _ms(self.settings.ctrl_timeout_s)
             )
         except usb.core.USBError as exc:
-            if _is_error(exc, _LIBUSB_PIPE, errno.EPIPE):
+            if is_usb_error(exc, LIBUSB_PIPE, errno.EPIPE):
                 reason = ""
                 with contextlib.suppress(DeviceError, usb.core.USBError):
                     reason = f": {self.status().last_error_text}"

@@ -1,8 +1,10 @@
-"""Contract suite: what the rest of the code may rely on from any :class:`drivers.camera.Camera`.
+"""Contract suite: what the rest of the code may rely on from any camera driver.
+
+Every backend must implement :class:`drivers.camera.CameraProtocol` this way.
 
 Runs against the simulated pico flexx through the real pyusb driver (instant and paced at the
 use case's frame rate) and, where royale is installed and a camera is connected, against real
-hardware through :class:`drivers.royale_backend.RoyaleCamera` (otherwise that backend is not
+hardware through :class:`drivers.camera.RoyaleCamera` (otherwise that backend is not
 collected, so a machine without it reports no skipped tests):
 
     TOFTWIN_ROYALE_CAMERA=<camera id or "first">  [TOFTWIN_ROYALE_ACCESS_CODE=...]
@@ -18,10 +20,15 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from drivers.camera import Camera, UsbCamera, UsbCameraSettings
-from drivers.camera_wire import USE_CASES
+from drivers.camera import (
+    USE_CASES,
+    CameraProtocol,
+    RoyaleCamera,
+    UsbCamera,
+    UsbCameraSettings,
+    royale_available,
+)
 from drivers.errors import DeviceInputError
-from drivers.royale_backend import RoyaleCamera, royale_available
 from drivers.sim.usb_camera import UsbCameraSim, plane_source
 
 pytestmark = pytest.mark.timeout(20)
@@ -46,10 +53,12 @@ BACKENDS = ["sim", "sim-paced"] + (
 
 
 @pytest.fixture(params=BACKENDS)
-def camera(request: pytest.FixtureRequest) -> Iterator[Camera]:
+def camera(request: pytest.FixtureRequest) -> Iterator[CameraProtocol]:
     if request.param == "royale":
         cam_id = os.environ.get("TOFTWIN_ROYALE_CAMERA", "first")
-        device: Camera = RoyaleCamera(None if cam_id == "first" else cam_id, frame_timeout_s=5.0)
+        device: CameraProtocol = RoyaleCamera(
+            None if cam_id == "first" else cam_id, frame_timeout_s=5.0
+        )
     else:
         sim = UsbCameraSim(
             plane_source(1.0), seed=3, instant=request.param == "sim", serial="0005-CONTRACT"
@@ -75,7 +84,7 @@ def _check_frame(frame, use_case) -> None:
 
 
 def test_implements_the_protocol_and_identifies_itself(camera):
-    assert isinstance(camera, Camera)
+    assert isinstance(camera, CameraProtocol)
     ident = camera.identity()
     assert ident.serial and ident.model
     assert ident.backend in ("pyusb", "royale")
