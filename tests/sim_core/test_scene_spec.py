@@ -33,8 +33,9 @@ def model_fields_recursive(model: type[BaseModel], path: str = "") -> dict[str, 
 
 
 def code_words(markdown: str) -> set[str]:
-    """Every identifier-like word inside a `code span` of ``markdown``."""
-    return {w for span in re.findall(r"`([^`]+)`", markdown) for w in re.findall(r"\w+", span)}
+    """Every identifier-like word inside a `code span` of ``markdown`` (not in code blocks)."""
+    text = re.sub(r"^```.*?^```", "", markdown, flags=re.M | re.S)
+    return {w for span in re.findall(r"`([^`\n]+)`", text) for w in re.findall(r"\w+", span)}
 
 
 def test_the_field_walk_reaches_nested_models():
