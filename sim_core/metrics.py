@@ -72,6 +72,9 @@ def grey_8bit(amplitude: np.ndarray, full_scale: float) -> np.ndarray:
     scale is mandatory, so that two images converted with the same full scale are comparable.
     Non-finite amplitudes give 0.
 
+    >>> grey_8bit(np.array([0.0, 0.5, 2.0, np.nan]), full_scale=1.0).tolist()
+    [0, 128, 255, 0]
+
     Raises
     ------
     InvalidInputError
@@ -96,6 +99,15 @@ def depth_16bit(range_m: np.ndarray, unit_m: float = 1e-3) -> np.ndarray:
 
     ``unit_m = 1e-3`` (the default) is exactly :func:`depth_mm_16bit`; other units (e.g. 1e-4 for
     0.1 mm steps) rescale before the same conversion.
+
+    >>> depth_16bit(np.array([1.5, np.nan, 70.0])).tolist()  # mm; NaN -> 0; 70 m clips
+    [1500, 0, 65535]
+    >>> depth_16bit(np.array([1.5]), unit_m=1e-4).tolist()  # 0.1 mm steps
+    [15000]
+    >>> depth_16bit(np.array([1.5]), unit_m=0.0)
+    Traceback (most recent call last):
+    ...
+    sim_core.errors.InvalidInputError: depth_unit: got 0.0; allowed: a finite number > 0
     """
     unit = _positive_finite("depth_unit", unit_m)
     rng = np.asarray(range_m, dtype=np.float64)

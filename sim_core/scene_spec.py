@@ -333,7 +333,18 @@ def scene_error_from_validation(exc: ValidationError) -> SceneError:
 
 
 def parse_scene_spec(data: dict) -> SceneSpec:
-    """Validate a scene given as a dict; raises :class:`SceneError`."""
+    """Validate a scene given as a dict; raises :class:`SceneError`.
+
+    The error names the field and the allowed range:
+
+    >>> camera = {"pose": {"position_m": [0, 0, 1], "look_at_m": [0, 0, 0]}}
+    >>> parse_scene_spec({"camera": camera}).render.spp
+    16
+    >>> parse_scene_spec({"camera": camera, "render": {"spp": 0}})
+    Traceback (most recent call last):
+    ...
+    sim_core.errors.SceneError: render.spp: Input should be greater than or equal to 1 (got 0)
+    """
     if not isinstance(data, dict):
         raise SceneError("scene", f"a scene must be a mapping, got {type(data).__name__}")
     try:

@@ -50,6 +50,9 @@ def phase_from_phasor(phasor: np.ndarray) -> np.ndarray:
     """Phase delay in [0, 2*pi) of phasors ``A * exp(-1j * phi)``; 0 where the phasor is 0.
 
     The quadrant is taken from the signs of both parts (atan2), not from a bare arctan.
+
+    >>> phase_from_phasor(np.array([1 + 0j, -1j, -1 + 0j, 1j, 0j])) / np.pi
+    array([0. , 0.5, 1. , 1.5, 0. ])
     """
     phi = np.mod(-np.angle(phasor), TWO_PI)
     # mod of a tiny negative number rounds to exactly 2*pi: fold it back to 0.
@@ -57,17 +60,37 @@ def phase_from_phasor(phasor: np.ndarray) -> np.ndarray:
 
 
 def ambiguity_range_m(frequency_hz: float) -> float:
-    """Unambiguous range c / (2 f) of one modulation frequency [m]."""
+    """Unambiguous range c / (2 f) of one modulation frequency [m].
+
+    The pico flexx's 60.24 MHz wraps at 2.49 m; a target at 2.60 m reads as 0.11 m.
+
+    >>> round(ambiguity_range_m(60.24e6), 3), round(ambiguity_range_m(80.32e6), 3)
+    (2.488, 1.866)
+    """
     return SPEED_OF_LIGHT_M_S / (2.0 * frequency_hz)
 
 
 def range_from_phase(phase_rad: np.ndarray, frequency_hz: float) -> np.ndarray:
-    """Range d = c * phi / (4 * pi * f) (seed eq. 7) [m]."""
+    """Range d = c * phi / (4 * pi * f) (seed eq. 7) [m].
+
+    Half a turn of phase is half the ambiguity range:
+
+    >>> f = 60.24e6
+    >>> bool(np.isclose(range_from_phase(np.pi, f), ambiguity_range_m(f) / 2))
+    True
+    """
     return SPEED_OF_LIGHT_M_S * phase_rad / (2.0 * TWO_PI * frequency_hz)
 
 
 def common_frequency_hz(f1: float, f2: float, max_denominator: int = 64) -> float:
-    """Greatest common divisor of two modulation frequencies (e.g. 80.32 and 60.24 -> 20.08 MHz)."""
+    """Greatest common divisor of two modulation frequencies (e.g. 80.32 and 60.24 -> 20.08 MHz).
+
+    Two frequencies together are unambiguous up to the ambiguity range of this one:
+
+    >>> f = common_frequency_hz(80.32e6, 60.24e6)
+    >>> round(f / 1e6, 2), round(ambiguity_range_m(f), 2)
+    (20.08, 7.46)
+    """
     ratio = Fraction(f1 / f2).limit_denominator(max_denominator)
     return f2 / ratio.denominator
 

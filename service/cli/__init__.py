@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from service.cli import compare, devices, serve, simulate
+from service.cli import compare, devices, schema, serve, simulate
 from service.cli.bench import bench_app
 from service.cli.common import err_console
 from sim_core.errors import InvalidInputError
@@ -27,6 +27,7 @@ app.command("compare")(compare.compare)
 app.add_typer(devices.devices_app, name="devices")
 app.command("sim-device")(devices.sim_device)
 app.add_typer(bench_app, name="bench")
+app.add_typer(schema.schema_app, name="schema")
 
 
 def main() -> None:

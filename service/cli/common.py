@@ -22,7 +22,15 @@ def fail_invalid(exc: InvalidInputError) -> None:
 
 
 def bounded(name: str, value: int, lo: int, hi: int) -> int:
-    """``value`` if it is in [lo, hi], else an input error naming the option."""
+    """``value`` if it is in [lo, hi], else an input error naming the option.
+
+    >>> bounded("--spp", 16, 1, 65536)
+    16
+    >>> bounded("--spp", 0, 1, 65536)
+    Traceback (most recent call last):
+    ...
+    sim_core.errors.InvalidInputError: --spp: 0 is outside [1, 65536]
+    """
     if not lo <= value <= hi:
         raise InvalidInputError(name, f"{value} is outside [{lo}, {hi}]")
     return value

@@ -1,10 +1,16 @@
-"""The PMD pixel model against closed forms: shot noise, SBI, ambient light."""
+"""The PMD pixel model against closed forms: shot noise, SBI, ambient light.
+
+Nominal inputs only; the numerical hard cases of the same model (Poisson draws up to 1e12
+electrons, any non-negative input, signal beyond the SBI range, the whole chain at 100 suns,
+1 mm and 10 km) are the separate suite tests/hard_cases/test_sensor_*.py.
+"""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
+from sim_core.camera import F_60_24_MHZ
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.sensor import (
@@ -50,6 +56,26 @@ def test_noise_free_frame_reconstructs_the_exact_range(camera):
     raw = expose(electrons(5000.0), camera, s, None)
     img = reconstruct_raw(raw, np.ones((8, 8)))
     np.testing.assert_allclose(img.range_m, RANGE_M, atol=1e-9)
+
+
+RANGES_M = np.linspace(0.1, 2.4, 12)[None]
+
+
+def bright_electrons(active_e: float) -> PixelElectrons:
+    phase = 4.0 * np.pi * F_60_24_MHZ * RANGES_M / SPEED_OF_LIGHT_M_S
+    shape = RANGES_M.shape
+    return PixelElectrons(np.full(shape, active_e), np.zeros(shape), 1.0,
+                          (active_e * np.exp(-1j * phase))[None])
+
+
+# (from tests/hard_cases: the same behaviour as the test above, over a range sweep and with
+# the SBI compensation active at 4e4 e-)
+@pytest.mark.parametrize("active_e", [1e4, 4e4])
+def test_modulated_signal_within_the_sbi_range_reconstructs_exactly(active_e, camera):
+    raw = expose(bright_electrons(active_e), camera, SensorParams(read_noise_e=0.0), None)
+    img = reconstruct_raw(raw, np.ones(RANGES_M.shape))
+    assert img.valid.all()
+    np.testing.assert_allclose(img.range_m, RANGES_M, atol=1e-6)
 
 
 def test_range_noise_follows_the_shot_noise_prediction(camera):

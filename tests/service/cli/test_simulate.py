@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from service.cli import app
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 runner = CliRunner()
 
 REQUIRED_ARRAYS = {

@@ -18,7 +18,7 @@ from rich.console import Console
 
 from service.cli.bench import mitsuba as bm
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[4]
 
 
 def _mitsuba_loads() -> tuple[bool, str]:

@@ -1,0 +1,69 @@
+"""``toftwin schema``: the JSON Schema of the scene format, for editors and other tools.
+
+The schema is generated from the pydantic models (:class:`sim_core.scene_spec.SceneSpec`); the
+copy in ``docs/scene.schema.json`` is regenerated with ``toftwin schema scene --out
+docs/scene.schema.json`` (a test fails when it is stale). What the schema cannot say (finite
+numbers only, unique object names, one of ``preset``/``kind``, ranges of material parameters) is
+still checked when a scene is loaded.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from service.cli.common import err_console
+
+#: the JSON Schema dialect pydantic generates
+DIALECT = "https://json-schema.org/draft/2020-12/schema"
+SCENE_SCHEMA_ID = "urn:toftwin:schema:scene"
+SCENE_SCHEMA_FILE = "docs/scene.schema.json"
+
+schema_app = typer.Typer(help="JSON Schemas of the file formats.", no_args_is_help=True)
+
+
+def scene_schema() -> dict[str, Any]:
+    """The JSON Schema of a scene file (YAML or JSON), with ``$schema``, ``$id`` and a title.
+
+    >>> s = scene_schema()
+    >>> s["$schema"], s["$id"], s["required"], s["additionalProperties"]
+    ('https://json-schema.org/draft/2020-12/schema', 'urn:toftwin:schema:scene', ['camera'], False)
+    >>> s["$defs"]["RenderSpec"]["properties"]["spp"]["minimum"]
+    1
+    """
+    from sim_core.scene_spec import SceneSpec
+
+    body = SceneSpec.model_json_schema()
+    return {
+        "$schema": DIALECT,
+        "$id": SCENE_SCHEMA_ID,
+        **body,
+        "title": "toftwin scene",
+        "description": "A toftwin scene file (docs/scene-format.md); "
+        f"regenerate with `toftwin schema scene --out {SCENE_SCHEMA_FILE}`.",
+    }
+
+
+def schema_text(schema: dict[str, Any]) -> str:
+    """The schema as the file holds it: indented JSON with a final newline."""
+    return json.dumps(schema, indent=2, ensure_ascii=False) + "\n"
+
+
+@schema_app.command("scene")
+def scene(
+    out: Annotated[
+        Path | None, typer.Option("--out", help="File to write (default: print to stdout).")
+    ] = None,
+) -> None:
+    """The JSON Schema of scene files; point an editor's YAML support at it."""
+    text = schema_text(scene_schema())
+    if out is None:
+        sys.stdout.write(text)
+        return
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    err_console.print(f"wrote {out}")
