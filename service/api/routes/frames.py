@@ -12,6 +12,7 @@ from service.api.deps import SessionDep, StoreDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
 from service.store import queries
+from sim_core.json_safe import json_safe
 
 router = APIRouter(prefix="/frames", tags=["frames"])
 FrameIdPath = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A frame id.")]
@@ -82,7 +83,7 @@ def frame_public(store, row, with_metadata: bool = True) -> dict:
         path = store.path(row.id) / "frame.json"
         meta = json.loads(path.read_text()) if path.is_file() else {}
     base = f"/api/v1/frames/{row.id}"
-    return queries.json_safe({
+    return json_safe({
         "id": row.id, "kind": row.kind, "created_at": row.created_at,
         "campaign_id": row.campaign_id, "scene_name": row.scene_name,
         "scene_hash": row.scene_hash, "rig": json.loads(row.rig_json),
