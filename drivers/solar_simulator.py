@@ -42,6 +42,7 @@ from drivers.errors import (
     SolarSimulatorError,
 )
 from drivers.transport import SerialSettings, SerialTransport
+from sim_core.lights import SUNS_RANGE  # level range in suns; its home is sim_core.lights
 
 __all__ = [
     "DEFAULT_CALIBRATION_PATH",
@@ -58,9 +59,6 @@ __all__ = [
     "describe_stb",
     "parse_register",
 ]
-
-#: Level range the rig may be driven to, in suns (Sol3A spectral match is specified near 1 sun).
-SUNS_RANGE = (0.8, 1.2)
 
 DEFAULT_CALIBRATION_PATH = Path(__file__).parent / "data" / "solar_calibration.yaml"
 

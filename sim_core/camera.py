@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from sim_core.errors import InvalidInputError
 
@@ -76,26 +77,52 @@ def distort_normalized(x: np.ndarray, y: np.ndarray, k: tuple[float, ...]) -> tu
     return xd, yd
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def undistort_point(xd, yd, k1, k2, p1, p2, k3, iterations):
+    """Invert :func:`distort_normalized` at one point by fixed-point iteration (compiled).
+
+    The one implementation of the inversion: :func:`undistort_normalized` runs it over arrays
+    and the render kernel's ``camera_ray`` inlines it.
+    """
+    x, y = xd, yd
+    for _ in range(iterations):
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        # radial stays near 1 for physical lenses; the floor keeps a wild k from dividing by 0.
+        if abs(radial) < 1e-6:
+            radial = 1e-6
+        dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        x = (xd - dx) / radial
+        y = (yd - dy) / radial
+    return x, y
+
+
+@njit(cache=True, error_model="numpy")
+def _undistort_points(xd, yd, k1, k2, p1, p2, k3, iterations):
+    x = np.empty_like(xd)
+    y = np.empty_like(yd)
+    for i in range(xd.shape[0]):
+        x[i], y[i] = undistort_point(xd[i], yd[i], k1, k2, p1, p2, k3, iterations)
+    return x, y
+
+
 def undistort_normalized(
     xd: np.ndarray, yd: np.ndarray, k: tuple[float, ...], iterations: int = 20
 ) -> tuple[np.ndarray, np.ndarray]:
     """Invert :func:`distort_normalized` by fixed-point iteration (as cv2.undistortPoints).
 
     Converges for the moderate distortion of real lenses (|k1| r^2 well below 1); the result is
-    checked by re-distorting in the tests.
+    checked by re-distorting in the tests. Runs :func:`undistort_point` on every point.
     """
-    k1, k2, p1, p2, k3 = k
-    x, y = xd.copy(), yd.copy()
-    for _ in range(iterations):
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        # radial stays near 1 for physical lenses; the floor keeps a wild k from dividing by 0.
-        radial = np.where(np.abs(radial) < 1e-6, 1e-6, radial)
-        dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        x = (xd - dx) / radial
-        y = (yd - dy) / radial
-    return x, y
+    k1, k2, p1, p2, k3 = (float(v) for v in k)
+    xa = np.asarray(xd, dtype=np.float64)
+    ya = np.asarray(yd, dtype=np.float64)
+    shape = np.broadcast_shapes(xa.shape, ya.shape)
+    xa = np.ascontiguousarray(np.broadcast_to(xa, shape)).ravel()
+    ya = np.ascontiguousarray(np.broadcast_to(ya, shape)).ravel()
+    x, y = _undistort_points(xa, ya, k1, k2, p1, p2, k3, int(iterations))
+    return x.reshape(shape), y.reshape(shape)
 
 
 def pixel_to_camera_direction(
@@ -127,6 +154,23 @@ def pixel_centre_grid(intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
     """Flattened (u, v) coordinates of every pixel centre, row-major (row 0 first)."""
     v, u = np.mgrid[0 : intr.height_px, 0 : intr.width_px]
     return u.ravel().astype(np.float64), v.ravel().astype(np.float64)
+
+
+def z_over_range(intr: Intrinsics) -> np.ndarray:
+    """cos(alpha) of every pixel, (H, W): the z component of its pixel-centre ray's unit
+    direction, i.e. ``depth_z / range`` (alpha: angle between the optical axis and the ray)."""
+    u, v = pixel_centre_grid(intr)
+    return pixel_to_camera_direction(intr, u, v)[:, 2].reshape(intr.shape)
+
+
+def range_to_depth_z(range_m: np.ndarray, z_over_range: np.ndarray) -> np.ndarray:
+    """Depth along the optical axis from radial range: ``range * z_over_range``."""
+    return range_m * z_over_range
+
+
+def depth_z_to_range(depth_z_m: np.ndarray, z_over_range: np.ndarray) -> np.ndarray:
+    """Radial range from depth along the optical axis: ``depth_z / z_over_range``."""
+    return depth_z_m / z_over_range
 
 
 def look_at(position_m, target_m, up) -> np.ndarray:

@@ -1,4 +1,20 @@
-"""Writing and reading frames: ``.npz`` arrays, a JSON sidecar, 16-bit PNG previews.
+"""The frame format: the one module that writes and reads frame folders (docs/frame-format.md).
+
+A frame folder holds, for a measured and a simulated frame alike:
+
+- ``frame.npz``: the reconstruction (:data:`IMAGE_ARRAYS`), plus for a simulated frame the
+  rendered light field and ground truth (:data:`LIGHT_FIELD_ARRAYS`); units in
+  :data:`ARRAY_UNITS`;
+- ``frame.json``: metadata (strict JSON, sorted keys; keys in docs/frame-format.md);
+- ``raw.npz``: the four-phase raw frame (:func:`write_raw`) - always for a measured frame, for a
+  simulated one only with a non-ideal sensor;
+- ``grey.png`` (8 bit, :func:`grey_preview_8bit` at the frame's grey full scale) and
+  ``depth.png`` (16 bit millimetres, :func:`depth_preview_mm`).
+
+The grey full scale (amplitude shown as grey 255) is a property of the frame, chosen by
+:func:`grey_full_scale` and recorded in ``frame.json`` as ``grey_preview_full_scale``; every
+grey image of the frame (the PNG, the ``grey_8bit`` array, ``toftwin preview``, the report
+panels, the service's comparison metrics) uses it.
 
 Every file is written to a temporary name in the target directory and renamed into place, so a
 reader never sees a half-written file and a crash leaves at most a stray ``*.tmp``.
@@ -9,13 +25,185 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from PIL import Image
 
+from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics
+from sim_core.errors import InvalidInputError
+from sim_core.json_safe import json_safe
+from sim_core.raw import RawFrame, ValidityThresholds, reconstruct_raw
+from sim_core.sensor import SensorParams
+from sim_core.tof import ToFImage
 
+# -- file names ------------------------------------------------------------------------------
+FRAME_NPZ = "frame.npz"
+FRAME_JSON = "frame.json"
+RAW_NPZ = "raw.npz"
+GREY_PNG = "grey.png"
+DEPTH_PNG = "depth.png"
+#: every file a frame folder may hold (measured and simulated)
+FRAME_FILES = (FRAME_NPZ, FRAME_JSON, GREY_PNG, DEPTH_PNG, RAW_NPZ)
+
+FrameKind = Literal["measured", "simulated"]
+
+# -- arrays ----------------------------------------------------------------------------------
+#: what each ``frame.npz`` array holds, written into frame.json (``arrays``)
+ARRAY_UNITS = {
+    "range_m": "m, radial; NaN where not valid",
+    "depth_z_m": "m, along the optical axis; NaN where not valid",
+    "amplitude": "DN, seed eq. 5 (ideal sensor: W m^-2 sr^-1, |phasor| of the first frequency)",
+    "intensity": "DN, mean tap sum, seed eq. 6 (ideal sensor: W m^-2 sr^-1, DC)",
+    "grey_8bit": "uint8 grey image in the camera tools' convention (see grey_full_scale)",
+    "depth_mm": "uint16 radial range in millimetres, 0 where not valid",
+    "phase_rad": "rad in [0, 2 pi), first frequency",
+    "phase_all_rad": "rad in [0, 2 pi), (n_f, H, W)",
+    "valid": "bool",
+    "frequencies_hz": "Hz",
+    "phasor": "W m^-2 sr^-1, complex, (n_f, H, W)",
+    "dc_active": "W m^-2 sr^-1",
+    "dc_ambient": "W m^-2 sr^-1",
+    "truth_range_m": "m, radial, pixel-centre ray; NaN where nothing is hit",
+    "truth_depth_z_m": "m, along the optical axis; NaN where nothing is hit",
+    "object_id": "index into objects of the scene, -1 for none",
+    "hit": "bool",
+}
+#: arrays of every frame (the reconstruction and its previews)
+IMAGE_ARRAYS = (
+    "grey_8bit", "depth_mm", "range_m", "depth_z_m", "amplitude", "intensity", "phase_rad",
+    "phase_all_rad", "valid", "frequencies_hz",
+)
+#: arrays of a simulated frame only (rendered light field and ground truth)
+LIGHT_FIELD_ARRAYS = (
+    "phasor", "dc_active", "dc_ambient", "truth_range_m", "truth_depth_z_m", "object_id", "hit",
+)
+#: arrays of ``raw.npz`` (``taps`` only where the source exposes them), plus ``meta_json``
+RAW_ARRAYS = ("phase_images", "intensity", "frequencies_hz", "saturated", "sbi_limit", "taps")
+
+# -- grey and depth previews -----------------------------------------------------------------
+GREY_FULL_SCALE_PERCENTILE = 99.5
+"""Percentile of the valid amplitude used as grey full scale where the amplitude has no DN."""
+
+
+def package_version() -> str:
+    """The toftwin version written into ``frame.json`` (``package_version``)."""
+    try:
+        return metadata.version("toftwin")
+    except metadata.PackageNotFoundError:  # running from a source tree without install
+        return "0+unknown"
+
+
+def grey_full_scale(amplitude: np.ndarray, valid: np.ndarray, adc_bits: int | None) -> float:
+    """The amplitude a frame shows as grey 255 (the rule of docs/frame-format.md).
+
+    A frame read out by a sensor (measured, or simulated with a non-ideal sensor) has its
+    amplitude in DN: its full scale is fixed by the ADC, ``2 ** (adc_bits - 1)`` DN, so grey
+    levels of frames from the same sensor are comparable whatever the scene, pose or mask.
+    An ideal-sensor frame (``adc_bits`` None) has radiance units and no natural scale: the
+    99.5th percentile of its valid, finite amplitude (0 when there is none: an all-black image).
+    """
+    if adc_bits is not None:
+        return float(2 ** (int(adc_bits) - 1))
+    value = np.asarray(amplitude)
+    sel = value[np.asarray(valid, dtype=bool) & np.isfinite(value)]
+    return float(np.percentile(sel, GREY_FULL_SCALE_PERCENTILE)) if sel.size else 0.0
+
+
+def sensor_adc_bits(raw: RawFrame | None) -> int | None:
+    """ADC bits of the sensor behind ``raw`` (None: no raw frame, an ideal sensor).
+
+    From the raw frame's ``meta["sensor"]`` where the source records it (the simulator does),
+    else the default sensor's (:class:`~sim_core.sensor.SensorParams`).
+    """
+    if raw is None:
+        return None
+    sensor = raw.meta.get("sensor") or {}
+    return int(sensor.get("adc_bits", SensorParams().adc_bits))
+
+
+def grey_preview_8bit(value: np.ndarray, valid: np.ndarray, full_scale: float | None = None):
+    """8-bit grey image ``round(value / full_scale * 255)`` clipped to [0, 255], 0 where not
+    finite; full scale None: the percentile rule of :func:`grey_full_scale` (no ADC).
+
+    Returns the image and the full scale used (an all-black image and 0 for a full scale <= 0).
+    """
+    if full_scale is None:
+        full_scale = grey_full_scale(value, valid, None)
+    if not full_scale > 0.0:
+        return np.zeros(value.shape, dtype=np.uint8), 0.0
+    g = np.where(np.isfinite(value), value, 0.0) / full_scale * 255.0
+    return np.clip(np.round(g), 0, 255).astype(np.uint8), full_scale
+
+
+def depth_preview_mm(range_m: np.ndarray) -> np.ndarray:
+    """16-bit depth image in millimetres, 0 where invalid (the camera tools' convention)."""
+    mm = np.where(np.isfinite(range_m), np.round(range_m * 1000.0), 0.0)
+    return np.clip(mm, 0, 65535).astype(np.uint16)
+
+
+def image_arrays(image: ToFImage, full_scale: float) -> dict[str, np.ndarray]:
+    """The :data:`IMAGE_ARRAYS` of ``frame.npz`` for a reconstruction."""
+    grey, _ = grey_preview_8bit(image.amplitude, image.valid, full_scale)
+    return {
+        "grey_8bit": grey,
+        "depth_mm": depth_preview_mm(image.range_m),
+        "range_m": image.range_m,
+        "depth_z_m": image.depth_z_m,
+        "amplitude": image.amplitude,
+        "intensity": image.intensity,
+        "phase_rad": image.phase_rad[0],
+        "phase_all_rad": image.phase_rad,
+        "valid": image.valid,
+        "frequencies_hz": image.frequencies_hz,
+    }
+
+
+def image_from_arrays(arrays: dict[str, np.ndarray]) -> ToFImage:
+    """A :class:`ToFImage` from the arrays of a ``frame.npz``."""
+    phase = arrays.get("phase_all_rad", arrays["phase_rad"][None])
+    return ToFImage(
+        range_m=arrays["range_m"],
+        depth_z_m=arrays["depth_z_m"],
+        amplitude=arrays["amplitude"],
+        intensity=arrays["intensity"],
+        phase_rad=phase,
+        valid=arrays["valid"].astype(bool),
+        frequencies_hz=arrays["frequencies_hz"],
+    )
+
+
+# -- intrinsics in frame.json ----------------------------------------------------------------
+def intrinsics_dict(intr: Intrinsics) -> dict[str, Any]:
+    """``frame.json`` ``intrinsics`` of a measured frame."""
+    return {
+        "width_px": intr.width_px, "height_px": intr.height_px, "fx_px": intr.fx_px,
+        "fy_px": intr.fy_px, "cx_px": intr.cx_px, "cy_px": intr.cy_px,
+        "distortion": list(intr.distortion),
+    }
+
+
+def intrinsics_from_meta(meta: dict, shape: tuple[int, int]) -> Intrinsics:
+    """The intrinsics a measured frame was reconstructed with.
+
+    Without ``intrinsics`` in ``frame.json``: the pico flexx preset's focal lengths with the
+    principal point at the image centre.
+    """
+    if "intrinsics" in meta:
+        i = meta["intrinsics"]
+        return Intrinsics(
+            i["width_px"], i["height_px"], i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"],
+            tuple(i.get("distortion", (0.0,) * 5)),
+        )
+    p = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
+    h, w = shape
+    return Intrinsics(w, h, p["fx_px"], p["fy_px"], (w - 1) / 2.0, (h - 1) / 2.0)
+
+
+# -- atomic files ----------------------------------------------------------------------------
 def _atomic_write(path: Path, write) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
@@ -35,17 +223,9 @@ def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON atomically (sorted keys, 2-space indent)."""
-    text = json.dumps(data, indent=2, sort_keys=True, default=_json_default).encode()
+    """Write strict JSON atomically (sorted keys, 2-space indent; :func:`json_safe`)."""
+    text = json.dumps(json_safe(data), indent=2, sort_keys=True, allow_nan=False).encode()
     _atomic_write(Path(path), lambda fh: fh.write(text))
-
-
-def _json_default(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def write_png(path: Path, image: np.ndarray) -> None:
@@ -56,30 +236,248 @@ def write_png(path: Path, image: np.ndarray) -> None:
     _atomic_write(Path(path), lambda fh: img.save(fh, format="PNG"))
 
 
-def depth_preview_mm(range_m: np.ndarray) -> np.ndarray:
-    """16-bit depth image in millimetres, 0 where invalid (the camera tools' convention)."""
-    mm = np.where(np.isfinite(range_m), np.round(range_m * 1000.0), 0.0)
-    return np.clip(mm, 0, 65535).astype(np.uint16)
+# -- raw.npz ---------------------------------------------------------------------------------
+def write_raw(path: str | Path, raw: RawFrame) -> None:
+    """Write ``raw.npz``: :data:`RAW_ARRAYS` and the metadata as JSON (``meta_json``)."""
+    arrays = {
+        "phase_images": raw.phase_images,
+        "intensity": raw.intensity,
+        "frequencies_hz": raw.frequencies_hz,
+        "saturated": raw.saturated,
+        "sbi_limit": raw.sbi_limit,
+        "meta_json": np.array(json.dumps(json_safe(
+            {"exposure_s": raw.exposure_s, "timestamp_s": raw.timestamp_s, **raw.meta}
+        ), allow_nan=False)),
+    }
+    if raw.taps is not None:
+        arrays["taps"] = raw.taps
+    write_npz(Path(path), arrays)
 
 
-def grey_preview_8bit(value: np.ndarray, valid: np.ndarray, full_scale: float | None = None):
-    """8-bit grey image: ``value / full_scale * 255``; full scale defaults to the 99.5th percentile.
+def read_raw(path: str | Path) -> RawFrame:
+    """Read a ``raw.npz`` written by :func:`write_raw`."""
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta_json"]))
+        exposure = float(meta.pop("exposure_s"))
+        stamp = float(meta.pop("timestamp_s"))
+        return RawFrame(
+            phase_images=z["phase_images"], intensity=z["intensity"],
+            frequencies_hz=z["frequencies_hz"], saturated=z["saturated"],
+            sbi_limit=z["sbi_limit"], exposure_s=exposure, timestamp_s=stamp,
+            taps=z["taps"] if "taps" in z.files else None, meta=meta,
+        )
 
-    Returns the image and the full scale used.
+
+# -- writing frame folders -------------------------------------------------------------------
+def _write_image_files(out: Path, arrays: dict[str, np.ndarray], meta: dict) -> None:
+    write_npz(out / FRAME_NPZ, arrays)
+    write_png(out / DEPTH_PNG, arrays["depth_mm"])
+    write_png(out / GREY_PNG, arrays["grey_8bit"])
+    write_json(out / FRAME_JSON, meta)
+
+
+def write_simulated(out_dir: str | Path, frame: Any, scene_name: str = "") -> Path:
+    """Write a simulated frame folder: ``frame.npz``, ``frame.json``, the PNGs and, with a
+    non-ideal sensor, ``raw.npz``.
+
+    ``frame`` is a :class:`sim_core.pipeline.SimulatedFrame` (not imported: the pipeline
+    imports this module).
     """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    im, lf = frame.image, frame.light_field
+    full_scale = frame.grey_full_scale
     if full_scale is None:
-        sel = value[valid & np.isfinite(value)]
-        full_scale = float(np.percentile(sel, 99.5)) if sel.size else 0.0
-    if not full_scale > 0.0:
-        return np.zeros(value.shape, dtype=np.uint8), 0.0
-    g = np.where(np.isfinite(value), value, 0.0) / full_scale * 255.0
-    return np.clip(np.round(g), 0, 255).astype(np.uint8), full_scale
+        full_scale = grey_full_scale(im.amplitude, im.valid, sensor_adc_bits(frame.raw))
+    arrays = {
+        **image_arrays(im, full_scale),
+        "phasor": lf.phasor,
+        "dc_active": lf.dc_active,
+        "dc_ambient": lf.dc_ambient,
+        "truth_range_m": lf.truth_range_m,
+        "truth_depth_z_m": lf.truth_depth_z_m,
+        "object_id": lf.object_id,
+        "hit": lf.hit,
+    }
+    # the image arrays' frequencies are the light field's (the same values)
+    arrays["frequencies_hz"] = lf.frequencies_hz
+    if frame.raw is not None:
+        write_raw(out / RAW_NPZ, frame.raw)
+    s = frame.settings
+    meta = {
+        "scene_name": scene_name,
+        "scene_hash": frame.scene_hash,
+        "package_version": package_version(),
+        "ideal_sensor": frame.ideal,
+        "settings": {
+            "integrator": s.integrator,
+            "spp": s.spp,
+            "max_bounces": s.max_bounces,
+            "effective_bounces": s.effective_bounces,
+            "seed": s.seed,
+            "russian_roulette_from_bounce": s.russian_roulette_from_bounce,
+            "threads": s.threads,
+        },
+        "timings_s": frame.timings_s,
+        "rays_traced": frame.rays_traced,
+        "embree_share": frame.embree_share,
+        "render_thread_seconds": frame.render_thread_seconds,
+        "shape": list(im.range_m.shape),
+        "frequencies_hz": lf.frequencies_hz.tolist(),
+        "grey_preview_full_scale": full_scale if full_scale > 0.0 else 0.0,
+        "arrays": ARRAY_UNITS,
+        "effect_plan": frame.plan.to_dict(),
+        **_adaptive_meta(frame),
+        "sensor": None if frame.raw is None else frame.raw.meta.get("sensor"),
+        **frame.extra,
+    }
+    _write_image_files(out, arrays, meta)
+    return out
 
 
-def read_frame(directory: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Read ``frame.npz`` and ``frame.json`` from a frame directory."""
+def _adaptive_meta(frame: Any) -> dict:
+    report = frame.adaptive
+    if report is None:
+        return {}
+    return {
+        "adaptive": report.to_dict(),
+        "achieved_range_error_mm": report.achieved_range_error_mm,
+        "seconds": report.seconds,
+    }
+
+
+def write_measured(
+    out_dir: str | Path, raw: RawFrame, camera: Camera, extra: dict[str, Any]
+) -> tuple[ToFImage, float]:
+    """Reconstruct ``raw`` with ``camera``'s intrinsics and write a measured frame folder.
+
+    ``raw.npz`` as the camera delivered it, ``frame.npz``/``frame.json``/PNGs of its
+    reconstruction (:func:`~sim_core.raw.reconstruct_raw`); ``extra`` goes into ``frame.json``.
+    Returns the reconstruction and its grey full scale.
+    """
+    from sim_core.camera import z_over_range
+
+    if raw.shape != camera.intrinsics.shape:
+        raise ValueError(
+            f"measured frame is {raw.shape}, the camera model {camera.intrinsics.shape}"
+        )
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    image = reconstruct_raw(raw, z_over_range(camera.intrinsics))
+    full_scale = grey_full_scale(image.amplitude, image.valid, sensor_adc_bits(raw))
+    arrays = image_arrays(image, full_scale)
+    meta = {
+        "kind": "measured",
+        "package_version": package_version(),
+        "shape": list(image.range_m.shape),
+        "frequencies_hz": image.frequencies_hz.tolist(),
+        "exposure_s": raw.exposure_s,
+        "timestamp_s": raw.timestamp_s,
+        "grey_preview_full_scale": full_scale,
+        "intrinsics": intrinsics_dict(camera.intrinsics),
+        "validity": ValidityThresholds().to_dict(),
+        "camera_meta": raw.meta,
+        "arrays": {k: ARRAY_UNITS[k] for k in arrays},
+        **extra,
+    }
+    write_raw(out / RAW_NPZ, raw)
+    _write_image_files(out, arrays, meta)
+    return image, full_scale
+
+
+# -- reading frame folders -------------------------------------------------------------------
+@dataclass(frozen=True)
+class Frame:
+    """A frame folder read back (:func:`read_frame`).
+
+    Attributes
+    ----------
+    kind : "measured" or "simulated"
+    image : ToFImage
+        The reconstruction (a measured frame's is recomputed from ``raw.npz``).
+    arrays : dict
+        ``frame.npz`` (empty for a measured folder holding only ``raw.npz``).
+    meta : dict
+        ``frame.json`` (empty when the folder has none).
+    grey_full_scale : float
+        Amplitude shown as grey 255 (``grey_preview_full_scale``, else :func:`grey_full_scale`).
+    raw : RawFrame or None
+        ``raw.npz`` where the folder has one.
+    """
+
+    kind: FrameKind
+    image: ToFImage
+    arrays: dict[str, np.ndarray]
+    meta: dict[str, Any]
+    grey_full_scale: float
+    raw: RawFrame | None = None
+
+    def grey_8bit(self) -> np.ndarray:
+        """The frame's grey image (``grey.png``), at its grey full scale."""
+        img, _ = grey_preview_8bit(self.image.amplitude, self.image.valid, self.grey_full_scale)
+        return img
+
+
+def _read_meta(d: Path) -> dict:
+    p = d / FRAME_JSON
+    return json.loads(p.read_text()) if p.is_file() else {}
+
+
+def _read_arrays(d: Path) -> dict[str, np.ndarray]:
+    with np.load(d / FRAME_NPZ) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _recorded_full_scale(meta: dict) -> float | None:
+    fs = meta.get("grey_preview_full_scale")
+    return float(fs) if isinstance(fs, int | float) and np.isfinite(fs) else None
+
+
+def read_measured(directory: str | Path) -> Frame:
+    """A measured frame folder: ``raw.npz`` reconstructed with ``frame.json``'s intrinsics."""
+    from sim_core.camera import z_over_range
+
     d = Path(directory)
-    with np.load(d / "frame.npz") as z:
-        arrays = {k: z[k] for k in z.files}
-    meta = json.loads((d / "frame.json").read_text())
-    return arrays, meta
+    if not (d / RAW_NPZ).is_file():
+        raise InvalidInputError("measured_dir", f"'{d}' holds no raw.npz (a measured frame)")
+    raw = read_raw(d / RAW_NPZ)
+    meta = _read_meta(d)
+    intr = intrinsics_from_meta(meta, raw.shape)
+    if intr.shape != raw.shape:
+        raise InvalidInputError(
+            "measured_dir", f"raw frame is {raw.shape} but frame.json intrinsics {intr.shape}"
+        )
+    image = reconstruct_raw(raw, z_over_range(intr))
+    fs = _recorded_full_scale(meta)
+    if fs is None:
+        fs = grey_full_scale(image.amplitude, image.valid, sensor_adc_bits(raw))
+    arrays = _read_arrays(d) if (d / FRAME_NPZ).is_file() else {}
+    return Frame("measured", image, arrays, meta, fs, raw)
+
+
+def read_simulated(directory: str | Path) -> Frame:
+    """A simulated frame folder (:func:`write_simulated` layout)."""
+    d = Path(directory)
+    if not (d / FRAME_NPZ).is_file():
+        raise InvalidInputError("simulated_dir", f"'{d}' holds no frame.npz (a saved frame)")
+    arrays = _read_arrays(d)
+    meta = _read_meta(d)
+    image = image_from_arrays(arrays)
+    raw = read_raw(d / RAW_NPZ) if (d / RAW_NPZ).is_file() else None
+    fs = _recorded_full_scale(meta)
+    if fs is None:
+        fs = grey_full_scale(image.amplitude, image.valid, sensor_adc_bits(raw))
+    return Frame("simulated", image, arrays, meta, fs, raw)
+
+
+def read_frame(directory: str | Path) -> Frame:
+    """A frame folder, measured (``frame.json`` kind "measured", or only ``raw.npz``) or
+    simulated."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise FileNotFoundError(f"no frame folder {d}")
+    meta = _read_meta(d)
+    measured = meta.get("kind") == "measured" or (
+        not (d / FRAME_NPZ).is_file() and (d / RAW_NPZ).is_file()
+    )
+    return read_measured(d) if measured else read_simulated(d)

@@ -12,6 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+#: level range the solar simulator (Oriel Sol3A) may be driven to, in suns; its spectral match
+#: is specified near 1 sun. The one home of the range: the scene spec, the rig driver
+#: (``drivers.solar_simulator.SUNS_RANGE``) and the service's requests use it.
+SUNS_RANGE = (0.8, 1.2)
+
 
 @dataclass(frozen=True)
 class PointLight:

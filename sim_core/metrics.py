@@ -39,7 +39,8 @@ import numpy as np
 from skimage.metrics import structural_similarity
 
 from sim_core.errors import InvalidInputError
-from sim_core.frame_io import depth_preview_mm, grey_preview_8bit
+from sim_core.frame_io import GREY_FULL_SCALE_PERCENTILE, depth_preview_mm, grey_preview_8bit
+from sim_core.json_safe import json_safe
 from sim_core.tof import ToFImage
 
 GREY_DATA_RANGE = 255.0
@@ -50,9 +51,6 @@ DEPTH_DATA_RANGE = 65535.0
 
 SSIM_WIN_SIZE = 7
 """Side of scikit-image's default (uniform) SSIM window."""
-
-GREY_FULL_SCALE_PERCENTILE = 99.5
-"""Percentile of the measured amplitude used as default grey full scale (as ``frame_io``)."""
 
 TABLE_HEADER: tuple[str, str, str, str, str] = ("Image", "Index", "Measured", "Simulated", "Error")
 """Column titles of :meth:`ComparisonReport.table_rows` (the layout of seed Table 5)."""
@@ -457,7 +455,7 @@ class ComparisonReport:
     def to_dict(self) -> dict[str, Any]:
         """JSON-friendly dict: plain ints/floats/strings; non-finite floats become the strings
         ``"inf"``, ``"-inf"`` or ``"nan"`` (so ``json.dumps(..., allow_nan=False)`` works)."""
-        return _json_safe(asdict(self))
+        return json_safe(asdict(self))
 
     def table_rows(self) -> list[tuple[str, str, str, str, str]]:
         """Rows laid out like seed Table 5 (columns :data:`TABLE_HEADER`), as strings.
@@ -550,7 +548,8 @@ def compare_images(
         Amplitude mapped to grey 255 (:func:`grey_8bit`). One number: the same for both frames
         (same amplitude unit). A pair: (measured, simulated), for frames in different units.
         None: the 99.5th percentile of the measured amplitude inside the effective mask, applied
-        to both frames.
+        to both frames. The service passes each frame's own grey full scale (the pair from
+        :func:`sim_core.frame_io.grey_full_scale`, as in the frames' ``grey.png``).
     depth_unit : float
         Metres per count of the 16-bit depth image; 1e-3 (millimetres, the camera tools'
         convention, :func:`depth_mm_16bit`). The data range stays 65535 counts.
@@ -717,25 +716,6 @@ def _histogram_array(field: str, values: np.ndarray) -> np.ndarray:
     if a.sum() <= 0.0:
         raise InvalidInputError(field, "all bins are 0; allowed: at least one non-empty bin")
     return a
-
-
-def _json_safe(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, bool | str) or obj is None:
-        return obj
-    if isinstance(obj, int | np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        v = float(obj)
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return v
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def _fmt(value: float) -> str:

@@ -15,14 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim_core.camera import Camera, pixel_centre_grid, pixel_to_camera_direction
-
-
-def cos_off_axis(camera: Camera) -> np.ndarray:
-    """cos(alpha) of every pixel: the angle between the optical axis and its chief ray, (H, W)."""
-    intr = camera.intrinsics
-    u, v = pixel_centre_grid(intr)
-    return pixel_to_camera_direction(intr, u, v)[:, 2].reshape(intr.shape)
+from sim_core.camera import Camera, z_over_range
 
 
 def pixel_irradiance_w_m2(
@@ -45,7 +38,7 @@ def pixel_irradiance_w_m2(
         raise ValueError(f"transmittance = {transmittance} is outside (0, 1]")
     if not f_number > 0.0:
         raise ValueError(f"f_number = {f_number} must be > 0")
-    c = cos_off_axis(camera)
+    c = z_over_range(camera.intrinsics)  # cos(alpha)
     return radiance_w_m2_sr * (transmittance * np.pi / 4.0 / f_number**2) * c**4
 
 

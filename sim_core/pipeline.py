@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +19,8 @@ import numpy as np
 
 from sim_core import frame_io
 from sim_core.adaptive import AdaptiveReport, render_adaptive
-from sim_core.optics import apply_mtf, cos_off_axis
+from sim_core.camera import z_over_range as camera_z_over_range
+from sim_core.optics import apply_mtf
 from sim_core.plan import EffectPlan, plan_effects
 from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.render import LightField, RenderSettings, render
@@ -32,13 +32,6 @@ from sim_core.tracing import RayTracer
 
 #: stream of the sensor-noise generator, so noise never shares numbers with the renderer
 NOISE_STREAM = 0x5E45
-
-
-def package_version() -> str:
-    try:
-        return metadata.version("toftwin")
-    except metadata.PackageNotFoundError:  # running from a source tree without install
-        return "0+unknown"
 
 
 @dataclass
@@ -55,6 +48,7 @@ class SimulatedFrame:
     plan: EffectPlan
     raw: RawFrame | None = None
     ideal: bool = True
+    #: amplitude shown as grey 255 (:func:`sim_core.frame_io.grey_full_scale`)
     grey_full_scale: float | None = None
     adaptive: AdaptiveReport | None = None
     extra: dict[str, Any] = field(default_factory=dict)
@@ -63,8 +57,8 @@ class SimulatedFrame:
 
 
 def z_over_range(scene: Scene) -> np.ndarray:
-    """Cosine between each pixel-centre ray and the optical axis, (H, W)."""
-    return cos_off_axis(scene.camera)
+    """:func:`sim_core.camera.z_over_range` of the scene's camera, (H, W)."""
+    return camera_z_over_range(scene.camera.intrinsics)
 
 
 def simulate(
@@ -126,7 +120,6 @@ def simulate(
 
     t = time.perf_counter()
     raw = None
-    grey_full_scale = None
     if ideal:
         image = reconstruct(
             phasor=phasor, intensity=dc_active + dc_ambient, frequencies_hz=lf.frequencies_hz,
@@ -142,7 +135,9 @@ def simulate(
         timings["sensor"] = time.perf_counter() - t
         t = time.perf_counter()
         image = reconstruct_raw(raw, z_over_range(scene))
-        grey_full_scale = float(2 ** (sensor.adc_bits - 1))
+    grey_full_scale = frame_io.grey_full_scale(
+        image.amplitude, image.valid, None if ideal else sensor.adc_bits
+    )
     timings["reconstruct"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return SimulatedFrame(
@@ -162,103 +157,6 @@ def simulate(
     )
 
 
-#: what each saved array holds, written into frame.json
-ARRAY_UNITS = {
-    "range_m": "m, radial; NaN where not valid",
-    "depth_z_m": "m, along the optical axis; NaN where not valid",
-    "amplitude": "DN, seed eq. 5 (ideal sensor: W m^-2 sr^-1, |phasor| of the first frequency)",
-    "intensity": "DN, mean tap sum, seed eq. 6 (ideal sensor: W m^-2 sr^-1, DC)",
-    "grey_8bit": "uint8 grey image in the camera tools' convention (see grey_full_scale)",
-    "depth_mm": "uint16 radial range in millimetres, 0 where not valid",
-    "phase_rad": "rad in [0, 2 pi), first frequency",
-    "phase_all_rad": "rad in [0, 2 pi), (n_f, H, W)",
-    "valid": "bool",
-    "frequencies_hz": "Hz",
-    "phasor": "W m^-2 sr^-1, complex, (n_f, H, W)",
-    "dc_active": "W m^-2 sr^-1",
-    "dc_ambient": "W m^-2 sr^-1",
-    "truth_range_m": "m, radial, pixel-centre ray; NaN where nothing is hit",
-    "truth_depth_z_m": "m, along the optical axis; NaN where nothing is hit",
-    "object_id": "index into objects of the scene, -1 for none",
-    "hit": "bool",
-}
-
-
-def frame_arrays(frame: SimulatedFrame) -> dict[str, np.ndarray]:
-    """The arrays of ``frame.npz``."""
-    im, lf = frame.image, frame.light_field
-    grey, _ = frame_io.grey_preview_8bit(im.amplitude, im.valid, frame.grey_full_scale)
-    return {
-        "grey_8bit": grey,
-        "depth_mm": frame_io.depth_preview_mm(im.range_m),
-        "range_m": im.range_m,
-        "depth_z_m": im.depth_z_m,
-        "amplitude": im.amplitude,
-        "intensity": im.intensity,
-        "phase_rad": im.phase_rad[0],
-        "phase_all_rad": im.phase_rad,
-        "valid": im.valid,
-        "frequencies_hz": lf.frequencies_hz,
-        "phasor": lf.phasor,
-        "dc_active": lf.dc_active,
-        "dc_ambient": lf.dc_ambient,
-        "truth_range_m": lf.truth_range_m,
-        "truth_depth_z_m": lf.truth_depth_z_m,
-        "object_id": lf.object_id,
-        "hit": lf.hit,
-    }
-
-
 def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "") -> Path:
-    """Write ``frame.npz``, ``frame.json``, ``depth.png`` and ``grey.png`` into ``out_dir``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    arrays = frame_arrays(frame)
-    frame_io.write_npz(out / "frame.npz", arrays)
-    if frame.raw is not None:
-        frame.raw.save(out / "raw.npz")
-    _, full_scale = frame_io.grey_preview_8bit(
-        frame.image.amplitude, frame.image.valid, frame.grey_full_scale
-    )
-    frame_io.write_png(out / "depth.png", arrays["depth_mm"])
-    frame_io.write_png(out / "grey.png", arrays["grey_8bit"])
-    s = frame.settings
-    meta = {
-        "scene_name": scene_name,
-        "scene_hash": frame.scene_hash,
-        "package_version": package_version(),
-        "ideal_sensor": frame.ideal,
-        "settings": {
-            "integrator": s.integrator,
-            "spp": s.spp,
-            "max_bounces": s.max_bounces,
-            "effective_bounces": s.effective_bounces,
-            "seed": s.seed,
-            "russian_roulette_from_bounce": s.russian_roulette_from_bounce,
-            "threads": s.threads,
-        },
-        "timings_s": frame.timings_s,
-        "rays_traced": frame.rays_traced,
-        "embree_share": frame.embree_share,
-        "render_thread_seconds": frame.render_thread_seconds,
-        "shape": list(frame.image.range_m.shape),
-        "frequencies_hz": frame.light_field.frequencies_hz.tolist(),
-        "grey_preview_full_scale": full_scale,
-        "arrays": ARRAY_UNITS,
-        "effect_plan": frame.plan.to_dict(),
-        **_adaptive_meta(frame.adaptive),
-        "sensor": None if frame.raw is None else frame.raw.meta.get("sensor"),
-        **frame.extra,
-    }
-    frame_io.write_json(out / "frame.json", meta)
-    return out
-
-
-def _adaptive_meta(report: AdaptiveReport | None) -> dict:
-    if report is None:
-        return {}
-    return {
-        "adaptive": report.to_dict(),
-        "achieved_range_error_mm": report.achieved_range_error_mm,
-        "seconds": report.seconds,
-    }
+    """Write the frame folder (:func:`sim_core.frame_io.write_simulated`)."""
+    return frame_io.write_simulated(out_dir, frame, scene_name)

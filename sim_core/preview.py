@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-from sim_core.frame_io import grey_preview_8bit
+from sim_core.frame_io import Frame
 
 
 def depth_colours(range_m: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -26,12 +26,13 @@ def depth_colours(range_m: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return rgb
 
 
-def side_by_side(arrays: dict[str, np.ndarray], scale: int = 2) -> Image.Image:
-    """Grey (amplitude) left, depth right, magnified ``scale`` times."""
-    valid = arrays["valid"].astype(bool)
-    grey, _ = grey_preview_8bit(arrays["amplitude"], valid)
+def side_by_side(frame: Frame, scale: int = 2) -> Image.Image:
+    """Grey (the frame's grey image, as its grey.png) left, depth right, magnified ``scale``
+    times."""
+    valid = frame.image.valid
+    grey = frame.grey_8bit()
     left = np.repeat(grey[..., None], 3, axis=2)
-    right = depth_colours(arrays["range_m"], valid)
+    right = depth_colours(frame.image.range_m, valid)
     gap = np.full((grey.shape[0], 4, 3), 255, dtype=np.uint8)
     img = Image.fromarray(np.concatenate([left, gap, right], axis=1))
     return img.resize((img.width * scale, img.height * scale), Image.NEAREST)

@@ -2,19 +2,17 @@
 
 Both the camera driver and the sensor model return this type, and
 :func:`reconstruct_raw` turns either into a :class:`~sim_core.tof.ToFImage`, so measured and
-simulated frames go through the very same reconstruction.
+simulated frames go through the very same reconstruction. ``raw.npz`` (the file form) is
+written and read by :func:`sim_core.frame_io.write_raw` and :func:`sim_core.frame_io.read_raw`.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sim_core import frame_io
 from sim_core.tof import ToFImage, reconstruct
 
 #: the four phase offsets of the reference signal, tau_i = i * pi / 2 (seed eq. 3)
@@ -69,36 +67,6 @@ class RawFrame:
         """
         c = self.phase_images.astype(np.float64)
         return (c[:, 0] - c[:, 2]) - 1j * (c[:, 3] - c[:, 1])
-
-    def save(self, path: str | Path) -> None:
-        """Write ``raw.npz`` (arrays) with the metadata as JSON inside, atomically."""
-        arrays = {
-            "phase_images": self.phase_images,
-            "intensity": self.intensity,
-            "frequencies_hz": self.frequencies_hz,
-            "saturated": self.saturated,
-            "sbi_limit": self.sbi_limit,
-            "meta_json": np.array(json.dumps(
-                {"exposure_s": self.exposure_s, "timestamp_s": self.timestamp_s, **self.meta},
-                default=frame_io._json_default,
-            )),
-        }
-        if self.taps is not None:
-            arrays["taps"] = self.taps
-        frame_io.write_npz(Path(path), arrays)
-
-    @classmethod
-    def load(cls, path: str | Path) -> RawFrame:
-        with np.load(path) as z:
-            meta = json.loads(str(z["meta_json"]))
-            exposure = float(meta.pop("exposure_s"))
-            stamp = float(meta.pop("timestamp_s"))
-            return cls(
-                phase_images=z["phase_images"], intensity=z["intensity"],
-                frequencies_hz=z["frequencies_hz"], saturated=z["saturated"],
-                sbi_limit=z["sbi_limit"], exposure_s=exposure, timestamp_s=stamp,
-                taps=z["taps"] if "taps" in z.files else None, meta=meta,
-            )
 
 
 @dataclass(frozen=True)

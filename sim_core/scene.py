@@ -162,7 +162,7 @@ def build_ambient(
     """Collimated ambient sources with in-band irradiance for the camera's filter.
 
     ``solar_suns`` overrides the solar simulator's level (a measured rig state, which may lie
-    slightly outside the 0.8-1.2 sun a scene file may ask for, e.g. while the lamp warms up);
+    slightly outside the ``SUNS_RANGE`` a scene file may ask for, e.g. while the lamp warms up);
     0 means its shutter is closed.
     """
     amb = spec.ambient

@@ -16,6 +16,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from sim_core.errors import SceneError
+from sim_core.lights import SUNS_RANGE
+from sim_core.sensor import SENSOR_BOUNDS
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -56,23 +58,29 @@ class Distortion(_Strict):
     k3: Finite = 0.0
 
 
+def _sensor_range(name: str, kind: type = float):
+    """A field type allowing the range of :data:`sim_core.sensor.SENSOR_BOUNDS` (inclusive)."""
+    lo, hi = SENSOR_BOUNDS[name]
+    if kind is int:
+        return Annotated[int, Field(ge=int(lo), le=int(hi))]
+    return Annotated[float, Field(ge=lo, le=hi, allow_inf_nan=False)]
+
+
 class SensorOverrides(_Strict):
     """Overrides of the PMD pixel parameters (defaults in docs/camera-presets.md)."""
 
-    pixel_pitch_m: Annotated[float, Field(gt=1e-7, le=1e-3, allow_inf_nan=False)] | None = None
-    fill_factor: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
-    quantum_efficiency: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
-    demodulation_contrast: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] | None = (
-        None
-    )
-    transmittance: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
-    full_well_e: Annotated[float, Field(ge=1.0, le=1e9, allow_inf_nan=False)] | None = None
-    read_noise_e: Annotated[float, Field(ge=0.0, le=1e5, allow_inf_nan=False)] | None = None
-    dark_current_e_s: Annotated[float, Field(ge=0.0, le=1e9, allow_inf_nan=False)] | None = None
-    adc_bits: Annotated[int, Field(ge=1, le=24)] | None = None
-    adc_gain_e_per_dn: Annotated[float, Field(ge=1e-3, le=1e6, allow_inf_nan=False)] | None = None
-    sbi_start_e: Annotated[float, Field(ge=1.0, le=1e9, allow_inf_nan=False)] | None = None
-    sbi_limit_e: Annotated[float, Field(ge=0.0, le=1e12, allow_inf_nan=False)] | None = None
+    pixel_pitch_m: _sensor_range("pixel_pitch_m") | None = None
+    fill_factor: _sensor_range("fill_factor") | None = None
+    quantum_efficiency: _sensor_range("quantum_efficiency") | None = None
+    demodulation_contrast: _sensor_range("demodulation_contrast") | None = None
+    transmittance: _sensor_range("transmittance") | None = None
+    full_well_e: _sensor_range("full_well_e") | None = None
+    read_noise_e: _sensor_range("read_noise_e") | None = None
+    dark_current_e_s: _sensor_range("dark_current_e_s") | None = None
+    adc_bits: _sensor_range("adc_bits", int) | None = None
+    adc_gain_e_per_dn: _sensor_range("adc_gain_e_per_dn") | None = None
+    sbi_start_e: _sensor_range("sbi_start_e") | None = None
+    sbi_limit_e: _sensor_range("sbi_limit_e") | None = None
     sbi_enabled: bool | None = None
 
 
@@ -128,7 +136,9 @@ class SolarSimulator(_Strict):
     """A collimated solar-simulator beam with a square footprint (Oriel Sol3A 94123A)."""
 
     direction: Vec3
-    irradiance_suns: Annotated[float, Field(ge=0.8, le=1.2, allow_inf_nan=False)] = 1.0
+    irradiance_suns: Annotated[
+        float, Field(ge=SUNS_RANGE[0], le=SUNS_RANGE[1], allow_inf_nan=False)
+    ] = 1.0
     in_band_fraction: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.04
     beam_centre_m: Vec3 = (0.0, 0.0, 0.0)
     footprint_m: tuple[PositiveLength, PositiveLength] = (0.305, 0.305)

@@ -36,6 +36,23 @@ from sim_core.noise import safe_poisson
 from sim_core.optics import pixel_irradiance_w_m2
 from sim_core.raw import PHASE_OFFSETS_RAD, RawFrame
 
+#: allowed range [low, high] (both included) of each numeric sensor parameter: checked by
+#: :class:`SensorParams` and by the scene spec's sensor overrides (:mod:`sim_core.scene_spec`)
+SENSOR_BOUNDS: dict[str, tuple[float, float]] = {
+    "pixel_pitch_m": (1e-7, 1e-3),
+    "fill_factor": (1e-3, 1.0),
+    "quantum_efficiency": (1e-4, 1.0),
+    "demodulation_contrast": (0.0, 1.0),
+    "transmittance": (1e-3, 1.0),
+    "full_well_e": (1.0, 1e9),
+    "read_noise_e": (0.0, 1e5),
+    "dark_current_e_s": (0.0, 1e9),
+    "adc_bits": (1, 24),
+    "adc_gain_e_per_dn": (1e-3, 1e6),
+    "sbi_start_e": (1.0, 1e9),
+    "sbi_limit_e": (0.0, 1e12),
+}
+
 
 @dataclass(frozen=True)
 class SensorParams:
@@ -46,7 +63,7 @@ class SensorParams:
     pixel_pitch_m : float
         Pixel pitch [m].
     fill_factor : float
-        Light-sensitive fraction of the pixel area, (0, 1].
+        Light-sensitive fraction of the pixel area, [1e-3, 1].
     quantum_efficiency : float
         Electrons per photon at the camera's wavelength, (0, 1].
     demodulation_contrast : float
@@ -86,13 +103,7 @@ class SensorParams:
     sbi_enabled: bool = True
 
     def __post_init__(self) -> None:
-        for name, lo, hi in (
-            ("pixel_pitch_m", 1e-7, 1e-3), ("fill_factor", 1e-3, 1.0),
-            ("quantum_efficiency", 1e-4, 1.0), ("demodulation_contrast", 0.0, 1.0),
-            ("transmittance", 1e-3, 1.0), ("full_well_e", 1.0, 1e9), ("read_noise_e", 0.0, 1e5),
-            ("dark_current_e_s", 0.0, 1e9), ("adc_bits", 1, 24), ("adc_gain_e_per_dn", 1e-3, 1e6),
-            ("sbi_start_e", 1.0, 1e9), ("sbi_limit_e", 0.0, 1e12),
-        ):
+        for name, (lo, hi) in SENSOR_BOUNDS.items():
             v = getattr(self, name)
             if not (np.isfinite(v) and lo <= v <= hi):
                 raise InvalidInputError(f"sensor.{name}", f"{v} is outside [{lo}, {hi}]")

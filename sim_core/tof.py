@@ -12,6 +12,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from sim_core.camera import range_to_depth_z
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 
 TWO_PI = 2.0 * np.pi
@@ -159,7 +160,7 @@ def reconstruct(
     rng = np.where(ok, rng, np.nan)
     return ToFImage(
         range_m=rng,
-        depth_z_m=rng * z_over_range,
+        depth_z_m=range_to_depth_z(rng, z_over_range),
         amplitude=amplitude,
         intensity=np.asarray(intensity, dtype=np.float64),
         phase_rad=phase,

@@ -27,7 +27,7 @@ from service.lab.lab import open_lab
 from service.lab.scenes import bundled_scenes
 from service.settings import Settings
 from sim_core.errors import InvalidInputError
-from sim_core.pipeline import package_version
+from sim_core.frame_io import package_version
 
 API_PREFIX = "/api/v1"
 _log = logging.getLogger(__name__)

@@ -42,10 +42,12 @@ def compare(
                         near_m=near_m, far_m=far_m, rows=_pair("--rows", rows),
                         cols=_pair("--cols", cols))
         measured = load_measured(measured_dir)
-        simulated, arrays, meta = load_simulated(simulated_dir)
-        m = build_mask(spec, measured, arrays.get("object_id"), meta.get("object_names", []),
-                       meta.get("turntable_object_ids", []))
-        report = compare_images(measured, simulated, m)
+        simulated = load_simulated(simulated_dir)
+        m = build_mask(spec, measured.image, simulated.arrays.get("object_id"),
+                       simulated.meta.get("object_names", []),
+                       simulated.meta.get("turntable_object_ids", []))
+        report = compare_images(measured.image, simulated.image, m,
+                                (measured.grey_full_scale, simulated.grey_full_scale))
     except ValidationError as exc:
         err_console.print(f"[bold red]error:[/] --mask: {exc.errors()[0]['msg']}")
         raise typer.Exit(code=2) from None

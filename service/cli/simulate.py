@@ -122,8 +122,7 @@ def preview(
     from sim_core.preview import side_by_side
 
     try:
-        arrays, _ = read_frame(frame_dir)
-        image = side_by_side(arrays, bounded("--scale", scale, 1, 8))
+        image = side_by_side(read_frame(frame_dir), bounded("--scale", scale, 1, 8))
     except FileNotFoundError as exc:
         err_console.print(f"[bold red]error:[/] {exc}")
         raise typer.Exit(code=2) from None

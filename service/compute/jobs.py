@@ -130,6 +130,8 @@ class SimulationResult:
         The simulation's stage timings (``total`` included) and ``save`` (writing the files).
     worker : str
         Host and process that ran the job.
+    grey_full_scale : float
+        The frame's grey full scale (``grey_preview_full_scale`` of its ``frame.json``).
     """
 
     files: dict[str, bytes]
@@ -139,6 +141,7 @@ class SimulationResult:
     effect_plan: dict[str, Any]
     timings_s: dict[str, float]
     worker: str
+    grey_full_scale: float = 0.0
 
 
 def run_job(job: SimulationJob) -> SimulationResult:
@@ -188,7 +191,7 @@ def run_job(job: SimulationJob) -> SimulationResult:
     return SimulationResult(
         files=files, image=frame.image, object_id=frame.light_field.object_id,
         scene_hash=frame.scene_hash, effect_plan=frame.plan.to_dict(), timings_s=timings,
-        worker=worker,
+        worker=worker, grey_full_scale=float(frame.grey_full_scale or 0.0),
     )
 
 

@@ -21,7 +21,7 @@ from sqlalchemy.orm import sessionmaker
 from service.errors import NotFoundError
 from service.export.results_table import CHANNEL_FIELDS
 from service.store import queries
-from sim_core.pipeline import package_version
+from sim_core.frame_io import package_version
 
 _NAMESPACE = uuid.UUID("6c1f6c3e-3a55-4b8e-9a8e-0f7a1d9b2c11")
 _EXIT_STATUS = {"completed": "success", "cancelled": "abort", "failed": "fail"}

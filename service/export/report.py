@@ -2,7 +2,8 @@
 
 Self-contained: plots are inline SVG, images inline PNG data URIs, so the page can be saved
 and mailed. Per pose (its first repeat) six panels: grey measured / simulated / |difference|
-(grey levels, both at the measured frame's full scale, as the metrics), and depth measured /
+(grey levels, each frame's grey image at its own grey full scale: its grey.png, as in the
+metrics; :func:`sim_core.frame_io.grey_full_scale`), and depth measured /
 simulated (near yellow, far blue) / difference (simulated - measured, red = farther, +-50 mm).
 """
 
@@ -12,7 +13,6 @@ import base64
 import html
 import io
 import json
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,8 @@ from service.errors import NotFoundError
 from service.export.results_table import result_rows
 from service.store import queries
 from service.store.frame_files import FrameStore
+from sim_core import frame_io
+from sim_core.frame_io import Frame
 from sim_core.preview import depth_colours
 
 #: poses with image panels (the plots show every pose)
@@ -46,14 +48,12 @@ def _png(rgb: np.ndarray) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
-def _load(store: FrameStore, frame_id: str) -> dict[str, np.ndarray]:
-    with np.load(Path(store.path(frame_id)) / "frame.npz") as z:
-        return {k: z[k] for k in ("amplitude", "range_m", "valid")}
+def _load(store: FrameStore, frame_id: str) -> Frame:
+    return frame_io.read_frame(store.path(frame_id))
 
 
-def _grey(amplitude: np.ndarray, full_scale: float) -> np.ndarray:
-    g = np.clip(np.nan_to_num(amplitude) / full_scale * 255.0, 0, 255).astype(np.uint8)
-    return np.repeat(g[..., None], 3, axis=2)
+def _rgb(grey: np.ndarray) -> np.ndarray:
+    return np.repeat(grey[..., None], 3, axis=2)
 
 
 def _diverging(diff_mm: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -66,15 +66,12 @@ def _diverging(diff_mm: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return rgb.astype(np.uint8)
 
 
-def pose_panels(
-    store: FrameStore, measured_id: str, simulated_id: str, full_scale: float | None
-) -> list:
+def pose_panels(store: FrameStore, measured_id: str, simulated_id: str) -> list:
     """Six (caption, data URI) panels for one pose."""
-    m, s = _load(store, measured_id), _load(store, simulated_id)
-    if not full_scale or not np.isfinite(full_scale):
-        sel = m["amplitude"][m["valid"]]
-        full_scale = float(np.percentile(sel, 99.5)) if sel.size else 1.0
-    gm, gs = _grey(m["amplitude"], full_scale), _grey(s["amplitude"], full_scale)
+    mf, sf = _load(store, measured_id), _load(store, simulated_id)
+    m = {"range_m": mf.image.range_m, "valid": mf.image.valid}
+    s = {"range_m": sf.image.range_m, "valid": sf.image.valid}
+    gm, gs = _rgb(mf.grey_8bit()), _rgb(sf.grey_8bit())
     both = m["valid"] & s["valid"]
     gdiff = np.abs(gm.astype(int) - gs.astype(int)).astype(np.uint8)
     gdiff[~both] = 0
@@ -177,9 +174,7 @@ def campaign_report(sessions: sessionmaker, store: FrameStore, campaign_id: str)
     if len(first) > MAX_PANEL_POSES:
         out.append(f"<p>Image panels of the first {MAX_PANEL_POSES} poses only.</p>")
     for r in first[:MAX_PANEL_POSES]:
-        fs = r["metrics"].get("grey_full_scale_measured")
-        panels = pose_panels(store, r["measured_frame_id"], r["simulated_frame_id"],
-                             fs if isinstance(fs, int | float) else None)
+        panels = pose_panels(store, r["measured_frame_id"], r["simulated_frame_id"])
         table = json.dumps({k: _metric(r, k, "ssim") for k in ("grey", "depth")})
         out.append(
             f"<h3>Pose {r['pose_index']}: {r['turntable_deg']:g} deg, {r['solar_suns']:g} sun"

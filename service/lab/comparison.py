@@ -1,22 +1,21 @@
 """Comparing a measured and a simulated frame: masks, loading frame folders, Table 5.
 
 The metrics themselves are :func:`sim_core.metrics.compare_images`; this module decides which
-pixels count (:class:`~service.api.schemas.MaskSpec`) and reads frames back from their folders.
+pixels count (:class:`~service.api.schemas.MaskSpec`); frame folders are read by
+:mod:`sim_core.frame_io`.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from service.lab.requests import MaskSpec
-from sim_core import metrics
-from sim_core.camera import CAMERA_PRESETS, Intrinsics
+from sim_core import frame_io, metrics
 from sim_core.errors import InvalidInputError
+from sim_core.frame_io import Frame
 from sim_core.metrics import ComparisonReport
-from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.tof import ToFImage
 
 
@@ -62,68 +61,22 @@ def compare(
     measured: ToFImage,
     simulated: ToFImage,
     mask: np.ndarray | None,
+    grey_full_scales: tuple[float, float],
 ) -> ComparisonReport:
-    """Seed Table 5 indexes of ``simulated`` against ``measured`` inside ``mask``."""
-    return metrics.compare_images(measured, simulated, mask)
+    """Seed Table 5 indexes of ``simulated`` against ``measured`` inside ``mask``.
+
+    ``grey_full_scales``: each frame's own grey full scale (measured, simulated), as in its
+    ``grey.png`` (:func:`sim_core.frame_io.grey_full_scale`), so the metrics' grey images are
+    the frames' grey images.
+    """
+    return metrics.compare_images(measured, simulated, mask, grey_full_scale=grey_full_scales)
 
 
-# -- frame folders ---------------------------------------------------------------------------
-def _meta(directory: Path) -> dict:
-    p = directory / "frame.json"
-    return json.loads(p.read_text()) if p.is_file() else {}
+def load_measured(directory: str | Path) -> Frame:
+    """A measured frame folder (:func:`sim_core.frame_io.read_measured`)."""
+    return frame_io.read_measured(directory)
 
 
-def _intrinsics(meta: dict, shape: tuple[int, int]) -> Intrinsics:
-    if "intrinsics" in meta:
-        i = meta["intrinsics"]
-        return Intrinsics(
-            i["width_px"], i["height_px"], i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"],
-            tuple(i.get("distortion", (0.0,) * 5)),
-        )
-    # no intrinsics recorded: the pico flexx preset, principal point at the image centre
-    p = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
-    h, w = shape
-    return Intrinsics(w, h, p["fx_px"], p["fy_px"], (w - 1) / 2.0, (h - 1) / 2.0)
-
-
-def load_measured(directory: str | Path) -> ToFImage:
-    """Reconstruct ``raw.npz`` of a measured frame folder with :func:`reconstruct_raw`."""
-    from sim_core.camera import pixel_centre_grid, pixel_to_camera_direction
-
-    d = Path(directory)
-    if not (d / "raw.npz").is_file():
-        raise InvalidInputError("measured_dir", f"'{d}' holds no raw.npz (a measured frame)")
-    raw = RawFrame.load(d / "raw.npz")
-    intr = _intrinsics(_meta(d), raw.shape)
-    if intr.shape != raw.shape:
-        raise InvalidInputError(
-            "measured_dir", f"raw frame is {raw.shape} but frame.json intrinsics {intr.shape}"
-        )
-    u, v = pixel_centre_grid(intr)
-    z_over_range = pixel_to_camera_direction(intr, u, v)[:, 2].reshape(intr.shape)
-    return reconstruct_raw(raw, z_over_range)
-
-
-def load_simulated(directory: str | Path) -> tuple[ToFImage, dict[str, np.ndarray], dict]:
-    """A simulated frame folder (``save_frame`` layout): its image, arrays and metadata."""
-    d = Path(directory)
-    if not (d / "frame.npz").is_file():
-        raise InvalidInputError("simulated_dir", f"'{d}' holds no frame.npz (a saved frame)")
-    with np.load(d / "frame.npz") as z:
-        arrays = {k: z[k] for k in z.files}
-    image = image_from_arrays(arrays)
-    return image, arrays, _meta(d)
-
-
-def image_from_arrays(arrays: dict[str, np.ndarray]) -> ToFImage:
-    """A :class:`ToFImage` from the arrays of a ``frame.npz``."""
-    phase = arrays.get("phase_all_rad", arrays["phase_rad"][None])
-    return ToFImage(
-        range_m=arrays["range_m"],
-        depth_z_m=arrays["depth_z_m"],
-        amplitude=arrays["amplitude"],
-        intensity=arrays["intensity"],
-        phase_rad=phase,
-        valid=arrays["valid"].astype(bool),
-        frequencies_hz=arrays["frequencies_hz"],
-    )
+def load_simulated(directory: str | Path) -> Frame:
+    """A simulated frame folder (:func:`sim_core.frame_io.read_simulated`)."""
+    return frame_io.read_simulated(directory)

@@ -107,7 +107,7 @@ def capture(
         use_case = rig.camera.use_case
     camera = camera_of(for_use_case(scene.spec, use_case))
     extra = {"rig": state.to_dict(), "use_case": use_case.name, "scene_name": ""}
-    frame_id, image = store.save_measured(raw, camera, extra)
+    frame_id, image, _ = store.save_measured(raw, camera, extra)
     with sessions() as s:
         queries.add_frame(s, queries.frame_row(frame_id, "measured", rig=state.to_dict(),
                                          summary={"valid_pixels": int(image.valid.sum())}))

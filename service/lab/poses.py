@@ -75,6 +75,7 @@ class Measurement:
     use_case: Any
     timings_s: dict[str, float] = field(default_factory=dict)
     started: float = 0.0
+    grey_full_scale: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -119,14 +120,15 @@ def measure(
         "rig": state.to_dict(), "scene_name": plan.scene.name, "campaign_id": plan.campaign_id,
         "pose_index": plan.pose_index, "repeat": plan.repeat, "use_case": use_case.name,
     }
-    frame_id, image = store.save_measured(raw, camera, extra)
+    frame_id, image, grey_full_scale = store.save_measured(raw, camera, extra)
     t3 = time.perf_counter()
     row = queries.frame_row(
         frame_id, "measured", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
         rig=state.to_dict(), summary=_summary(image),
     )
     return Measurement(row, image, state, use_case,
-                       {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0)
+                       {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
+                       grey_full_scale)
 
 
 def submit(
@@ -169,7 +171,8 @@ def finish(
     try:
         mask = build_mask(plan.mask, m.image, result.object_id, names,
                           plan.scene.turntable_object_ids)
-        report = compare(m.image, result.image, mask)
+        report = compare(m.image, result.image, mask,
+                         (m.grey_full_scale, result.grey_full_scale))
         metrics: dict[str, Any] = report.to_dict()
         metrics["table"] = [list(r) for r in report.table_rows()]
     except InvalidInputError as exc:  # e.g. no pixel valid in both frames: recorded, not fatal

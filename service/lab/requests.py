@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-from drivers.solar_simulator import SUNS_RANGE
+from sim_core.lights import SUNS_RANGE
 
 SUNS_LOW, SUNS_HIGH = SUNS_RANGE
 

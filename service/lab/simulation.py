@@ -14,6 +14,7 @@ from service.lab.scenes import scene_from_request
 from service.settings import Settings
 from service.store import queries
 from service.store.frame_files import FrameStore, new_frame_id
+from sim_core.json_safe import json_safe
 
 
 def simulate_frame(
@@ -39,7 +40,7 @@ def simulate_frame(
             frame_id, "simulated", scene_name=scene.name, scene_hash=result.scene_hash, rig=rig,
             summary={"valid_pixels": int(result.image.valid.sum())},
         ))
-    return queries.json_safe({
+    return json_safe({
         "frame_id": frame_id, "scene_name": scene.name, "scene_hash": result.scene_hash,
         "effect_plan": result.effect_plan,
         "timings_s": result.timings_s,

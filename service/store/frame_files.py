@@ -6,13 +6,8 @@ parent directory is fsynced: a reader sees a whole frame or none. The database r
 frame is committed afterwards, with the result that uses it; :meth:`FrameStore.sweep` removes
 what a crash left between the two (partial folders, folders without a row).
 
-Layout of a frame folder (the same as ``toftwin simulate --out``):
-
-- simulated: ``frame.npz``, ``frame.json``, ``grey.png``, ``depth.png`` and ``raw.npz`` (from
-  :func:`sim_core.pipeline.save_frame`);
-- measured: ``raw.npz`` as the camera delivered it, and ``frame.npz``/``frame.json``/PNGs of its
-  reconstruction (:func:`sim_core.raw.reconstruct_raw`), ``frame.json`` holding the rig state
-  and the intrinsics used.
+The layout of a frame folder (the same as ``toftwin simulate --out``) is the frame format of
+:mod:`sim_core.frame_io` (docs/frame-format.md), which writes and reads every file of it.
 """
 
 from __future__ import annotations
@@ -25,50 +20,20 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from sim_core import frame_io
 from sim_core.camera import Camera
-from sim_core.pipeline import ARRAY_UNITS, package_version
-from sim_core.raw import RawFrame, ValidityThresholds, reconstruct_raw
-from sim_core.sensor import SensorParams
+from sim_core.raw import RawFrame
 from sim_core.tof import ToFImage
 
 FRAME_ID = re.compile(r"^[0-9a-f]{32}$")
-#: the files of a frame folder (``save_frame`` layout)
-SIMULATED_FILES = ("frame.npz", "frame.json", "grey.png", "depth.png", "raw.npz")
+#: the files of a frame folder (:data:`sim_core.frame_io.FRAME_FILES`)
+SIMULATED_FILES = frame_io.FRAME_FILES
 _PARTIAL = ".partial-"
 
 
 def new_frame_id() -> str:
     """A fresh frame id (32 hex digits)."""
     return uuid.uuid4().hex
-
-
-def measured_arrays(image: ToFImage, grey_full_scale: float | None) -> dict[str, np.ndarray]:
-    """The ``frame.npz`` arrays of a reconstructed measured frame (names as simulated frames)."""
-    grey, _ = frame_io.grey_preview_8bit(image.amplitude, image.valid, grey_full_scale)
-    return {
-        "grey_8bit": grey,
-        "depth_mm": frame_io.depth_preview_mm(image.range_m),
-        "range_m": image.range_m,
-        "depth_z_m": image.depth_z_m,
-        "amplitude": image.amplitude,
-        "intensity": image.intensity,
-        "phase_rad": image.phase_rad[0],
-        "phase_all_rad": image.phase_rad,
-        "valid": image.valid,
-        "frequencies_hz": image.frequencies_hz,
-    }
-
-
-def intrinsics_dict(camera: Camera) -> dict[str, Any]:
-    """The intrinsics of ``camera`` as stored in a measured frame's ``frame.json``."""
-    i = camera.intrinsics
-    return {
-        "width_px": i.width_px, "height_px": i.height_px, "fx_px": i.fx_px, "fy_px": i.fy_px,
-        "cx_px": i.cx_px, "cy_px": i.cy_px, "distortion": list(i.distortion),
-    }
 
 
 class FrameStore:
@@ -117,47 +82,27 @@ class FrameStore:
 
     def save_measured(
         self, raw: RawFrame, camera: Camera, extra: dict[str, Any]
-    ) -> tuple[str, ToFImage]:
-        """Reconstruct and write a measured frame; returns its id and the reconstruction.
+    ) -> tuple[str, ToFImage, float]:
+        """Reconstruct and write a measured frame (:func:`sim_core.frame_io.write_measured`).
 
         The reconstruction uses ``camera`` (the scene's intrinsics at the use case's size) for
-        the range-to-depth conversion; ``extra`` goes into ``frame.json``.
+        the range-to-depth conversion; ``extra`` goes into ``frame.json``. Returns the frame's
+        id, the reconstruction and its grey full scale.
         """
-        from sim_core.optics import cos_off_axis
-
         if raw.shape != camera.intrinsics.shape:
             raise ValueError(
                 f"measured frame is {raw.shape}, the camera model {camera.intrinsics.shape}"
             )
-        image = reconstruct_raw(raw, cos_off_axis(camera))
-        full_scale = float(2 ** (SensorParams().adc_bits - 1))
-        arrays = measured_arrays(image, full_scale)
         frame_id = new_frame_id()
-        meta = {
-            "kind": "measured",
-            "frame_id": frame_id,
-            "package_version": package_version(),
-            "shape": list(image.range_m.shape),
-            "frequencies_hz": image.frequencies_hz.tolist(),
-            "exposure_s": raw.exposure_s,
-            "timestamp_s": raw.timestamp_s,
-            "grey_preview_full_scale": full_scale,
-            "intrinsics": intrinsics_dict(camera),
-            "validity": ValidityThresholds().to_dict(),
-            "camera_meta": raw.meta,
-            "arrays": {k: ARRAY_UNITS[k] for k in arrays},
-            **extra,
-        }
+        out: dict[str, Any] = {}
 
         def write(d: Path) -> None:
-            raw.save(d / "raw.npz")
-            frame_io.write_npz(d / "frame.npz", arrays)
-            frame_io.write_png(d / "depth.png", arrays["depth_mm"])
-            frame_io.write_png(d / "grey.png", arrays["grey_8bit"])
-            frame_io.write_json(d / "frame.json", meta)
+            out["image"], out["full_scale"] = frame_io.write_measured(
+                d, raw, camera, {"frame_id": frame_id, **extra}
+            )
 
         self._publish(frame_id, write)
-        return frame_id, image
+        return frame_id, out["image"], out["full_scale"]
 
     def delete(self, frame_ids: Iterable[str]) -> None:
         """Remove frames (used when a result could not be committed)."""

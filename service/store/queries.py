@@ -7,8 +7,6 @@ the states it names (a compare-and-set), so two requests cannot both start a cam
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from collections.abc import Iterable
 from typing import Any
@@ -17,6 +15,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from service.store.tables import CampaignRow, FrameRow, PlannedPoseRow, PoseResultRow
+from sim_core.json_safe import dumps_strict
 
 #: states from which a campaign can be (re)started by its runner
 RESUMABLE = ("paused", "interrupted", "failed")
@@ -28,20 +27,9 @@ def now() -> float:
     return time.time()
 
 
-def json_safe(obj: Any) -> Any:
-    """``obj`` with non-finite floats as the strings "inf", "-inf", "nan" (as in metrics)."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
-    return obj
-
-
 def dumps(obj: Any) -> str:
     """Strict JSON for a text column."""
-    return json.dumps(json_safe(obj), sort_keys=True, allow_nan=False)
+    return dumps_strict(obj, sort_keys=True)
 
 
 # -- frames ----------------------------------------------------------------------------------

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
+import sim_core.camera as _camera
 import sim_core.materials.kernels as _material_kernels
 import sim_core.render.rng as _rng
 from sim_core.materials.kernels import (
@@ -45,7 +46,7 @@ def _drop_stale_cache() -> None:
     """
     cache = Path(__file__).with_name("__pycache__")
     digest = hashlib.sha256()
-    for mod in (_material_kernels, _rng):
+    for mod in (_material_kernels, _rng, _camera):
         digest.update(Path(mod.__file__).read_bytes())
     stamp = cache / "kernels.deps.sha256"
     want = digest.hexdigest()
@@ -86,24 +87,15 @@ def _offset_scale(px, py, pz):
 def camera_ray(u, v, fx, fy, cx, cy, dist, rotation):
     """World-frame unit direction through pixel coordinates (u, v) (OpenCV model, pinhole).
 
-    ``dist`` holds k1, k2, p1, p2, k3; the distortion is inverted by 20 fixed-point steps, as
-    :func:`sim_core.camera.undistort_normalized` does.
+    ``dist`` holds k1, k2, p1, p2, k3; the distortion is inverted by 20 fixed-point steps of
+    :func:`sim_core.camera.undistort_point` (as :func:`sim_core.camera.undistort_normalized`).
     """
     k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
     xd = (u - cx) / fx
     yd = (v - cy) / fy
     x, y = xd, yd
     if k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0:
-        for _ in range(20):
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            # keeps a wild k from dividing by 0
-            if abs(radial) < 1e-6:
-                radial = 1e-6
-            dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-            dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-            x = (xd - dx) / radial
-            y = (yd - dy) / radial
+        x, y = _camera.undistort_point(xd, yd, k1, k2, p1, p2, k3, 20)
     inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
     cx_, cy_, cz_ = x * inv, y * inv, inv
     return (

@@ -10,9 +10,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from sim_core import frame_io
 from sim_core.camera import F_60_24_MHZ
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.raw import RawFrame, reconstruct_raw
+from sim_core.raw import reconstruct_raw
 from sim_core.sensor import (
     PixelElectrons,
     SensorParams,
@@ -140,8 +141,8 @@ def test_ambient_beyond_the_sbi_limit_invalidates_the_pixel(camera):
 
 def test_raw_frame_round_trips_through_npz(tmp_path, camera):
     raw = expose(electrons(3000.0, 100.0), camera, SensorParams(), np.random.default_rng(2))
-    raw.save(tmp_path / "raw.npz")
-    back = RawFrame.load(tmp_path / "raw.npz")
+    frame_io.write_raw(tmp_path / "raw.npz", raw)
+    back = frame_io.read_raw(tmp_path / "raw.npz")
     for f in ("phase_images", "intensity", "frequencies_hz", "saturated", "sbi_limit", "taps"):
         np.testing.assert_array_equal(getattr(back, f), getattr(raw, f))
     assert back.meta["sensor"] == dataclasses.asdict(SensorParams())

@@ -12,6 +12,8 @@ from service.api.deps import SessionDep, StoreDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
 from service.store import queries
+from sim_core import frame_io
+from sim_core.json_safe import json_safe
 
 router = APIRouter(prefix="/frames", tags=["frames"])
 FrameIdPath = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A frame id.")]
@@ -41,7 +43,7 @@ def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> di
 def frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``frame.npz``: range, depth, amplitude, intensity, phase, valid mask (units in metadata)."""
     _row(session, frame_id)
-    return FileResponse(store.path(frame_id) / "frame.npz",
+    return FileResponse(store.path(frame_id) / frame_io.FRAME_NPZ,
                         media_type="application/octet-stream", filename=f"{frame_id}.npz")
 
 
@@ -51,7 +53,7 @@ def frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) ->
 def frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``raw.npz``: the four-phase raw frame (measured, or a simulated non-ideal sensor's)."""
     _row(session, frame_id)
-    path = store.path(frame_id) / "raw.npz"
+    path = store.path(frame_id) / frame_io.RAW_NPZ
     if not path.is_file():
         raise NotFoundError(f"frame {frame_id} has no raw frame (ideal sensor)")
     return FileResponse(path, media_type="application/octet-stream",
@@ -79,10 +81,10 @@ def frame_public(store, row, with_metadata: bool = True) -> dict:
     """The public form of a frame row (``metadata``: its frame.json)."""
     meta = {}
     if with_metadata:
-        path = store.path(row.id) / "frame.json"
+        path = store.path(row.id) / frame_io.FRAME_JSON
         meta = json.loads(path.read_text()) if path.is_file() else {}
     base = f"/api/v1/frames/{row.id}"
-    return queries.json_safe({
+    return json_safe({
         "id": row.id, "kind": row.kind, "created_at": row.created_at,
         "campaign_id": row.campaign_id, "scene_name": row.scene_name,
         "scene_hash": row.scene_hash, "rig": json.loads(row.rig_json),
