@@ -132,7 +132,7 @@ class Illumination(_Strict):
 
 
 # --- ambient --------------------------------------------------------------------------------
-class SolarSimulator(_Strict):
+class SolarSimulatorSpec(_Strict):
     """A collimated solar-simulator beam with a square footprint (Oriel Sol3A 94123A)."""
 
     direction: Vec3
@@ -173,7 +173,7 @@ class MoonAlbedo(_Strict):
 class Ambient(_Strict):
     """Ambient (unmodulated) light sources; all optional."""
 
-    solar_simulator: SolarSimulator | None = None
+    solar_simulator: SolarSimulatorSpec | None = None
     sun: Sun | None = None
     earth: EarthAlbedo | None = None
     moon: MoonAlbedo | None = None
@@ -239,7 +239,7 @@ class ObjectSpec(_Strict):
     on_turntable: bool = False
 
 
-class Turntable(_Strict):
+class TurntableSpec(_Strict):
     """Rotation stage; its angle rotates every object marked ``on_turntable``."""
 
     axis_point_m: Vec3 = (0.0, 0.0, 0.0)
@@ -292,7 +292,7 @@ class SceneSpec(_Strict):
     illumination: Illumination = Illumination()
     ambient: Ambient = Ambient()
     objects: list[ObjectSpec] = Field(default_factory=list, max_length=10000)
-    turntable: Turntable | None = None
+    turntable: TurntableSpec | None = None
     optics: OpticsSpec = OpticsSpec()
     render: RenderSpec = RenderSpec()
 

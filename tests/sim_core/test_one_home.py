@@ -9,7 +9,7 @@ from pydantic import ValidationError
 from sim_core.camera import distort_normalized, undistort_normalized, undistort_point
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
-from sim_core.scene_spec import SensorOverrides, SolarSimulator
+from sim_core.scene_spec import SensorOverrides, SolarSimulatorSpec
 from sim_core.sensor import SENSOR_BOUNDS, SensorParams
 
 K = (-0.2, 0.05, 0.001, -0.002, 0.01)
@@ -48,7 +48,7 @@ def test_one_suns_range():
     assert solar.SUNS_RANGE is SUNS_RANGE
     assert (requests.SUNS_LOW, requests.SUNS_HIGH) == SUNS_RANGE
     for v in SUNS_RANGE:
-        SolarSimulator(irradiance_suns=v, direction=[0.0, 0.0, -1.0])
+        SolarSimulatorSpec(irradiance_suns=v, direction=[0.0, 0.0, -1.0])
     for v in (SUNS_RANGE[0] - 0.01, SUNS_RANGE[1] + 0.01, math.nan):
         with pytest.raises(ValidationError):
-            SolarSimulator(irradiance_suns=v, direction=[0.0, 0.0, -1.0])
+            SolarSimulatorSpec(irradiance_suns=v, direction=[0.0, 0.0, -1.0])
