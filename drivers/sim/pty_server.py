@@ -499,21 +499,25 @@ def serve(
         time_scale=time_scale,
         link_dir=link_dir,
     )
-    previous = None
+    previous: dict[int, Any] = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        # Ctrl-C and SIGTERM both just set the event: a KeyboardInterrupt raised wherever the
+        # main thread happens to be (inside Event.wait's lock, say) could leave the shutdown
+        # half done, and a loaded machine showed the SIGINT path hanging where SIGTERM did not.
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            previous[signum] = signal.signal(signum, lambda *_: stop.set())
     try:
         for port in handle.ports:
             print(port, file=out)
         out.flush()
         while not stop.wait(0.2):
             pass
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # a SIGINT before the handler was installed
         pass
     finally:
         handle.stop()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def main(argv: list[str] | None = None) -> int:
