@@ -27,7 +27,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from drivers.camera import CameraProtocol, UsbCamera, UsbCameraSettings
-from drivers.errors import DeviceInputError, DeviceTimeoutError
+from drivers.errors import (
+    DeviceInputError,
+    DeviceTimeoutError,
+    LampFaultError,
+    ProtocolError,
+    SolarSimulatorError,
+    TurntableError,
+)
 from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
 from drivers.solar_simulator import (
@@ -42,6 +49,12 @@ from sim_core.raw import RawFrame
 __all__ = ["Rig", "RigState"]
 
 _log = logging.getLogger(__name__)
+
+#: angle a stage without its own ``tolerance_deg`` may miss its target by [deg]
+ANGLE_TOLERANCE_DEG = 0.01
+#: level the solar simulator may read back off the one set [sun] (its power regulation and
+#: calibration: a few W of ~400 W)
+SUNS_TOLERANCE = 0.02
 
 
 @dataclass(frozen=True)
@@ -119,6 +132,7 @@ class Rig:
         self._held_since = 0.0
         self._on_close = list(on_close)
         self._closed = False
+        self._lamp_lit = False  # the lamp burned after the last apply (to log it going out)
         #: the simulators behind a :meth:`simulated` rig (empty for a real rig)
         self.sims: dict[str, Any] = {}
 
@@ -156,26 +170,44 @@ class Rig:
 
     # -- state --------------------------------------------------------------------------------
     def state(self) -> RigState:
-        """Read the state back from the devices."""
+        """Read the state back from the devices.
+
+        A read-back is a device's word, not the caller's input: a non-finite value is a
+        :class:`ProtocolError` (503), never an input error (422). A level a little below zero
+        (the lamp calibration extrapolated below its table with the lamp nearly out) reads as 0.
+        """
         with self.hold():
-            return RigState(
-                turntable_angle_deg=self.turntable.position_deg(),
-                solar_suns=self.solar.read_suns(),
-                shutter_open=self.solar.shutter_is_open(),
-            )
+            angle = self.turntable.position_deg()
+            suns = self.solar.read_suns()
+            shutter = self.solar.shutter_is_open()
+        for name, value in (("turntable position", angle), ("solar level", suns)):
+            if not math.isfinite(value):
+                raise ProtocolError(f"{name} read back as {value!r}")
+        return RigState(turntable_angle_deg=angle, solar_suns=max(0.0, suns),
+                        shutter_open=shutter)
 
     def apply(self, target: RigState, *, wait_stable_s: float | None = None) -> RigState:
-        """Drive the rig to ``target`` and return the state read back.
+        """Drive the rig to ``target``, check what it reached, and return the state read back.
 
         Moves the turntable (homing first if needed), lights the lamp and sets the level
         (``solar_suns`` > 0, within 0.8..1.2 suns) or puts the lamp out (0), and opens or closes
         the shutter. With ``wait_stable_s`` the solar simulator's output is waited for
         (:meth:`SolarSimulatorProtocol.wait_until_stable`) before returning.
+
+        Then the state is read back and compared with ``target`` (:meth:`verify`): a stage off
+        its target, a lamp that went out or reports a fault, a level or a shutter that is not
+        what was asked for raise a :class:`DeviceError` naming it, so that nothing is captured
+        and stored as if the rig were where it was asked to be. A lamp found out when it was
+        lit before is logged.
         """
         with self.hold():
+            lamp_was_on = self._lamp_lit
             self.turntable.move_to(target.turntable_angle_deg)
             if target.solar_suns > 0:
                 if not self.solar.is_lamp_on():
+                    if lamp_was_on:
+                        _log.warning("solar simulator: the lamp went out since the last pose; "
+                                     "relighting it")
                     self.solar.lamp_on()
                 self.solar.set_suns(target.solar_suns)
                 if wait_stable_s is not None:
@@ -186,7 +218,44 @@ class Rig:
                 self.solar.open_shutter()
             else:
                 self.solar.close_shutter()
-            return self.state()
+            state = self.state()
+            self._lamp_lit = state.solar_suns > 0
+            self.verify(target, state)
+            return state
+
+    def verify(self, target: RigState, state: RigState) -> None:
+        """Raise a :class:`DeviceError` if ``state`` (read back) is not ``target``.
+
+        Tolerances: the turntable's own ``tolerance_deg`` (else :data:`ANGLE_TOLERANCE_DEG`),
+        :data:`SUNS_TOLERANCE` for the level; the lamp must burn without a fault bit exactly
+        when a level above 0 is asked for, and the shutter must be as asked.
+        """
+        tol_deg = float(getattr(self.turntable, "tolerance_deg", ANGLE_TOLERANCE_DEG))
+        error_deg = abs(state.turntable_angle_deg - target.turntable_angle_deg)
+        if not error_deg <= tol_deg:
+            raise TurntableError(
+                f"turntable read back {state.turntable_angle_deg:.4f} deg after a move to "
+                f"{target.turntable_angle_deg:.4f} deg (tolerance {tol_deg:g} deg)"
+            )
+        if target.solar_suns > 0:
+            status = self.solar.status()
+            if status.fault or not status.lamp_on:
+                raise LampFaultError(
+                    f"lamp {'fault' if status.fault else 'out'} after setting "
+                    f"{target.solar_suns:g} sun: {status.describe()}; relight the lamp "
+                    "(POST /api/v1/devices/solar/lamp) and resume"
+                )
+            if not abs(state.solar_suns - target.solar_suns) <= SUNS_TOLERANCE:
+                raise SolarSimulatorError(
+                    f"solar level read back {state.solar_suns:.3f} sun after setting "
+                    f"{target.solar_suns:g} sun (tolerance {SUNS_TOLERANCE:g} sun)"
+                )
+        elif state.solar_suns > 0:
+            raise SolarSimulatorError(
+                f"lamp still burning at {state.solar_suns:.3f} sun after it was put out")
+        if state.shutter_open != target.shutter_open:
+            want = "open" if target.shutter_open else "closed"
+            raise SolarSimulatorError(f"shutter not {want} after the command")
 
     def capture(self, n: int = 1) -> list[RawFrame]:
         """Capture ``n`` frames; each frame's ``meta["rig"]`` holds the rig state at capture."""

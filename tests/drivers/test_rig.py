@@ -14,6 +14,8 @@ from drivers.errors import (
     DeviceInputError,
     DeviceTimeoutError,
     LimitError,
+    SolarSimulatorError,
+    TurntableError,
 )
 from drivers.rig import Rig, RigState
 from drivers.sim.usb_camera import CameraRequest, UsbCameraSim, plane_source
@@ -219,3 +221,62 @@ def test_open_without_the_camera_closes_the_serial_devices_and_raises(
         Rig.open(*ports, camera_serial="no-such-serial", usb_backend=camera_sim)
     assert {"turntable", "solar"} <= set(exc.tb.tb_next.tb_frame.f_locals)
     assert [_fds_on(p) for p in ports] == before
+
+
+# -- what apply reads back is checked against what it asked for --------------------------------
+@pytest.mark.parametrize("skip", range(8))
+def test_apply_never_returns_a_state_the_lamp_did_not_reach(rig, skip):
+    """The arc dies at any one of the lamp supply's commands during apply: a device error."""
+    rig.apply(RigState(10.0, 1.0, True))
+    rig.sims["solar"].servers["lamp"].faults.inject(f"lamp-fault:1@{skip}")
+    try:
+        state = rig.apply(RigState(20.0, 1.0, True))
+    except SolarSimulatorError as exc:
+        assert "fault" in str(exc) or "out" in str(exc)
+        return
+    # the fault fired before the lamp was lit for this pose (it was relit), or after apply
+    # read the state back: what apply returned was verified
+    assert state.solar_suns == pytest.approx(1.0, abs=0.02)
+
+
+def test_a_lamp_fault_after_the_last_lamp_command_is_caught_by_the_read_back(requests_seen):
+    """Fault points after the level is set are seen only by comparing the read-back."""
+    messages = []
+    for skip in range(8):
+        with Rig.simulated(plane_source(1.0), seed=4) as rig:
+            rig.apply(RigState(10.0, 1.0, True))
+            rig.sims["solar"].servers["lamp"].faults.inject(f"lamp-fault:1@{skip}")
+            try:
+                rig.apply(RigState(20.0, 1.0, True))
+            except SolarSimulatorError as exc:
+                messages.append(str(exc))
+    assert any("relight the lamp" in m for m in messages), messages
+
+
+def test_a_lamp_that_went_out_is_relit_by_the_next_apply_and_logged(rig, caplog):
+    rig.apply(RigState(10.0, 1.0, True))
+    rig.sims["solar"].models["lamp"].lamp_on = False  # the arc dies between two poses
+    with caplog.at_level("WARNING", logger="drivers.rig"):
+        state = rig.apply(RigState(20.0, 1.0, True))
+    assert state.solar_suns == pytest.approx(1.0, abs=0.02)
+    assert any("lamp went out" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize(
+    ("read_back", "error", "words"),
+    [
+        (RigState(20.05, 1.0, True), TurntableError, "turntable read back 20.0500 deg"),
+        (RigState(20.0, 0.9, True), SolarSimulatorError, "solar level read back 0.900 sun"),
+        (RigState(20.0, 1.0, False), SolarSimulatorError, "shutter not open"),
+    ],
+)
+def test_verify_names_what_the_rig_did_not_reach(rig, read_back, error, words):
+    rig.apply(RigState(20.0, 1.0, True))  # the lamp burns, so only the compared value differs
+    with pytest.raises(error, match=words):
+        rig.verify(RigState(20.0, 1.0, True), read_back)
+    rig.verify(RigState(20.0, 1.0, True), RigState(20.004, 1.01, True))  # within tolerance
+
+
+def test_verify_refuses_a_lamp_still_burning_after_it_was_put_out(rig):
+    with pytest.raises(SolarSimulatorError, match="still burning"):
+        rig.verify(RigState(0.0, 0.0, False), RigState(0.0, 0.95, False))

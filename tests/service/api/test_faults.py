@@ -50,3 +50,37 @@ def test_emergency_stop_pauses_a_running_campaign(client):
     assert client.get("/api/v1/devices/solar").json()["shutter_open"] is False
     client.post(f"/api/v1/campaigns/{cid}/cancel", headers=AUTH)
     assert wait_campaign(client, cid, lambda s: True)["state"] == "cancelled"
+
+
+def lamp_faults(client):
+    """The fault injector of the simulated lamp supply's serial port."""
+    return client.app.state.lab.lease.rig.sims["solar"].servers["lamp"].faults
+
+
+def test_a_lamp_fault_pauses_the_campaign_and_no_pose_is_stored_without_its_light(client):
+    poses = [{"turntable_deg": a, "solar_suns": 1.0} for a in range(-40, 60, 20)]
+    cid = start_campaign(client, poses)
+    wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
+    lamp_faults(client).inject("lamp-fault")  # the arc dies and will not relight
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "paused", status
+    assert "LampFaultError" in status["error"] and "lamp" in status["error"]
+    rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
+    assert len(rows) == status["poses_done"] < len(poses)
+    for row in client.get(f"/api/v1/campaigns/{cid}/results").json():
+        rig = client.get(f"/api/v1/frames/{row['measured_frame_id']}").json()["rig"]
+        assert rig["solar_suns"] == pytest.approx(1.0, abs=0.02) and rig["shutter_open"]
+
+    # a manual pose meets the same fault as a device error (503), not as the client's (422)
+    res = client.post("/api/v1/poses", headers=AUTH, json={"turntable_deg": 0.0,
+                                                          "solar_suns": 1.0})
+    assert res.status_code in (409, 503), res.text
+
+    lamp_faults(client).clear()
+    client.app.state.lab.lease.rig.sims["solar"].models["lamp"].fault = False  # lamp replaced
+    res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)
+    assert res.status_code == 200, res.text
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "completed", status
+    rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
+    assert [r["pose_index"] for r in rows] == list(range(len(poses)))
