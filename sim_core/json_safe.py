@@ -4,7 +4,8 @@
 scalars and arrays. :func:`json_safe` turns such a value into plain Python that
 ``json.dumps(..., allow_nan=False)`` accepts: non-finite floats become the strings ``"nan"``,
 ``"inf"`` and ``"-inf"`` (or ``None`` with ``non_finite=None``), numpy scalars their Python
-value, arrays lists, tuples lists and keys strings. Anything else (e.g. a ``datetime`` for
+value, arrays lists, tuples lists and keys strings; a string that cannot be UTF-8 (a lone
+surrogate) gets its bad characters as backslash escapes. Anything else (e.g. a ``datetime`` for
 FastAPI's encoder) is returned unchanged for the caller's encoder to handle.
 
 Used by frame metadata (:mod:`sim_core.frame_io`), comparison reports (:mod:`sim_core.metrics`)
@@ -37,7 +38,13 @@ def json_safe(obj: Any, non_finite: str | None = AS_STRING) -> Any:
         return json_safe(obj.tolist(), non_finite)
     if isinstance(obj, bool | np.bool_):
         return bool(obj)
-    if isinstance(obj, str) or obj is None:
+    if obj is None:
+        return obj
+    if isinstance(obj, str):
+        try:
+            obj.encode("utf-8")
+        except UnicodeEncodeError:  # a lone surrogate (e.g. "\ud800" in a request) is no UTF-8
+            return obj.encode("utf-8", "backslashreplace").decode("utf-8")
         return obj
     if isinstance(obj, int | np.integer):
         return int(obj)

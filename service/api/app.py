@@ -28,6 +28,7 @@ from service.lab.scenes import bundled_scenes
 from service.settings import Settings
 from sim_core.errors import InvalidInputError
 from sim_core.frame_io import package_version
+from sim_core.json_safe import json_safe
 
 API_PREFIX = "/api/v1"
 _log = logging.getLogger(__name__)
@@ -43,7 +44,10 @@ def _field(loc: tuple | list) -> str:
 
 
 async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:
-    errors = jsonable_encoder(exc.errors(), custom_encoder={Exception: str})
+    # The errors echo the raw input (NaN, 1e309 read as inf, a lone surrogate): made strict JSON
+    # first, so that a bad request is always a 422 and never a failure to encode one.
+    errors = jsonable_encoder(json_safe(list(exc.errors())), custom_encoder={Exception: str})
+    errors = json_safe(errors)
     messages = []
     for e in errors:
         msg = str(e.get("msg", "")).removeprefix("Value error, ")

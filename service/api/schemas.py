@@ -10,7 +10,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
-from service.lab.requests import Angle, Level, RequestBody
+from service.lab.requests import Angle, Level, RequestBody, StrictBool
 
 
 class Message(BaseModel):
@@ -134,7 +134,7 @@ class MoveIn(RequestBody):
 class LampIn(RequestBody):
     """Lamp on or off."""
 
-    on: bool
+    on: StrictBool
 
 
 class LevelIn(RequestBody):
@@ -146,7 +146,7 @@ class LevelIn(RequestBody):
 class ShutterIn(RequestBody):
     """Shutter open or closed."""
 
-    open: bool
+    open: StrictBool
 
 
 class DeviceStatus(BaseModel):

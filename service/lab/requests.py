@@ -13,11 +13,16 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, model_validator
 
 from sim_core.lights import SUNS_RANGE
 
 SUNS_LOW, SUNS_HIGH = SUNS_RANGE
+
+#: numbers and switches as JSON gives them: a number field takes an integer or a float but never
+#: ``true`` (which lax validation would read as 1), a switch only ``true`` or ``false``
+StrictNumber = Annotated[float, Strict()]
+StrictBool = Annotated[bool, Strict()]
 
 
 def _in_range(lo: float, hi: float, unit: str):
@@ -45,6 +50,7 @@ def _check_level(v: float) -> float:
 
 Angle = Annotated[
     float,
+    Strict(),
     Field(
         description="Turntable angle [deg]; also checked against the stage's software limits "
         "(see GET /api/v1/devices).",
@@ -54,6 +60,7 @@ Angle = Annotated[
 ]
 Suns = Annotated[
     float,
+    Strict(),
     Field(
         description=f"Solar simulator level [sun]: {SUNS_LOW:g} to {SUNS_HIGH:g}, or 0 (off).",
         json_schema_extra={"minimum": 0, "maximum": SUNS_HIGH},
@@ -62,6 +69,7 @@ Suns = Annotated[
 ]
 Level = Annotated[
     float,
+    Strict(),
     Field(
         description=f"Solar simulator level [sun], {SUNS_LOW:g} to {SUNS_HIGH:g}.",
         json_schema_extra={"minimum": SUNS_LOW, "maximum": SUNS_HIGH},
@@ -74,9 +82,11 @@ SceneRef = Annotated[
     Field(description="A bundled example's name (e.g. 'satellite_ground_test') or an inline "
           "scene (docs/scene-format.md; no file meshes)."),
 ]
-Seed = Annotated[int, Field(ge=0, le=2**31 - 1, description="Seed of the simulation's noise.")]
-Spp = Annotated[int, Field(ge=1, le=65536, description="Samples per pixel (<= max_spp).")]
-PixelIndex = Annotated[int, Field(ge=0, le=4096)]
+Seed = Annotated[
+    int, Strict(), Field(ge=0, le=2**31 - 1, description="Seed of the simulation's noise.")
+]
+Spp = Annotated[int, Strict(), Field(ge=1, le=65536, description="Samples per pixel (<= max_spp).")]
+PixelIndex = Annotated[int, Strict(), Field(ge=0, le=4096)]
 PixelRange = tuple[PixelIndex, PixelIndex]
 
 
@@ -97,8 +107,8 @@ class MaskSpec(RequestBody):
     names: list[Annotated[str, Field(min_length=1, max_length=100)]] | None = Field(
         None, min_length=1, max_length=100
     )
-    near_m: float | None = Field(None, ge=0.0, le=1000.0)
-    far_m: float | None = Field(None, ge=0.0, le=1000.0)
+    near_m: StrictNumber | None = Field(None, ge=0.0, le=1000.0)
+    far_m: StrictNumber | None = Field(None, ge=0.0, le=1000.0)
     rows: PixelRange | None = None
     cols: PixelRange | None = None
 
@@ -122,7 +132,7 @@ class SimulationCreate(RequestBody):
     turntable_deg: Angle | None = None
     solar_suns: Suns | None = None
     effects: Literal["auto", "all"] = "auto"
-    ideal: bool = False
+    ideal: StrictBool = False
     seed: Seed = 0
     spp: Spp | None = None
 
@@ -145,7 +155,8 @@ class CampaignPoseIn(RequestBody):
 
     turntable_deg: Angle
     solar_suns: Suns = 1.0
-    repeats: int = Field(1, ge=1, le=10000, description="Captures at this pose (<= max_repeats).")
+    repeats: Annotated[int, Strict()] = Field(
+        1, ge=1, le=10000, description="Captures at this pose (<= max_repeats).")
 
 
 class CampaignCreate(RequestBody):
