@@ -34,3 +34,9 @@ class UnavailableError(ServiceError):
     """A device or the executor is not available."""
 
     status_code = 503
+
+
+class GoneError(ServiceError):
+    """The resource is known but its files are gone from the data directory."""
+
+    status_code = 410

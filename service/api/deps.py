@@ -102,6 +102,7 @@ ERRORS = {
     401: {"description": "Missing or wrong bearer token."},
     404: {"description": "No such resource."},
     409: {"description": "A campaign holds the rig, or the resource is in the wrong state."},
+    410: {"description": "The resource is known but its files are gone from the data directory."},
     422: {"description": "Invalid input; the message names the field and the allowed range."},
     503: {"description": "A device fault (the device's message) or a device not available."},
 }

@@ -20,6 +20,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from service.errors import GoneError
 from sim_core import frame_io
 from sim_core.camera import Camera
 from sim_core.raw import RawFrame
@@ -48,6 +49,15 @@ class FrameStore:
         if not FRAME_ID.match(frame_id):
             raise KeyError(frame_id)
         return self.root / frame_id
+
+    def file(self, frame_id: str, name: str) -> Path:
+        """The path of one of a frame's files; 410 naming the frame if it is not on disk."""
+        path = self.path(frame_id) / name
+        if not path.is_file():
+            where = "the frame's folder is gone" if not path.parent.is_dir() else f"{name} is gone"
+            raise GoneError(f"frame {frame_id}: {where} from the data directory ({path}); "
+                            "its database row remains")
+        return path
 
     def exists(self, frame_id: str) -> bool:
         return FRAME_ID.match(frame_id) is not None and (self.root / frame_id).is_dir()

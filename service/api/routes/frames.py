@@ -39,20 +39,21 @@ def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> di
 
 @router.get("/{frame_id}/arrays", response_class=FileResponse, responses={
     200: {"content": {"application/octet-stream": {}}, "description": "frame.npz"},
-    **errors(404)})
+    **errors(404, 410)})
 def frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``frame.npz``: range, depth, amplitude, intensity, phase, valid mask (units in metadata)."""
     _row(session, frame_id)
-    return FileResponse(store.path(frame_id) / frame_io.FRAME_NPZ,
+    return FileResponse(store.file(frame_id, frame_io.FRAME_NPZ),
                         media_type="application/octet-stream", filename=f"{frame_id}.npz")
 
 
 @router.get("/{frame_id}/raw", response_class=FileResponse, responses={
     200: {"content": {"application/octet-stream": {}}, "description": "raw.npz"},
-    **errors(404)})
+    **errors(404, 410)})
 def frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``raw.npz``: the four-phase raw frame (measured, or a simulated non-ideal sensor's)."""
     _row(session, frame_id)
+    store.file(frame_id, frame_io.FRAME_JSON)  # 410 if the frame's files are gone
     path = store.path(frame_id) / frame_io.RAW_NPZ
     if not path.is_file():
         raise NotFoundError(f"frame {frame_id} has no raw frame (ideal sensor)")
@@ -61,13 +62,13 @@ def frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> Fi
 
 
 @router.get("/{frame_id}/preview/{kind}.png", response_class=FileResponse, responses={
-    200: {"content": {"image/png": {}}, "description": "PNG preview"}, **errors(404)})
+    200: {"content": {"image/png": {}}, "description": "PNG preview"}, **errors(404, 410)})
 def frame_preview(
     frame_id: FrameIdPath, kind: Literal["grey", "depth"], store: StoreDep, session: SessionDep
 ) -> FileResponse:
     """8-bit grey, or 16-bit depth in millimetres (0 where invalid), as the camera tools write."""
     _row(session, frame_id)
-    return FileResponse(store.path(frame_id) / f"{kind}.png", media_type="image/png")
+    return FileResponse(store.file(frame_id, f"{kind}.png"), media_type="image/png")
 
 
 def _row(session, frame_id: str):
