@@ -334,6 +334,14 @@ class TurntableProtocol(Protocol):
         """Stop any motion now."""
         ...
 
+    def enable(self) -> None:
+        """Leave the disabled state (after a stall or a following error); return when READY."""
+        ...
+
+    def reset(self, timeout_s: float = 15.0) -> None:
+        """Reboot the controller; return when it answers again (not referenced)."""
+        ...
+
     def close(self) -> None:
         """Release the port."""
         ...

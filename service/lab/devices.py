@@ -67,6 +67,20 @@ def move(lease: RigLease, angle_deg: float) -> dict[str, Any]:
     return turntable_position(lease)
 
 
+def enable_turntable(lease: RigLease) -> dict[str, Any]:
+    """Leave the disabled state a stall or a following error left the controller in."""
+    with lease.manual() as rig:
+        rig.turntable.enable()
+    return turntable_position(lease)
+
+
+def reset_turntable(lease: RigLease) -> dict[str, Any]:
+    """Reboot the controller (it comes back not referenced: the next move homes first)."""
+    with lease.manual() as rig:
+        rig.turntable.reset()
+    return turntable_position(lease)
+
+
 def solar_state(lease: RigLease) -> dict[str, Any]:
     solar = lease.require().solar
     return {"lamp_on": solar.is_lamp_on(), "suns": solar.read_suns(),

@@ -55,6 +55,18 @@ def turntable_move(body: MoveIn, lease: LeaseDep, _: TokenDep) -> dict:
     return devices.move(lease, body.angle_deg)
 
 
+@router.post("/turntable/enable", response_model=TurntablePosition, responses=COMMAND)
+def turntable_enable(lease: LeaseDep, _: TokenDep) -> dict:
+    """Enable the controller again after a stall or a following error (SMC100 ``MM1``)."""
+    return devices.enable_turntable(lease)
+
+
+@router.post("/turntable/reset", response_model=TurntablePosition, responses=COMMAND)
+def turntable_reset(lease: LeaseDep, _: TokenDep) -> dict:
+    """Reboot the controller (SMC100 ``RS``); the next move references the stage first."""
+    return devices.reset_turntable(lease)
+
+
 @router.get("/solar", response_model=SolarPublic, responses=errors(503))
 def solar(lease: LeaseDep) -> dict:
     """Lamp, level in suns and shutter of the solar simulator."""

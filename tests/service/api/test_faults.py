@@ -84,3 +84,31 @@ def test_a_lamp_fault_pauses_the_campaign_and_no_pose_is_stored_without_its_ligh
     assert status["state"] == "completed", status
     rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
     assert [r["pose_index"] for r in rows] == list(range(len(poses)))
+
+
+def test_a_stalled_turntable_is_recovered_through_the_api(client):
+    turntable_faults(client).inject("stall:1")  # the next move stalls: following error
+    res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 60.0})
+    assert res.status_code == 503 and "following error" in res.json()["detail"]
+    res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 60.0})
+    assert res.status_code == 503 and "enable" in res.json()["detail"]  # still disabled
+
+    assert client.post("/api/v1/devices/turntable/enable").status_code == 401
+    res = client.post("/api/v1/devices/turntable/enable", headers=AUTH)
+    assert res.status_code == 200, res.text
+    res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 60.0})
+    assert res.status_code == 200 and res.json()["angle_deg"] == pytest.approx(60.0, abs=0.01)
+
+    res = client.post("/api/v1/devices/turntable/reset", headers=AUTH)  # reboot: unreferenced
+    assert res.status_code == 200, res.text
+    res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": -30.0})
+    assert res.status_code == 200 and res.json()["angle_deg"] == pytest.approx(-30.0, abs=0.01)
+
+
+def test_enable_and_reset_are_refused_while_a_campaign_holds_the_rig(client):
+    cid = start_campaign(client, [{"turntable_deg": a} for a in range(-60, 70, 10)])
+    wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
+    for verb in ("enable", "reset"):
+        res = client.post(f"/api/v1/devices/turntable/{verb}", headers=AUTH)
+        assert res.status_code == 409 and cid in res.json()["detail"], res.text
+    client.post(f"/api/v1/campaigns/{cid}/cancel", headers=AUTH)
