@@ -547,7 +547,13 @@ class Turntable:
             self._query("TE", parse_te)
 
     def enable(self) -> None:
-        """Leave DISABLE (``MM1``), e.g. after a following error; wait for READY."""
+        """Leave DISABLE (``MM1``), e.g. after a following error; wait for READY.
+
+        A controller that is not disabled is left as it is (``MM1`` is refused outside
+        DISABLE and READY), so enabling is safe to ask for in any state.
+        """
+        if self.status().state not in DISABLE_STATES:
+            return
         self._command("MM", 1)
         self._wait_ready("enable", self.move_timeout_s)
 
