@@ -160,7 +160,22 @@ def finish(
     sessions: sessionmaker, store: FrameStore, plan: PosePlan, m: Measurement,
     job: tuple[str, JobFuture], timeout_s: float,
 ) -> Outcome:
-    """Stage 3: store the simulated frame, compare, commit the result and both frame rows."""
+    """Stage 3: store the simulated frame, compare, commit the result and both frame rows.
+
+    If anything fails on the way (the simulation, its files, the comparison, the commit), both
+    of the unit's frame folders are removed at once: no frame is left without a row.
+    """
+    try:
+        return _finish(sessions, store, plan, m, job, timeout_s)
+    except BaseException:
+        store.delete([m.row.id, job[0]])
+        raise
+
+
+def _finish(
+    sessions: sessionmaker, store: FrameStore, plan: PosePlan, m: Measurement,
+    job: tuple[str, JobFuture], timeout_s: float,
+) -> Outcome:
     sim_id, future = job
     t0 = time.perf_counter()
     result = future.result(timeout=timeout_s)
@@ -191,17 +206,13 @@ def finish(
     }
     timings["store"] += t2 - t1
     timings["total"] = t3 - m.started  # the commit below is not included
-    try:
-        with sessions() as session:
-            row = queries.add_result(
-                session, campaign_id=plan.campaign_id, pose_index=plan.pose_index,
-                repeat=plan.repeat, turntable_deg=plan.turntable_deg,
-                solar_suns=plan.solar_suns, measured=m.row, simulated=sim_row,
-                metrics=metrics, rig=m.rig.to_dict(), timings_s=timings,
-            )
-    except Exception:
-        store.delete([m.row.id, sim_id])
-        raise
+    with sessions() as session:
+        row = queries.add_result(
+            session, campaign_id=plan.campaign_id, pose_index=plan.pose_index,
+            repeat=plan.repeat, turntable_deg=plan.turntable_deg,
+            solar_suns=plan.solar_suns, measured=m.row, simulated=sim_row,
+            metrics=metrics, rig=m.rig.to_dict(), timings_s=timings,
+        )
     return Outcome(row, timings, time.perf_counter() - t3)
 
 
