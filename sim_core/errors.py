@@ -22,7 +22,23 @@ class InvalidInputError(ToftwinError, ValueError):
 
     def __init__(self, field: str, message: str) -> None:
         self.field = field
+        self.message = message
         super().__init__(f"{field}: {message}")
+
+    def __reduce__(self):
+        # Pickled across a process boundary (a simulation worker's error reaching the service):
+        # rebuilt from the field, the message and the attributes, whatever the subclass's own
+        # constructor takes, so that the error arrives intact and the pool is not broken.
+        return _rebuild_input_error, (type(self), self.field, self.message, self.__dict__)
+
+
+def _rebuild_input_error(
+    cls: type[InvalidInputError], field: str, message: str, state: dict
+) -> InvalidInputError:
+    error = cls.__new__(cls)
+    InvalidInputError.__init__(error, field, message)
+    error.__dict__.update(state)
+    return error
 
 
 class SceneError(InvalidInputError):

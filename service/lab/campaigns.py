@@ -18,7 +18,7 @@ from service.errors import NotFoundError
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate
 from service.lab.runner import CampaignRunner
-from service.lab.scenes import scene_from_request
+from service.lab.scenes import check_mask, image_shape, scene_from_request
 from service.settings import Settings
 from service.store import queries
 from sim_core.errors import InvalidInputError
@@ -34,6 +34,7 @@ def create_campaign(
     """
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
+    check_mask(req.mask, scene, image_shape(scene, rig.camera.use_case if rig else None))
     if len(req.poses) > settings.max_poses:
         raise InvalidInputError(
             "poses", f"{len(req.poses)} poses; allowed: 1 to {settings.max_poses} (max_poses)")

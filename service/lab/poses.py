@@ -30,7 +30,14 @@ from service.compute.jobs import make_job
 from service.lab.comparison import build_mask, compare
 from service.lab.requests import MaskSpec, PoseCreate
 from service.lab.rig_lease import RigLease
-from service.lab.scenes import SceneSource, camera_of, for_use_case, scene_from_request
+from service.lab.scenes import (
+    SceneSource,
+    camera_of,
+    check_mask,
+    for_use_case,
+    image_shape,
+    scene_from_request,
+)
 from service.settings import Settings
 from service.store import queries
 from service.store.frame_files import FrameStore, new_frame_id
@@ -223,7 +230,9 @@ def run_single_pose(
     """``POST /poses``: the three stages in a row for one pose."""
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
-    check_angle(lease.require(), req.turntable_deg, "turntable_deg")
+    rig = lease.require()
+    check_angle(rig, req.turntable_deg, "turntable_deg")
+    check_mask(req.mask, scene, image_shape(scene, rig.camera.use_case))
     plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp)
     with lease.manual() as rig:
         m = measure(rig, store, plan, settings.solar_stable_timeout_s)

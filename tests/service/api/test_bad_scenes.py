@@ -1,0 +1,80 @@
+"""A scene or mask that cannot work is a 422 naming the field when the request arrives: nothing
+moves, nothing is stored, and a running campaign is not disturbed."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+
+PLATE = {"name": "plate", "mesh": {"kind": "rectangle", "size_m": [1.0, 1.0]},
+         "material": "black-flannel", "pose": {"position_m": [0.0, 0.0, 1.0]}}
+CAMERA = {"pose": {"position_m": [0, 0, 0], "look_at_m": [0, 0, 1], "up": [0, -1, 0]}}
+
+BAD_SCENES = [
+    ({"camera": CAMERA, "objects": [{**PLATE, "material": {"preset": "no-such-preset"}}]},
+     "scene.objects[0].material.preset"),
+    ({"camera": CAMERA, "objects": [{**PLATE, "on_turntable": True}]},
+     "scene.objects[0].on_turntable"),
+    ({"camera": {"pose": {"position_m": [0, 0, 1], "look_at_m": [0, 0, 1]}}, "objects": [PLATE]},
+     "scene.camera.pose.look_at_m"),
+    ({"camera": CAMERA, "objects": [{**PLATE, "mesh": {"kind": "box", "size_m": [3, 3, 3]},
+                                     "pose": {"position_m": [0, 0, 0]}}]},
+     "scene.camera.pose.position_m"),
+]
+BAD_MASKS = [
+    ({"kind": "objects", "names": ["no-such-object"]}, "mask.names[0]"),
+    ({"kind": "region", "rows": [100, 400], "cols": [0, 10]}, "mask.rows"),
+    ({"kind": "region", "rows": [0, 10], "cols": [220, 220]}, "mask.cols"),
+]
+
+
+def _angle(client) -> float:
+    return client.get("/api/v1/devices/turntable/position").json()["angle_deg"]
+
+
+@pytest.mark.parametrize(("scene", "field"), BAD_SCENES)
+def test_a_bad_inline_scene_is_refused_by_every_call_before_anything_moves(client, scene, field):
+    before = _angle(client)
+    calls = [
+        ("/api/v1/simulate", {"scene": scene, "spp": 1}),
+        ("/api/v1/poses", {"scene": scene, "turntable_deg": before + 30.0, "solar_suns": 1.0}),
+        ("/api/v1/campaigns", {"name": "bad", "scene": scene,
+                               "poses": [{"turntable_deg": before + 30.0}]}),
+    ]
+    for path, body in calls:
+        res = client.post(path, headers=AUTH, json=body)
+        assert res.status_code == 422, (path, res.status_code, res.text)
+        assert res.json()["message"].startswith(field), (path, res.json()["message"])
+    assert _angle(client) == pytest.approx(before, abs=1e-9)
+    assert client.get("/api/v1/campaigns").json() == []
+    assert client.get("/api/v1/frames").json() == []
+
+
+@pytest.mark.parametrize(("mask", "field"), BAD_MASKS)
+def test_a_mask_the_frames_cannot_have_is_refused_before_anything_moves(client, mask, field):
+    before = _angle(client)
+    for path, body in [
+        ("/api/v1/poses", {"turntable_deg": before + 30.0, "solar_suns": 1.0, "mask": mask}),
+        ("/api/v1/campaigns", {"name": "m", "mask": mask,
+                               "poses": [{"turntable_deg": before + 30.0}]}),
+    ]:
+        res = client.post(path, headers=AUTH, json=body)
+        assert res.status_code == 422, (path, res.status_code, res.text)
+        assert res.json()["message"].startswith(field), res.json()["message"]
+    assert _angle(client) == pytest.approx(before, abs=1e-9)
+    assert client.get("/api/v1/frames").json() == []
+
+
+def test_a_bad_scene_during_a_running_campaign_is_refused_and_the_campaign_completes(client):
+    poses = [{"turntable_deg": a} for a in range(-40, 60, 20)]
+    cid = start_campaign(client, poses)
+    wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
+    scene, field = BAD_SCENES[0]
+    res = client.post("/api/v1/simulate", headers=AUTH, json={"scene": scene, "spp": 1})
+    assert res.status_code == 422 and res.json()["message"].startswith(field)
+    res = client.post("/api/v1/campaigns", headers=AUTH,
+                      json={"name": "bad", "scene": scene, "poses": [{"turntable_deg": 0.0}]})
+    assert res.status_code == 422 and res.json()["message"].startswith(field)
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "completed" and status["poses_done"] == len(poses), status
