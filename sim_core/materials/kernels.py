@@ -54,24 +54,13 @@ Parameter layouts
 from __future__ import annotations
 
 import math
-import threading
 
-import numba
 import numpy as np
 from numba import njit, prange
 
-# The default OpenMP/TBB layers keep their threads spinning after a parallel region, which
-# starves the Embree worker threads and numpy between kernels (measured by the renderer: 2x
-# slower frames on 2 cores). The workqueue layer parks its threads. The layer is fixed by the
-# first parallel kernel a process runs, which may well be one of the batch wrappers below
-# (e.g. Hapke's constructor), so the choice is made here, before any of them can run.
-if numba.config.THREADING_LAYER == "default":
-    numba.config.THREADING_LAYER = "workqueue"
-
-#: The workqueue layer aborts the process if two threads launch parallel kernels at once. Every
-#: caller of a parallel kernel in this package (material batches, the renderer) holds this lock,
-#: so a service or a simulated camera may render from several threads safely.
-PARALLEL_KERNEL_LOCK = threading.RLock()
+# The batch wrappers below are parallel kernels: numba's threading layer must be chosen before
+# any of them runs, and callers hold PARALLEL_KERNEL_LOCK (see sim_core.numba_runtime).
+import sim_core.numba_runtime  # noqa: F401
 
 N_PARAMS = 8
 KIND_LAMBERTIAN = 0

@@ -46,7 +46,8 @@ import numpy as np
 
 from sim_core.camera import pixel_centre_grid
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.materials.kernels import N_PARAMS, PARALLEL_KERNEL_LOCK
+from sim_core.materials.kernels import N_PARAMS
+from sim_core.numba_runtime import PARALLEL_KERNEL_LOCK
 from sim_core.render import kernels
 from sim_core.render.kernels import camera_rays
 from sim_core.render.lightfield import LightField

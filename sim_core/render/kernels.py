@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit, prange
 
 import sim_core.materials.kernels as _material_kernels
+import sim_core.numba_runtime  # noqa: F401  (camera_rays is a parallel kernel)
 import sim_core.render.rng as _rng
 from sim_core.materials.kernels import (
     duff_frame,
@@ -67,8 +68,6 @@ _drop_stale_cache()
 
 # Every division in these kernels is guarded where its divisor can be 0 (see the comments), so
 # numba's per-division zero check (error_model="python") only costs time: "numpy" drops it.
-# The threading layer of the one parallel kernel (camera_rays) is set in
-# sim_core.materials.kernels, imported above.
 _SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 # Relative and absolute offset of secondary-ray origins; see integrator.RAY_OFFSET_REL.
@@ -117,7 +116,8 @@ def camera_ray(u, v, fx, fy, cx, cy, dist, rotation):
 def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
     """:func:`camera_ray` over arrays of pixel coordinates: (m, 3) float64 unit directions.
 
-    Parallel (numba's thread pool): callers hold ``PARALLEL_KERNEL_LOCK``.
+    Parallel (numba's thread pool): callers hold
+    :data:`sim_core.numba_runtime.PARALLEL_KERNEL_LOCK`.
     """
     m = u_px.shape[0]
     out = np.empty((m, 3))
