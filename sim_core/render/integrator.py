@@ -16,6 +16,12 @@ Integrators
   delta lights: BRDF-sampled rays can never hit them, so next-event estimation alone is
   unbiased and no multiple importance sampling is needed.
 
+Rays are traced in the render frame, world coordinates relative to the camera centre, where
+Embree's float32 loses least. Secondary rays (shadow rays and continuing paths) start a little
+off the surface they leave, on the side they go to, to keep Embree from finding that surface
+again: :data:`sim_core.render.kernels.RAY_OFFSET_REL` times the hit point's largest coordinate,
+at least :data:`sim_core.render.kernels.RAY_OFFSET_MIN_M`.
+
 Work split
 ----------
 A request for ``n`` samples of some pixels becomes independent chunks: a block of pixels and a
@@ -64,11 +70,6 @@ TASKS_PER_THREAD = 16
 MIN_CHUNK_RAYS = 2048
 #: what the worker threads' time is charged to (:attr:`RenderResult.stage_thread_seconds`)
 STAGES = ("camera_rays", "embree", "shading", "accumulation")
-#: relative offset of secondary-ray origins along the normal; Embree is float32 (~6e-8 relative),
-#: so origins closer than ~100 ulps re-hit the surface they start on (self-intersection).
-RAY_OFFSET_REL = 1e-5
-#: absolute floor of that offset [m], for points near the render origin
-RAY_OFFSET_MIN_M = 1e-6
 #: a surface closer than this to the point source would see an infinite irradiance I/d^2 [m]
 MIN_LIGHT_DISTANCE_M = 1e-4
 

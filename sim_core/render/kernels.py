@@ -70,15 +70,20 @@ _drop_stale_cache()
 # numba's per-division zero check (error_model="python") only costs time: "numpy" drops it.
 _SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 
-# Relative and absolute offset of secondary-ray origins; see integrator.RAY_OFFSET_REL.
-_OFFSET_REL = 1e-5
-_OFFSET_MIN_M = 1e-6
+#: relative offset of secondary-ray origins (shadow rays, continuing paths) along the normal,
+#: times the largest coordinate of the hit point in the render frame: Embree is float32 (~6e-8
+#: relative), so origins closer than ~100 ulps re-hit the surface they start on
+#: (self-intersection)
+RAY_OFFSET_REL = 1e-5
+#: absolute floor of that offset [m], for points near the render origin (the camera centre)
+RAY_OFFSET_MIN_M = 1e-6
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _offset_scale(px, py, pz):
-    m = max(abs(px), abs(py), abs(pz)) * _OFFSET_REL
-    return m if m > _OFFSET_MIN_M else _OFFSET_MIN_M
+    """Offset of a secondary ray's origin from the hit point (px, py, pz) along the normal."""
+    m = max(abs(px), abs(py), abs(pz)) * RAY_OFFSET_REL
+    return m if m > RAY_OFFSET_MIN_M else RAY_OFFSET_MIN_M
 
 
 @njit(cache=True, inline="always", error_model="numpy")
