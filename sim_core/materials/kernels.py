@@ -74,11 +74,11 @@ COS_EPS = 1e-9
 U_MAX = float(np.nextafter(1.0, 0.0))
 
 # Parameter indices (see "Parameter layouts" in the module docstring).
-_ALBEDO, _ALBEDO_OVER_PI = 0, 1
+_ALBEDO_OVER_PI = 1  # Lambertian
 _ALPHA, _P_SPEC, _P_DIFF, _KD_OVER_PI, _KS = 0, 1, 2, 3, 4
 _F0, _EXPONENT = 5, 6  # seed microfacet
 _N2, _FRESNEL_HALF = 5, 6  # Cook–Torrance
-_W, _B0, _H, _PHASE_B, _GAMMA, _NORM, _B0_H = 0, 1, 2, 3, 4, 5, 6  # Hapke
+_H, _PHASE_B, _GAMMA, _NORM, _B0_H = 2, 3, 4, 5, 6  # Hapke (w and b0 are folded into these)
 
 
 # -------------------------------------------------------------------------------------------
