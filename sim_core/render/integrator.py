@@ -24,10 +24,11 @@ at least :data:`sim_core.render.kernels.RAY_OFFSET_MIN_M`.
 
 Work split
 ----------
-A request for ``n`` samples of some pixels becomes independent chunks: a block of pixels and a
-few sample passes, about ``CHUNK_RAYS`` camera rays. A worker thread traces a chunk from start
-to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays) and adds its
-samples to the per-pixel sums; every block of pixels belongs to one task, so no two threads
+A request for ``n`` samples of some pixels becomes tasks, one block of pixels each (about
+``TASKS_PER_THREAD`` per worker thread). A task traces its block in chunks of a few sample
+passes, about ``CHUNK_RAYS`` camera rays, one after the other on one thread: each chunk from
+start to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays), then
+its samples into the per-pixel sums. A block of pixels belongs to one task, so no two threads
 write the same pixel. Each chunk is wavefront-style inside (one Embree call per bounce for all
 its rays) and small enough to stay in cache; there is no barrier between stages.
 
@@ -234,7 +235,8 @@ class ProgressiveRenderer:
         pixels: np.ndarray | None = None,
         progress: Callable[[int, int], None] | None = None,
     ) -> None:
-        """Take ``n`` more samples of each pixel in ``pixels``, on the tracer's worker threads.
+        """Take ``n`` more samples of each pixel in ``pixels``, on the tracer's worker threads
+        (with one thread: on the calling thread, block by block).
 
         ``pixels`` are distinct flat integer indices in [0, H*W) (default: all pixels).
         Requests to one renderer run one at a time.
@@ -478,7 +480,8 @@ def _trace_block(
 ) -> None:
     """Trace ``n`` more samples of each pixel in ``pixels``, ``passes`` samples per chunk.
 
-    Runs on a worker thread; the caller gives each thread distinct pixels.
+    Runs on a worker thread (with one thread: the caller's); no two tasks running at once share
+    a pixel.
     """
     clock = _StageClock()
     first = acc.n[pixels]  # fancy indexing: a copy, unaffected by this task's own additions

@@ -1,12 +1,14 @@
 """Compiled per-ray kernels of the integrator (numba).
 
 The integrator traces a frame as many independent *chunks* (a block of pixels, a few sample
-passes), each on one worker thread from start to finish: camera rays, then per bounce one
-Embree query, one call of :func:`bounce` and one occlusion query, then :func:`add_shadowed`,
-and finally :func:`accumulate_chunk` into the per-pixel sums. These kernels are therefore serial and
-``nogil``: two threads run them side by side with Embree, without numba's thread pool (whose
-workers, parked or spinning, competed with Embree's callers: measured ~30 % slower Embree
-queries), without a barrier after every stage, and on chunks small enough to stay in cache.
+passes), each on one worker thread from start to finish: camera rays (:func:`primary_rays`),
+then per bounce one Embree query, one call of :func:`bounce`, one occlusion query and one call
+of :func:`add_shadowed`, and finally :func:`accumulate_chunk` into the per-pixel sums. These
+kernels are therefore serial and ``nogil``: two threads run them side by side with Embree,
+without numba's thread pool (whose workers, parked or spinning, competed with Embree's callers:
+measured ~30 % slower Embree queries), without a barrier after every stage, and on chunks small
+enough to stay in cache. The one parallel kernel, :func:`camera_rays`, serves the per-render
+ground truth only.
 
 Being serial, :func:`bounce` writes the rays it spawns (shadow rays, continuing paths) packed,
 in ray order, so no separate compaction pass is needed. History: the first numpy version spent
