@@ -3,7 +3,6 @@
 SPEED_OF_LIGHT_M_S = 299_792_458.0
 PLANCK_J_S = 6.626_070_15e-34
 BOLTZMANN_J_K = 1.380_649e-23
-ELEMENTARY_CHARGE_C = 1.602_176_634e-19
 
 #: one "sun" as the solar-simulator industry defines it (AM1.5G, IEC 60904-9) [W/m^2]
 ONE_SUN_W_M2 = 1000.0

@@ -70,14 +70,6 @@ class Scene:
     def n_triangles(self) -> int:
         return int(self.triangles_m.shape[0])
 
-    def bounds_m(self) -> tuple[np.ndarray, np.ndarray]:
-        """Axis-aligned bounds of the geometry; the camera position if there is none."""
-        if self.n_triangles == 0:
-            p = self.camera.position_m
-            return p, p
-        pts = self.triangles_m.reshape(-1, 3)
-        return pts.min(axis=0), pts.max(axis=0)
-
 
 def _unit(v, field_name: str) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64)

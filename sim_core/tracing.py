@@ -29,7 +29,7 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
 #: below this many rays per thread, splitting costs more than it gains
-#: (../shared/PERFORMANCE-NOTES.md: ~1-3 us per call, throughput flat from ~10k rays)
+#: (an embreex call costs ~1-3 us of overhead; its throughput is flat from ~10k rays a call)
 MIN_RAYS_PER_THREAD = 16_384
 
 
@@ -41,11 +41,10 @@ class TraceStats:
     """
 
     rays: int = 0
-    calls: int = 0
     seconds: float = 0.0
 
     def snapshot(self) -> TraceStats:
-        return TraceStats(self.rays, self.calls, self.seconds)
+        return TraceStats(self.rays, self.seconds)
 
 
 class RayTracer:
@@ -104,10 +103,9 @@ class RayTracer:
             raise RuntimeError("submit: this tracer has one thread and no pool")
         return self._pool.submit(fn, *args)
 
-    def _count(self, rays: int, calls: int, seconds: float) -> None:
+    def _count(self, rays: int, seconds: float) -> None:
         with self._stats_lock:
             self.stats.rays += rays
-            self.stats.calls += calls
             self.stats.seconds += seconds
 
     def _dispatch(self, fn, n: int):
@@ -125,7 +123,7 @@ class RayTracer:
             edges = np.linspace(0, n, k + 1).astype(np.int64)
             futures = [self._pool.submit(timed, a, b) for a, b in pairwise(edges.tolist())]
             seconds = sum(f.result() for f in futures)
-        self._count(n, 1, seconds)
+        self._count(n, seconds)
 
     def intersect(
         self, origins_rel: np.ndarray, directions: np.ndarray
@@ -162,7 +160,7 @@ class RayTracer:
         tfar = np.full(m, np.finfo(np.float32).max, dtype=np.float32)
         pid = np.full(m, -1, dtype=np.int32)
         if m == 0 or self.n_triangles == 0:
-            self._count(m, 0, 0.0)
+            self._count(m, 0.0)
             return tfar, pid
 
         def work(a: int, b: int) -> None:
@@ -185,7 +183,7 @@ class RayTracer:
             return self.intersect32(o32, d32)  # nothing to trace: its empty answer
         t0 = time.perf_counter()
         hits = self._closest(o32, d32)
-        self._count(m, 1, time.perf_counter() - t0)
+        self._count(m, time.perf_counter() - t0)
         return hits
 
     def occluded_here(self, o32: np.ndarray, d32: np.ndarray, tmax32: np.ndarray) -> np.ndarray:
@@ -195,9 +193,9 @@ class RayTracer:
         """
         m = o32.shape[0]
         if m == 0 or self.n_triangles == 0:
-            self._count(m, 0, 0.0)
+            self._count(m, 0.0)
             return np.full(m, -1, dtype=np.int32)
         t0 = time.perf_counter()
         res = self._scene.run(o32, d32, dists=tmax32, query="OCCLUDED")
-        self._count(m, 1, time.perf_counter() - t0)
+        self._count(m, time.perf_counter() - t0)
         return res

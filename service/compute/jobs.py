@@ -28,7 +28,7 @@ from sim_core.scene_spec import SceneSpec
 #: (:func:`service.lab.lab.open_rig`) - takes this lock. A render already uses all cores, so two
 #: at once would only compete. (sim_core is thread-safe on its own: its few parallel numba
 #: kernels, which numba's ``workqueue`` layer cannot run from two threads at once, take
-#: ``PARALLEL_KERNEL_LOCK``.)
+#: :data:`sim_core.numba_runtime.PARALLEL_KERNEL_LOCK`.)
 RENDER_LOCK = threading.Lock()
 
 

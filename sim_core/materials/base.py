@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim_core.materials import kernels
+from sim_core.numba_runtime import PARALLEL_KERNEL_LOCK
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,7 @@ def frame_from_normal(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n : (m, 3) float
         Unit normals.
     """
-    with kernels.PARALLEL_KERNEL_LOCK:
+    with PARALLEL_KERNEL_LOCK:
         return kernels.frame_batch(np.ascontiguousarray(n, dtype=np.float64))
 
 
@@ -154,13 +155,13 @@ class Material(ABC):
     def eval_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """BRDF value f_r [1/sr] without the cosine, shading frame; ``kernels.eval_brdf``."""
         wi, wo = _pair(wi, wo)
-        with kernels.PARALLEL_KERNEL_LOCK:
+        with PARALLEL_KERNEL_LOCK:
             return kernels.eval_batch(*self._kernel(), wi, wo)
 
     def pdf_local(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Solid-angle pdf [1/sr] of ``sample_local`` returning ``wi``; ``kernels.pdf_brdf``."""
         wi, wo = _pair(wi, wo)
-        with kernels.PARALLEL_KERNEL_LOCK:
+        with PARALLEL_KERNEL_LOCK:
             return kernels.pdf_batch(*self._kernel(), wi, wo)
 
     def sample_local(self, wo: np.ndarray, u: np.ndarray) -> BSDFSample:
@@ -173,7 +174,7 @@ class Material(ABC):
         wo, u = _directions(wo, "wo"), _directions(u, "u")
         if u.shape != wo.shape:
             raise ValueError(f"u must have the shape of wo, got {u.shape} and {wo.shape}")
-        with kernels.PARALLEL_KERNEL_LOCK:
+        with PARALLEL_KERNEL_LOCK:
             wi, pdf, weight = kernels.sample_batch(*self._kernel(), wo, u)
         cls = type(self)
         if cls.eval_local is not Material.eval_local or cls.pdf_local is not Material.pdf_local:

@@ -54,24 +54,13 @@ Parameter layouts
 from __future__ import annotations
 
 import math
-import threading
 
-import numba
 import numpy as np
 from numba import njit, prange
 
-# The default OpenMP/TBB layers keep their threads spinning after a parallel region, which
-# starves the Embree worker threads and numpy between kernels (measured by the renderer: 2x
-# slower frames on 2 cores). The workqueue layer parks its threads. The layer is fixed by the
-# first parallel kernel a process runs, which may well be one of the batch wrappers below
-# (e.g. Hapke's constructor), so the choice is made here, before any of them can run.
-if numba.config.THREADING_LAYER == "default":
-    numba.config.THREADING_LAYER = "workqueue"
-
-#: The workqueue layer aborts the process if two threads launch parallel kernels at once. Every
-#: caller of a parallel kernel in this package (material batches, the renderer) holds this lock,
-#: so a service or a simulated camera may render from several threads safely.
-PARALLEL_KERNEL_LOCK = threading.RLock()
+# The batch wrappers below are parallel kernels: numba's threading layer must be chosen before
+# any of them runs, and callers hold PARALLEL_KERNEL_LOCK (see sim_core.numba_runtime).
+import sim_core.numba_runtime  # noqa: F401
 
 N_PARAMS = 8
 KIND_LAMBERTIAN = 0
@@ -85,11 +74,11 @@ COS_EPS = 1e-9
 U_MAX = float(np.nextafter(1.0, 0.0))
 
 # Parameter indices (see "Parameter layouts" in the module docstring).
-_ALBEDO, _ALBEDO_OVER_PI = 0, 1
+_ALBEDO_OVER_PI = 1  # Lambertian
 _ALPHA, _P_SPEC, _P_DIFF, _KD_OVER_PI, _KS = 0, 1, 2, 3, 4
 _F0, _EXPONENT = 5, 6  # seed microfacet
 _N2, _FRESNEL_HALF = 5, 6  # Cook–Torrance
-_W, _B0, _H, _PHASE_B, _GAMMA, _NORM, _B0_H = 0, 1, 2, 3, 4, 5, 6  # Hapke
+_H, _PHASE_B, _GAMMA, _NORM, _B0_H = 2, 3, 4, 5, 6  # Hapke (w and b0 are folded into these)
 
 
 # -------------------------------------------------------------------------------------------

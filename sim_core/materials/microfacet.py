@@ -6,7 +6,7 @@ The scattering formulas themselves (the Beckmann normal distribution and its sam
 Schlick-type power-law Fresnel term and the full unpolarised dielectric Fresnel equations, the
 V-cavity shadowing-masking term, cosine-hemisphere sampling), in the spirit of pbrt-v4's
 ``util/scattering.h``, are scalar numba kernels in :mod:`sim_core.materials.kernels`, together
-with their numerical guards (``COS_EPS``, ``U_MAX``, re-exported here).
+with their numerical guards (``COS_EPS``, ``U_MAX``; ``U_MAX`` is re-exported here).
 
 Conventions are those of :mod:`sim_core.materials.base`: shading frame with the normal on +z,
 ``wi`` towards the light, ``wo`` towards the viewer, both pointing away from the surface, arrays
@@ -21,10 +21,9 @@ from abc import abstractmethod
 
 from sim_core.errors import InvalidInputError
 from sim_core.materials.base import Material, finish_sample
-from sim_core.materials.kernels import COS_EPS, U_MAX
+from sim_core.materials.kernels import U_MAX
 
 __all__ = [
-    "COS_EPS",
     "U_MAX",
     "MicrofacetMixture",
     "check_parameter",

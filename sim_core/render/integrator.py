@@ -16,12 +16,19 @@ Integrators
   delta lights: BRDF-sampled rays can never hit them, so next-event estimation alone is
   unbiased and no multiple importance sampling is needed.
 
+Rays are traced in the render frame, world coordinates relative to the camera centre, where
+Embree's float32 loses least. Secondary rays (shadow rays and continuing paths) start a little
+off the surface they leave, on the side they go to, to keep Embree from finding that surface
+again: :data:`sim_core.render.kernels.RAY_OFFSET_REL` times the hit point's largest coordinate,
+at least :data:`sim_core.render.kernels.RAY_OFFSET_MIN_M`.
+
 Work split
 ----------
-A request for ``n`` samples of some pixels becomes independent chunks: a block of pixels and a
-few sample passes, about ``CHUNK_RAYS`` camera rays. A worker thread traces a chunk from start
-to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays) and adds its
-samples to the per-pixel sums; every block of pixels belongs to one task, so no two threads
+A request for ``n`` samples of some pixels becomes tasks, one block of pixels each (about
+``TASKS_PER_THREAD`` per worker thread). A task traces its block in chunks of a few sample
+passes, about ``CHUNK_RAYS`` camera rays, one after the other on one thread: each chunk from
+start to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays), then
+its samples into the per-pixel sums. A block of pixels belongs to one task, so no two threads
 write the same pixel. Each chunk is wavefront-style inside (one Embree call per bounce for all
 its rays) and small enough to stay in cache; there is no barrier between stages.
 
@@ -46,9 +53,19 @@ import numpy as np
 
 from sim_core.camera import pixel_centre_grid
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.materials.kernels import N_PARAMS, PARALLEL_KERNEL_LOCK
+from sim_core.materials.kernels import N_PARAMS
+from sim_core.numba_runtime import PARALLEL_KERNEL_LOCK
 from sim_core.render import kernels
-from sim_core.render.kernels import camera_rays
+from sim_core.render.kernels import (
+    AmbientSources,
+    CameraLight,
+    Paths,
+    Pinhole,
+    PixelSums,
+    SampleValues,
+    SceneTables,
+    camera_rays,
+)
 from sim_core.render.lightfield import LightField
 from sim_core.scene import Scene
 from sim_core.tracing import RayTracer
@@ -63,11 +80,6 @@ TASKS_PER_THREAD = 16
 MIN_CHUNK_RAYS = 2048
 #: what the worker threads' time is charged to (:attr:`RenderResult.stage_thread_seconds`)
 STAGES = ("camera_rays", "embree", "shading", "accumulation")
-#: relative offset of secondary-ray origins along the normal; Embree is float32 (~6e-8 relative),
-#: so origins closer than ~100 ulps re-hit the surface they start on (self-intersection).
-RAY_OFFSET_REL = 1e-5
-#: absolute floor of that offset [m], for points near the render origin
-RAY_OFFSET_MIN_M = 1e-6
 #: a surface closer than this to the point source would see an infinite irradiance I/d^2 [m]
 MIN_LIGHT_DISTANCE_M = 1e-4
 
@@ -155,13 +167,14 @@ class _Accumulator:
         self.ss_re = np.zeros((n_f, npix))
         self.ss_im = np.zeros((n_f, npix))
         self.s_reim = np.zeros((n_f, npix))
+        #: the same arrays, as the accumulation kernel takes them
+        self.sums = PixelSums(self.n, self.s_active, self.ss_active, self.s_ambient,
+                              self.ss_ambient, self.s_re, self.s_im, self.ss_re, self.ss_im,
+                              self.s_reim)
 
-    def add(self, pixels: np.ndarray, dc, ambient, re, im) -> None:
+    def add(self, pixels: np.ndarray, samples: SampleValues) -> None:
         """Add per-sample values; sample ``r`` belongs to pixel ``pixels[r % len(pixels)]``."""
-        kernels.accumulate_chunk(
-            pixels, dc, ambient, re, im, self.n, self.s_active, self.ss_active, self.s_ambient,
-            self.ss_ambient, self.s_re, self.s_im, self.ss_re, self.ss_im, self.s_reim,
-        )
+        kernels.accumulate_chunk(pixels, samples, self.sums)
 
     def mean(self, s: np.ndarray) -> np.ndarray:
         """Per-pixel mean; unsampled pixels (n = 0) report 0, not 0/0."""
@@ -222,7 +235,8 @@ class ProgressiveRenderer:
         pixels: np.ndarray | None = None,
         progress: Callable[[int, int], None] | None = None,
     ) -> None:
-        """Take ``n`` more samples of each pixel in ``pixels``, on the tracer's worker threads.
+        """Take ``n`` more samples of each pixel in ``pixels``, on the tracer's worker threads
+        (with one thread: on the calling thread, block by block).
 
         ``pixels`` are distinct flat integer indices in [0, H*W) (default: all pixels).
         Requests to one renderer run one at a time.
@@ -354,7 +368,7 @@ def material_tables(materials) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Context:
-    """Per-render constants shared by the stages, as the arrays the kernels take."""
+    """Per-render constants shared by the stages, as the arrays and groups the kernels take."""
 
     def __init__(self, scene: Scene, settings: RenderSettings, tracer: RayTracer, origin) -> None:
         self.scene = scene
@@ -367,64 +381,72 @@ class _Context:
         self.turns_per_m = self.freqs / SPEED_OF_LIGHT_M_S
         self.u_px, self.v_px = pixel_centre_grid(scene.camera.intrinsics)
         self.npix = self.u_px.size
-        self.rotation = np.ascontiguousarray(scene.camera.rotation)
-        intr = scene.camera.intrinsics
-        self.intr = intr
-        self.distortion = np.asarray(intr.distortion, dtype=np.float64)
-        self.normals = np.ascontiguousarray(scene.normals, dtype=np.float64)
-        self.tri_mat = np.ascontiguousarray(scene.material_index, dtype=np.int64)
-        self.mat_kind, self.mat_params = material_tables(scene.materials)
+        self.shape = scene.camera.intrinsics.shape
+        self.camera = Pinhole.of(scene.camera.intrinsics, scene.camera.rotation)
+        self.footprint_px = settings.footprint_px if settings.jitter else 0.0
+        mat_kind, mat_params = material_tables(scene.materials)
+        self.tables = SceneTables(
+            np.ascontiguousarray(scene.normals, dtype=np.float64),
+            np.ascontiguousarray(scene.material_index, dtype=np.int64),
+            mat_kind,
+            mat_params,
+        )
         light = scene.light
-        self.light_pos = np.asarray(light.position_m - self.origin, dtype=np.float64)
-        self.light_axis = np.asarray(light.axis, dtype=np.float64)
-        self.light_scale = float(light.scale_w_sr)
         if light.profile_angle_rad is None:
-            self.prof_angle = np.zeros(0)
-            self.prof_rel = np.zeros(0)
+            prof_angle = np.zeros(0)
+            prof_rel = np.zeros(0)
         else:
-            self.prof_angle = np.asarray(light.profile_angle_rad, dtype=np.float64)
-            self.prof_rel = np.asarray(light.profile_relative, dtype=np.float64)
+            prof_angle = np.asarray(light.profile_angle_rad, dtype=np.float64)
+            prof_rel = np.asarray(light.profile_relative, dtype=np.float64)
+        self.light = CameraLight(
+            np.asarray(light.position_m - self.origin, dtype=np.float64),
+            np.asarray(light.axis, dtype=np.float64),
+            float(light.scale_w_sr),
+            prof_angle,
+            prof_rel,
+            MIN_LIGHT_DISTANCE_M,
+        )
         amb = scene.ambient if settings.ambient else ()
         n_a = len(amb)
-        self.amb_dir = np.array([a.direction for a in amb], dtype=np.float64).reshape(n_a, 3)
-        self.amb_irr = np.array([a.irradiance_w_m2 for a in amb], dtype=np.float64)
-        self.amb_footprint = np.array(
+        has_footprint = np.array(
             [a.footprint_centre_m is not None and a.footprint_size_m is not None for a in amb],
             dtype=np.bool_,
         )
-        self.amb_centre = np.array(
-            [a.footprint_centre_m if f else np.zeros(3)
-             for a, f in zip(amb, self.amb_footprint, strict=True)],
-            dtype=np.float64,
-        ).reshape(n_a, 3)
-        self.amb_size = np.array(
-            [a.footprint_size_m if f else (0.0, 0.0)
-             for a, f in zip(amb, self.amb_footprint, strict=True)],
-            dtype=np.float64,
-        ).reshape(n_a, 2)
-        self.amb_u = np.array([a.footprint_u for a in amb], dtype=np.float64).reshape(n_a, 3)
-        self.amb_v = np.array([a.footprint_v for a in amb], dtype=np.float64).reshape(n_a, 3)
+        self.ambient = AmbientSources(
+            direction=np.array([a.direction for a in amb], dtype=np.float64).reshape(n_a, 3),
+            irradiance=np.array([a.irradiance_w_m2 for a in amb], dtype=np.float64),
+            centre=np.array(
+                [a.footprint_centre_m if f else np.zeros(3)
+                 for a, f in zip(amb, has_footprint, strict=True)],
+                dtype=np.float64,
+            ).reshape(n_a, 3),
+            u=np.array([a.footprint_u for a in amb], dtype=np.float64).reshape(n_a, 3),
+            v=np.array([a.footprint_v for a in amb], dtype=np.float64).reshape(n_a, 3),
+            size=np.array(
+                [a.footprint_size_m if f else (0.0, 0.0)
+                 for a, f in zip(amb, has_footprint, strict=True)],
+                dtype=np.float64,
+            ).reshape(n_a, 2),
+            has_footprint=has_footprint,
+        )
 
 
 def _ground_truth(ctx: _Context) -> dict:
     """Range, depth, normal and object through every pixel centre (no jitter)."""
-    h, w = ctx.intr.shape
-    d = camera_rays(
-        ctx.u_px, ctx.v_px, ctx.intr.fx_px, ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px,
-        ctx.distortion, ctx.rotation,
-    )
+    h, w = ctx.shape
+    d = camera_rays(ctx.u_px, ctx.v_px, ctx.camera)
     tfar, prim = ctx.tracer.intersect32(np.zeros_like(d, dtype=np.float32), d.astype(np.float32))
     hit = prim >= 0
     rng = np.where(hit, tfar.astype(np.float64), np.nan)
     normal = np.zeros((ctx.npix, 3))
     obj = np.full(ctx.npix, -1, dtype=np.int32)
     if hit.any():  # an empty scene has no normal table to index
-        normal[hit] = ctx.normals[prim[hit]]
+        normal[hit] = ctx.tables.normals[prim[hit]]
         facing = np.einsum("ij,ij->i", normal, d) > 0.0
         normal[facing] *= -1.0
         obj[hit] = ctx.scene.object_index[prim[hit]]
     # z component of each unit direction in the camera frame: depth_z = range * z.
-    z_cam = d @ ctx.rotation[:, 2]
+    z_cam = d @ ctx.camera.rotation[:, 2]
     return {
         "truth_range_m": rng.reshape(h, w),
         "truth_depth_z_m": (rng * z_cam).reshape(h, w),
@@ -458,7 +480,8 @@ def _trace_block(
 ) -> None:
     """Trace ``n`` more samples of each pixel in ``pixels``, ``passes`` samples per chunk.
 
-    Runs on a worker thread; the caller gives each thread distinct pixels.
+    Runs on a worker thread (with one thread: the caller's); no two tasks running at once share
+    a pixel.
     """
     clock = _StageClock()
     first = acc.n[pixels]  # fancy indexing: a copy, unaffected by this task's own additions
@@ -478,41 +501,27 @@ def _trace_chunk(
     st = ctx.settings
     tracer = ctx.tracer
     d, keys = kernels.primary_rays(
-        st.seed, pixels, first_sample, g, ctx.u_px, ctx.v_px,
-        st.footprint_px if st.jitter else 0.0, ctx.intr.fx_px,
-        ctx.intr.fy_px, ctx.intr.cx_px, ctx.intr.cy_px, ctx.distortion, ctx.rotation,
+        st.seed, pixels, first_sample, g, ctx.u_px, ctx.v_px, ctx.footprint_px, ctx.camera
     )
     clock.lap("camera_rays")
     m = d.shape[0]
-    out_dc = np.zeros(m)
-    out_amb = np.zeros(m)
-    out_re = np.zeros((ctx.n_f, m))
-    out_im = np.zeros((ctx.n_f, m))
-    o = np.zeros_like(d)
-    slot = np.arange(m, dtype=np.int64)
-    length = np.zeros(m)
-    throughput = np.ones(m)
+    out = SampleValues(np.zeros(m), np.zeros(m), np.zeros((ctx.n_f, m)), np.zeros((ctx.n_f, m)))
+    paths = Paths(np.zeros_like(d), d, np.arange(m, dtype=np.int64), keys, np.zeros(m), np.ones(m))
     clock.skip()  # numpy buffers: "other"
     n_bounces = st.effective_bounces
     for b in range(1, n_bounces + 1):
-        tfar, prim = tracer.intersect_here(o, d)
+        tfar, prim = tracer.intersect_here(paths.o, paths.d)
         clock.lap("embree")
-        shadow, (o, d, slot, keys, length, throughput) = kernels.bounce(
-            o, d, tfar, prim, slot, keys, length, throughput,
-            ctx.normals, ctx.tri_mat, ctx.mat_kind, ctx.mat_params,
-            ctx.light_pos, ctx.light_axis, ctx.light_scale, ctx.prof_angle, ctx.prof_rel,
-            MIN_LIGHT_DISTANCE_M, ctx.amb_dir, ctx.amb_irr, ctx.amb_centre, ctx.amb_u,
-            ctx.amb_v, ctx.amb_size, ctx.amb_footprint, ctx.origin,
+        shadow, paths = kernels.bounce(
+            paths, tfar, prim, ctx.tables, ctx.light, ctx.ambient, ctx.origin,
             b, st.russian_roulette_from_bounce, b < n_bounces,
         )
         clock.lap("shading")
-        sh_o, sh_d, sh_t, sh_slot, sh_c, sh_len, sh_amb = shadow
-        occluded = tracer.occluded_here(sh_o, sh_d, sh_t)
+        occluded = tracer.occluded_here(shadow.o, shadow.d, shadow.t_max)
         clock.lap("embree")
-        kernels.add_shadowed(occluded, sh_slot, sh_c, sh_len, sh_amb, ctx.turns_per_m,
-                             out_dc, out_amb, out_re, out_im)
+        kernels.add_shadowed(occluded, shadow, ctx.turns_per_m, out)
         clock.lap("accumulation")
-        if o.shape[0] == 0:
+        if paths.o.shape[0] == 0:
             break
-    acc.add(pixels, out_dc, out_amb, out_re, out_im)
+    acc.add(pixels, out)
     clock.lap("accumulation")

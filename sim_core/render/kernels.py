@@ -1,12 +1,14 @@
 """Compiled per-ray kernels of the integrator (numba).
 
 The integrator traces a frame as many independent *chunks* (a block of pixels, a few sample
-passes), each on one worker thread from start to finish: camera rays, then per bounce one
-Embree query, one call of :func:`bounce` and one occlusion query, then :func:`add_shadowed`,
-and finally :func:`accumulate_chunk` into the per-pixel sums. These kernels are therefore serial and
-``nogil``: two threads run them side by side with Embree, without numba's thread pool (whose
-workers, parked or spinning, competed with Embree's callers: measured ~30 % slower Embree
-queries), without a barrier after every stage, and on chunks small enough to stay in cache.
+passes), each on one worker thread from start to finish: camera rays (:func:`primary_rays`),
+then per bounce one Embree query, one call of :func:`bounce`, one occlusion query and one call
+of :func:`add_shadowed`, and finally :func:`accumulate_chunk` into the per-pixel sums. These
+kernels are therefore serial and ``nogil``: two threads run them side by side with Embree,
+without numba's thread pool (whose workers, parked or spinning, competed with Embree's callers:
+measured ~30 % slower Embree queries), without a barrier after every stage, and on chunks small
+enough to stay in cache. The one parallel kernel, :func:`camera_rays`, serves the per-render
+ground truth only.
 
 Being serial, :func:`bounce` writes the rays it spawns (shadow rays, continuing paths) packed,
 in ray order, so no separate compaction pass is needed. History: the first numpy version spent
@@ -20,12 +22,14 @@ from __future__ import annotations
 import hashlib
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 import sim_core.camera as _camera
 import sim_core.materials.kernels as _material_kernels
+import sim_core.numba_runtime  # noqa: F401  (camera_rays is a parallel kernel)
 import sim_core.render.rng as _rng
 from sim_core.materials.kernels import (
     duff_frame,
@@ -68,31 +72,144 @@ _drop_stale_cache()
 
 # Every division in these kernels is guarded where its divisor can be 0 (see the comments), so
 # numba's per-division zero check (error_model="python") only costs time: "numpy" drops it.
-# The threading layer of the one parallel kernel (camera_rays) is set in
-# sim_core.materials.kernels, imported above.
 _SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 
-# Relative and absolute offset of secondary-ray origins; see integrator.RAY_OFFSET_REL.
-_OFFSET_REL = 1e-5
-_OFFSET_MIN_M = 1e-6
+#: relative offset of secondary-ray origins (shadow rays, continuing paths) along the normal,
+#: times the largest coordinate of the hit point in the render frame: Embree is float32 (~6e-8
+#: relative), so origins closer than ~100 ulps re-hit the surface they start on
+#: (self-intersection)
+RAY_OFFSET_REL = 1e-5
+#: absolute floor of that offset [m], for points near the render origin (the camera centre)
+RAY_OFFSET_MIN_M = 1e-6
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _offset_scale(px, py, pz):
-    m = max(abs(px), abs(py), abs(pz)) * _OFFSET_REL
-    return m if m > _OFFSET_MIN_M else _OFFSET_MIN_M
+    """Offset of a secondary ray's origin from the hit point (px, py, pz) along the normal."""
+    m = max(abs(px), abs(py), abs(pz)) * RAY_OFFSET_REL
+    return m if m > RAY_OFFSET_MIN_M else RAY_OFFSET_MIN_M
+
+
+# Argument groups of the kernels. NamedTuples are numba tuples (typed per field, passed by
+# value, fields read like attributes), so a group costs nothing inside a kernel; the integrator
+# builds the per-render ones (Pinhole, SceneTables, CameraLight, AmbientSources, PixelSums)
+# once per render.
+
+
+class Pinhole(NamedTuple):
+    """The camera model of :func:`camera_ray` (OpenCV pinhole with distortion)."""
+
+    fx: float  #: focal length along u [px]
+    fy: float  #: focal length along v [px]
+    cx: float  #: principal point u [px]
+    cy: float  #: principal point v [px]
+    dist: np.ndarray  #: (5,) float64 distortion k1, k2, p1, p2, k3
+    rotation: np.ndarray  #: (3, 3) float64 camera-to-world rotation (columns: camera axes)
+
+    @classmethod
+    def of(cls, intrinsics, rotation) -> Pinhole:
+        """The model of :class:`sim_core.camera.Intrinsics` and a camera-to-world rotation."""
+        return cls(
+            float(intrinsics.fx_px), float(intrinsics.fy_px), float(intrinsics.cx_px),
+            float(intrinsics.cy_px), np.asarray(intrinsics.distortion, dtype=np.float64),
+            np.ascontiguousarray(rotation, dtype=np.float64),
+        )
+
+
+class Paths(NamedTuple):
+    """The live paths of a chunk, one row each: the rays to trace next and what they carry.
+
+    Ray arrays are float32 in the render frame (what Embree takes).
+    """
+
+    o: np.ndarray  #: (m, 3) float32 ray origins
+    d: np.ndarray  #: (m, 3) float32 unit ray directions
+    slot: np.ndarray  #: (m,) int64 the path's row in the chunk's :class:`SampleValues`
+    key: np.ndarray  #: (m,) uint64 the path's random-number key (:mod:`sim_core.render.rng`)
+    length: np.ndarray  #: (m,) float64 path length from the camera to the ray's origin [m]
+    throughput: np.ndarray  #: (m,) float64 BRDF sampling weights so far, over roulette survival
+
+
+class SceneTables(NamedTuple):
+    """Per-triangle geometry and the material tables."""
+
+    normals: np.ndarray  #: (T, 3) float64 unit normals
+    tri_mat: np.ndarray  #: (T,) int64 material row of each triangle
+    mat_kind: np.ndarray  #: (M,) int64 kernel ids (``sim_core.materials.kernels.KIND_*``)
+    mat_params: np.ndarray  #: (M, N_PARAMS) float64 parameter vectors
+
+
+class CameraLight(NamedTuple):
+    """The camera's own (modulated) point source."""
+
+    position: np.ndarray  #: (3,) float64 in the render frame [m]
+    axis: np.ndarray  #: (3,) float64 unit beam axis
+    scale: float  #: radiant intensity on the axis [W/sr]
+    profile_angle: np.ndarray  #: (k,) float64 increasing angles [rad]; empty: isotropic
+    profile_rel: np.ndarray  #: (k,) float64 relative intensity at those angles
+    min_distance_m: float  #: irradiance cap: a surface closer sees the light from this distance
+
+
+class AmbientSources(NamedTuple):
+    """The collimated, unmodulated sources, one row each (possibly none)."""
+
+    direction: np.ndarray  #: (A, 3) float64 unit propagation directions
+    irradiance: np.ndarray  #: (A,) float64 irradiance normal to the beam [W/m^2]
+    centre: np.ndarray  #: (A, 3) float64 a point on the beam axis, world frame [m]
+    u: np.ndarray  #: (A, 3) float64 unit vector of the beam cross-section along its width
+    v: np.ndarray  #: (A, 3) float64 unit vector of the cross-section along its height
+    size: np.ndarray  #: (A, 2) float64 width and height of the beam cross-section [m]
+    has_footprint: np.ndarray  #: (A,) bool False: an unbounded beam (centre, u, v, size unused)
+
+
+class ShadowRays(NamedTuple):
+    """Candidate contributions of light sources, each behind one shadow ray."""
+
+    o: np.ndarray  #: (k, 3) float32 origins
+    d: np.ndarray  #: (k, 3) float32 unit directions towards the source
+    t_max: np.ndarray  #: (k,) float32 distance to the source (inf for ambient sources)
+    slot: np.ndarray  #: (k,) int64 row of the path in the chunk's :class:`SampleValues`
+    contribution: np.ndarray  #: (k,) float64 radiance added if the ray is unblocked
+    length: np.ndarray  #: (k,) float64 full path length, source to camera [m] (unused: ambient)
+    is_ambient: np.ndarray  #: (k,) bool from an ambient source (adds to DC only)
+
+
+class SampleValues(NamedTuple):
+    """A chunk's per-sample results, one entry (column) per camera ray."""
+
+    dc: np.ndarray  #: (m,) float64 radiance of the camera's source
+    ambient: np.ndarray  #: (m,) float64 radiance of the ambient sources
+    re: np.ndarray  #: (n_f, m) float64 real part of each frequency's phasor
+    im: np.ndarray  #: (n_f, m) float64 imaginary part
+
+
+class PixelSums(NamedTuple):
+    """Per-pixel sample counts, sums and sums of squares (and of re x im) of the samples."""
+
+    n: np.ndarray  #: (P,) int64
+    s_dc: np.ndarray  #: (P,) float64
+    ss_dc: np.ndarray  #: (P,) float64
+    s_amb: np.ndarray  #: (P,) float64
+    ss_amb: np.ndarray  #: (P,) float64
+    s_re: np.ndarray  #: (n_f, P) float64
+    s_im: np.ndarray  #: (n_f, P) float64
+    ss_re: np.ndarray  #: (n_f, P) float64
+    ss_im: np.ndarray  #: (n_f, P) float64
+    s_reim: np.ndarray  #: (n_f, P) float64
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def camera_ray(u, v, fx, fy, cx, cy, dist, rotation):
-    """World-frame unit direction through pixel coordinates (u, v) (OpenCV model, pinhole).
+def camera_ray(u, v, cam):
+    """World-frame unit direction through pixel coordinates (u, v) of the :class:`Pinhole`
+    ``cam`` (OpenCV model).
 
-    ``dist`` holds k1, k2, p1, p2, k3; the distortion is inverted by 20 fixed-point steps of
-    :func:`sim_core.camera.undistort_point` (as :func:`sim_core.camera.undistort_normalized`).
+    ``cam.dist`` holds k1, k2, p1, p2, k3; the distortion is inverted by 20 fixed-point steps
+    of :func:`sim_core.camera.undistort_point` (as :func:`sim_core.camera.undistort_normalized`).
     """
+    dist, rotation = cam.dist, cam.rotation
     k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    xd = (u - cx) / fx
-    yd = (v - cy) / fy
+    xd = (u - cam.cx) / cam.fx
+    yd = (v - cam.cy) / cam.fy
     x, y = xd, yd
     if k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0:
         x, y = _camera.undistort_point(xd, yd, k1, k2, p1, p2, k3, 20)
@@ -106,25 +223,23 @@ def camera_ray(u, v, fx, fy, cx, cy, dist, rotation):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def camera_rays(u_px, v_px, fx, fy, cx, cy, dist, rotation):
+def camera_rays(u_px, v_px, cam):
     """:func:`camera_ray` over arrays of pixel coordinates: (m, 3) float64 unit directions.
 
-    Parallel (numba's thread pool): callers hold ``PARALLEL_KERNEL_LOCK``.
+    Parallel (numba's thread pool): callers hold
+    :data:`sim_core.numba_runtime.PARALLEL_KERNEL_LOCK`.
     """
     m = u_px.shape[0]
     out = np.empty((m, 3))
     for i in prange(m):
-        out[i, 0], out[i, 1], out[i, 2] = camera_ray(u_px[i], v_px[i], fx, fy, cx, cy, dist,
-                                                     rotation)
+        out[i, 0], out[i, 1], out[i, 2] = camera_ray(u_px[i], v_px[i], cam)
     return out
 
 
 @njit(**_SERIAL)
-def primary_rays(
-    seed, pixels, first_sample, n_passes, u_px, v_px, footprint_px, fx, fy, cx, cy, dist,
-    rotation,
-):
-    """Camera rays for ``n_passes`` more samples of each pixel in ``pixels``.
+def primary_rays(seed, pixels, first_sample, n_passes, u_px, v_px, footprint_px, cam):
+    """Camera rays of the :class:`Pinhole` ``cam`` for ``n_passes`` more samples of each pixel
+    in ``pixels`` (flat indices into the pixel-centre grids ``u_px``, ``v_px``).
 
     Ray ``r`` belongs to pixel ``pixels[r % n]`` and is that pixel's sample number
     ``first_sample[r % n] + r // n``: its path key hashes (seed, that sample number, pixel), so
@@ -148,7 +263,7 @@ def primary_rays(
                 ju, jv = uniform_pair(key, 0, 0)
                 u += (ju - 0.5) * footprint_px
                 v += (jv - 0.5) * footprint_px
-            d[r, 0], d[r, 1], d[r, 2] = camera_ray(u, v, fx, fy, cx, cy, dist, rotation)
+            d[r, 0], d[r, 1], d[r, 2] = camera_ray(u, v, cam)
     return d, keys
 
 
@@ -180,28 +295,36 @@ def _profile_intensity(cos_a, scale, prof_angle, prof_rel):
 
 
 @njit(**_SERIAL)
-def bounce(
-    o, d, tfar, prim, slot, keys, length, throughput,
-    normals, tri_mat, mat_kind, mat_params,
-    light_pos, light_axis, light_scale, prof_angle, prof_rel, min_light_distance_m,
-    amb_dir, amb_irr, amb_centre, amb_u, amb_v, amb_size, amb_footprint, render_origin,
-    bounce_index, rr_from_bounce, scatter,
-):
+def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_index, rr_from_bounce,
+           scatter):
     """All the work at one path vertex except ray casting (seed eqs. 19-22).
 
-    For every ray ``i`` that met a surface (``prim[i] >= 0``): the hit point and a normal
-    facing the ray; the candidate contribution of the camera's source (seed eqs. 20-21, none
-    where the light is behind the surface) with its shadow ray and the full path length; the
-    same for every ambient source (DC only, inside its beam footprint); and, if ``scatter``,
-    the next ray by BRDF importance sampling with Russian roulette (uniform dimensions 0-2 and
-    3 of this bounce). Sampling does not depend on visibility, so both happen in one pass.
+    ``paths`` (:class:`Paths`) were traced by Embree: ``tfar`` (float32) and ``prim`` (-1: no
+    hit) are its answer per ray. For every ray ``i`` that met a surface: the hit point and a
+    normal facing the ray; the candidate contribution of the camera's source ``light``
+    (:class:`CameraLight`, seed eqs. 20-21, none where the light is behind the surface) with
+    its shadow ray and the full path length; the same for every source of ``ambient``
+    (:class:`AmbientSources`; DC only, inside its beam footprint, which is given in world
+    coordinates: ``render_origin`` is the render frame's origin in them); and, if ``scatter``,
+    the next ray by BRDF importance sampling with Russian roulette from bounce
+    ``rr_from_bounce`` on (uniform dimensions 0-2 and 3 of bounce ``bounce_index``). Sampling
+    does not depend on visibility, so both happen in one pass. ``tables`` is a
+    :class:`SceneTables`.
 
-    Returns the shadow rays ``(o, d, t_max, slot, contribution, length, is_ambient)`` and the
-    continuing paths ``(o, d, slot, key, length, throughput)``, each packed in ray order.
-    ``slot`` is the path's row in the chunk's per-sample sums; ``length`` of an ambient shadow
-    ray is unused (ambient light is unmodulated). Ray arrays are float32 in the render frame
-    (what Embree takes); the arithmetic is float64.
+    Returns the :class:`ShadowRays` and the continuing :class:`Paths`, each packed in ray
+    order. Ray arrays are float32 in the render frame; the arithmetic is float64.
     """
+    o, d, slot, keys, length, throughput = (
+        paths.o, paths.d, paths.slot, paths.key, paths.length, paths.throughput
+    )
+    normals, tri_mat = tables.normals, tables.tri_mat
+    mat_kind, mat_params = tables.mat_kind, tables.mat_params
+    light_pos, light_axis, light_scale = light.position, light.axis, light.scale
+    prof_angle, prof_rel = light.profile_angle, light.profile_rel
+    min_light_distance_m = light.min_distance_m
+    amb_dir, amb_irr, amb_centre = ambient.direction, ambient.irradiance, ambient.centre
+    amb_u, amb_v, amb_size = ambient.u, ambient.v, ambient.size
+    amb_footprint = ambient.has_footprint
     m = prim.shape[0]
     n_amb = amb_dir.shape[0]
     cap = m * (1 + n_amb)
@@ -330,20 +453,24 @@ def bounce(
         nx_thr[nn] = tn
         nn += 1
     return (
-        (sh_o[:ns], sh_d[:ns], sh_t[:ns], sh_slot[:ns], sh_c[:ns], sh_len[:ns], sh_amb[:ns]),
-        (nx_o[:nn], nx_d[:nn], nx_slot[:nn], nx_key[:nn], nx_len[:nn], nx_thr[:nn]),
+        ShadowRays(sh_o[:ns], sh_d[:ns], sh_t[:ns], sh_slot[:ns], sh_c[:ns], sh_len[:ns],
+                   sh_amb[:ns]),
+        Paths(nx_o[:nn], nx_d[:nn], nx_slot[:nn], nx_key[:nn], nx_len[:nn], nx_thr[:nn]),
     )
 
 
 @njit(**_SERIAL)
-def add_shadowed(occluded, sh_slot, sh_c, sh_len, sh_amb, turns_per_m, out_dc, out_amb,
-                 out_re, out_im):
+def add_shadowed(occluded, shadow, turns_per_m, out):
     """Add the contributions whose shadow ray is unblocked to their path's sums (eqs. 17, 31).
 
-    ``occluded`` is Embree's answer per shadow ray (0 = blocked, -1 = free). The camera source
-    adds ``c`` to DC and ``c exp(-i 2π f L / c0)`` to each frequency's phasor (``turns_per_m``
-    = f / c0); ambient sources add to their DC sum only.
+    ``occluded`` is Embree's answer per ray of ``shadow`` (:class:`ShadowRays`; 0 = blocked,
+    -1 = free); ``out`` is the chunk's :class:`SampleValues`. The camera source adds ``c`` to
+    DC and ``c exp(-i 2π f L / c0)`` to each frequency's phasor (``turns_per_m`` = f / c0);
+    ambient sources add to their DC sum only.
     """
+    sh_slot, sh_c = shadow.slot, shadow.contribution
+    sh_len, sh_amb = shadow.length, shadow.is_ambient
+    out_dc, out_amb, out_re, out_im = out.dc, out.ambient, out.re, out.im
     nf = turns_per_m.shape[0]
     for j in range(sh_slot.shape[0]):
         if occluded[j] == 0:
@@ -361,14 +488,16 @@ def add_shadowed(occluded, sh_slot, sh_c, sh_len, sh_amb, turns_per_m, out_dc, o
 
 
 @njit(**_SERIAL)
-def accumulate_chunk(pixels, out_dc, out_amb, out_re, out_im, n, s_dc, ss_dc, s_amb, ss_amb,
-                     s_re, s_im, ss_re, ss_im, s_reim):
-    """Add a chunk's per-sample values to the per-pixel sums and sums of squares.
+def accumulate_chunk(pixels, samples, sums):
+    """Add a chunk's :class:`SampleValues` to the :class:`PixelSums` ``sums``.
 
     Sample ``r`` belongs to pixel ``pixels[r % len(pixels)]`` (the chunk holds whole passes).
     Samples are added one at a time in ``r`` order, which is the order of the pixel's sample
     numbers, so every sum is the same however the samples were grouped into chunks and threads.
     """
+    out_dc, out_amb, out_re, out_im = samples.dc, samples.ambient, samples.re, samples.im
+    n, s_dc, ss_dc, s_amb, ss_amb = sums.n, sums.s_dc, sums.ss_dc, sums.s_amb, sums.ss_amb
+    s_re, s_im, ss_re, ss_im, s_reim = sums.s_re, sums.s_im, sums.ss_re, sums.ss_im, sums.s_reim
     npx = pixels.shape[0]
     nf = out_re.shape[0]
     for p in range(out_dc.shape[0] // npx):  # nested loops: no integer division per sample

@@ -57,15 +57,3 @@ def uniform_pair(key, bounce, pair):
     h = mix64(key + np.uint64(bounce * 8 + pair + 1) * _GOLDEN)
     return float(h >> _S32) * _INV_2_32, float(h & _LOW32) * _INV_2_32
 
-
-@njit(cache=True)
-def uniforms(seed, sample_pass, pixels, bounce, n_pairs):
-    """(n, 2 * n_pairs) uniforms for a batch of pixels of one pass; for tests and tools."""
-    n = pixels.shape[0]
-    out = np.empty((n, 2 * n_pairs))
-    sk = seed_key(seed)
-    for i in range(n):
-        key = path_key(sk, sample_pass, pixels[i])
-        for k in range(n_pairs):
-            out[i, 2 * k], out[i, 2 * k + 1] = uniform_pair(key, bounce, k)
-    return out

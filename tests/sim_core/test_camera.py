@@ -13,7 +13,7 @@ from sim_core.camera import (
     undistort_normalized,
 )
 from sim_core.errors import InvalidInputError
-from sim_core.render.kernels import camera_rays
+from sim_core.render.kernels import Pinhole, camera_rays
 
 
 def pico_flexx() -> Intrinsics:
@@ -58,8 +58,7 @@ def test_compiled_ray_kernel_matches_the_reference_with_distortion():
     u, v = pixel_centre_grid(intr)
     r = look_at([1.0, 2.0, 3.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0])[:3, :3]
     ref = pixel_to_camera_direction(intr, u, v) @ r.T
-    got = camera_rays(u, v, intr.fx_px, intr.fy_px, intr.cx_px, intr.cy_px,
-                      np.asarray(intr.distortion), r)
+    got = camera_rays(u, v, Pinhole.of(intr, r))
     np.testing.assert_allclose(got, ref, atol=1e-12)
 
 
