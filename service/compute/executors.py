@@ -15,8 +15,14 @@
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
+import ctypes
 import multiprocessing
 import os
+import signal
+import sys
+import threading
+import time
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Protocol
 
@@ -54,9 +60,38 @@ class Executor(Protocol):
         ...
 
 
-def _init_worker(threads: int) -> None:
-    """Limit a pool process to ``threads`` numba threads (before numba is imported)."""
+def _init_worker(threads: int, parent_pid: int) -> None:
+    """Set up a pool process: ``threads`` numba threads (before numba is imported), and exit
+    when the service process dies.
+
+    A service killed with SIGKILL cannot shut its pool down; without this its workers (a
+    renderer each, ~200 MB) would live on, reparented, and pile up across crashes. Linux is
+    asked to kill the worker with its parent (``PR_SET_PDEATHSIG``); everywhere a daemon thread
+    also checks every second that the parent is still the one that started the worker.
+    """
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    _die_with_parent(parent_pid)
+
+
+def _die_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(poll_s)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+#: prctl option: the signal this process gets when its parent dies (linux/prctl.h)
+_PR_SET_PDEATHSIG = 1
 
 
 class LocalExecutor:
@@ -74,7 +109,7 @@ class LocalExecutor:
             max_workers=self._workers,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_init_worker,
-            initargs=(self._threads,),
+            initargs=(self._threads, os.getpid()),
         )
 
     @property
