@@ -94,6 +94,7 @@ class Settings(BaseSettings):
     max_repeats: int = Field(100, ge=1, le=10000)
     sse_interval_s: float = Field(0.5, gt=0.0)
     sse_max_s: float = Field(3600.0, gt=0.0)
+    sse_max_streams: int = Field(100, ge=1, le=10000)
     stop_wait_s: float = Field(30.0, ge=0.0)
 
     @field_validator("token")

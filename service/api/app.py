@@ -20,6 +20,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
 from drivers.errors import DeviceError
+from service.api.deps import StreamSlots
 from service.api.routes import campaigns, devices, frames, poses, simulate
 from service.api.schemas import Health
 from service.errors import ServiceError
@@ -94,6 +95,7 @@ def create_app(settings: Settings) -> FastAPI:
         redoc_url=None,
         max_body_size=settings.max_body_bytes,
     )
+    app.state.stream_slots = StreamSlots(settings.sse_max_streams)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(InvalidInputError, _invalid_input)
     app.add_exception_handler(DeviceError, _device_error)

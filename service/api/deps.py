@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import secrets
+import threading
 from collections.abc import Iterator
 from typing import Annotated
 
@@ -16,6 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from service.api.schemas import Message
 from service.compute.executors import Executor
+from service.errors import UnavailableError
 from service.lab.lab import Lab
 from service.lab.rig_lease import RigLease
 from service.lab.runner import CampaignRunner
@@ -68,7 +70,34 @@ def get_default_scene(lab: LabDep) -> SceneSource:
     return lab.default_scene
 
 
+class StreamSlots:
+    """A bound on the event streams open at once (each holds a connection and a poll loop)."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self._open = 0
+        self._lock = threading.Lock()
+
+    def take(self) -> None:
+        """One more stream, or 503 when ``limit`` are open."""
+        with self._lock:
+            if self._open >= self.limit:
+                raise UnavailableError(
+                    f"{self._open} event streams are open, the most this service serves "
+                    "(TOFTWIN_SSE_MAX_STREAMS); poll GET /api/v1/campaigns/{id} or retry later")
+            self._open += 1
+
+    def give_back(self) -> None:
+        with self._lock:
+            self._open = max(0, self._open - 1)
+
+
+def get_stream_slots(request: Request) -> StreamSlots:
+    return request.app.state.stream_slots
+
+
 SettingsDep = Annotated[Settings, Depends(get_settings)]
+StreamSlotsDep = Annotated[StreamSlots, Depends(get_stream_slots)]
 SessionDep = Annotated[Session, Depends(get_session)]
 SessionsDep = Annotated[sessionmaker, Depends(get_sessions)]
 StoreDep = Annotated[FrameStore, Depends(get_store)]

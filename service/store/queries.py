@@ -159,6 +159,27 @@ def mark_interrupted(session: Session) -> list[str]:
 
 
 # -- results ---------------------------------------------------------------------------------
+def campaign_version(session: Session, campaign_id: str) -> tuple[str, float] | None:
+    """(state, updated_at) of a campaign: one indexed row; changes with every result and state."""
+    row = session.execute(select(CampaignRow.state, CampaignRow.updated_at)
+                          .where(CampaignRow.id == campaign_id)).first()
+    return None if row is None else (row[0], float(row[1]))
+
+
+def results_per_pose(session: Session, campaign_id: str) -> dict[int, int]:
+    """How many results each pose index of a campaign has (poses without any are absent)."""
+    q = (select(PoseResultRow.pose_index, func.count()).where(
+        PoseResultRow.campaign_id == campaign_id).group_by(PoseResultRow.pose_index))
+    return {int(p): int(n) for p, n in session.execute(q)}
+
+
+def done_repeats(session: Session, campaign_id: str, pose_index: int) -> set[int]:
+    """The repeats of one pose that have a result."""
+    q = select(PoseResultRow.repeat).where(PoseResultRow.campaign_id == campaign_id,
+                                           PoseResultRow.pose_index == pose_index)
+    return {int(r) for r in session.scalars(q)}
+
+
 def done_units(session: Session, campaign_id: str) -> set[tuple[int, int]]:
     q = select(PoseResultRow.pose_index, PoseResultRow.repeat).where(
         PoseResultRow.campaign_id == campaign_id)

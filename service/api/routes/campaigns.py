@@ -19,6 +19,7 @@ from service.api.deps import (
     SessionsDep,
     SettingsDep,
     StoreDep,
+    StreamSlotsDep,
     TokenDep,
     errors,
 )
@@ -26,7 +27,7 @@ from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.export.bluesky import campaign_documents
 from service.export.report import campaign_report
 from service.export.results_table import result_rows, results_csv
-from service.lab.campaigns import campaign_status, create_campaign
+from service.lab.campaigns import campaign_status, create_campaign, status_key
 from service.lab.requests import CampaignCreate
 from service.store import queries
 
@@ -100,34 +101,45 @@ def cancel(
     return campaign_status(sessions, runner, campaign_id)
 
 
-def _status(campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep) -> dict:
-    """The campaign's status; 404 before a stream starts."""
-    return campaign_status(sessions, runner, campaign_id)
+def _stream_slot(
+    campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, slots: StreamSlotsDep
+) -> None:
+    """404 for an unknown campaign, 503 when too many streams are open (before streaming)."""
+    status_key(sessions, runner, campaign_id)
+    slots.take()
 
 
-@router.get("/{campaign_id}/events", response_class=EventSourceResponse, responses=errors(404))
+@router.get("/{campaign_id}/events", response_class=EventSourceResponse,
+            responses=errors(404, 503))
 async def events(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, settings: SettingsDep,
-    status: Annotated[dict, Depends(_status)],
+    slots: StreamSlotsDep, _: Annotated[None, Depends(_stream_slot)],
 ) -> AsyncIterator[ServerSentEvent]:
     """Server-sent events: the campaign's status (as ``GET``) whenever it changes.
 
-    The stream ends after a final state (completed, cancelled, failed); a browser follows it
-    with ``new EventSource(url)``.
+    The status is sent when the stream opens and after every change (a result, a state, the
+    pose being worked on), never again unchanged; in between the stream asks the database one
+    small question per interval. The stream ends after a final state (completed, cancelled,
+    failed); a browser follows it with ``new EventSource(url)``. At most ``sse_max_streams``
+    streams are open at once (503 beyond).
     """
-    deadline = time.monotonic() + settings.sse_max_s
-    last = None
-    while True:
-        key = (status["state"], status["poses_done"], status["error"],
-               str(status["current_pose"]))
-        if key != last:
-            last = key
-            yield ServerSentEvent(data=status, event="status", id=str(status["poses_done"]),
-                                  retry=int(settings.sse_interval_s * 4000))
-        if status["state"] in queries.TERMINAL or time.monotonic() > deadline:
-            return
-        await asyncio.sleep(settings.sse_interval_s)
-        status = await run_in_threadpool(campaign_status, sessions, runner, campaign_id)
+    try:
+        deadline = time.monotonic() + settings.sse_max_s
+        last = None
+        while True:
+            key = await run_in_threadpool(status_key, sessions, runner, campaign_id)
+            if key != last:
+                last = key
+                status = await run_in_threadpool(campaign_status, sessions, runner, campaign_id)
+                yield ServerSentEvent(data=status, event="status", id=str(status["poses_done"]),
+                                      retry=int(settings.sse_interval_s * 4000))
+                if status["state"] in queries.TERMINAL:
+                    return
+            if time.monotonic() > deadline:
+                return
+            await asyncio.sleep(settings.sse_interval_s)
+    finally:
+        slots.give_back()
 
 
 @router.get("/{campaign_id}/results", response_model=list[ResultPublic], responses={
