@@ -43,9 +43,9 @@ def serve(
     from service.api.app import create_app
     from service.settings import Settings
 
-    refuse_if_in_use(data_dir or Path("toftwin-data"))  # before the token file is written
     token = None
     if simulated and "TOFTWIN_TOKEN" not in os.environ and settings_file is None:
+        refuse_if_in_use(data_dir or Path("toftwin-data"))  # keep a running server's token
         token = session_token(data_dir or Path("toftwin-data"))
     try:
         settings = Settings.load(

@@ -66,11 +66,15 @@ def read_holder(data_dir: str | Path) -> dict[str, Any] | None:
 def _command() -> str:
     """``toftwin serve`` for the CLI (script or ``python -m service.cli``), else the program."""
     argv = sys.argv
-    prog = Path(argv[0]).name if argv and argv[0] else "python"
-    if prog in ("toftwin", "__main__.py") and len(argv) > 1:
-        words = [w for w in argv[1:3] if not w.startswith("-")]
-        return " ".join(["toftwin", *words[:1]])
-    return prog
+    if not argv or not argv[0]:
+        return "python"
+    path = Path(argv[0])
+    if path.name == "toftwin" or path.parts[-3:] == ("service", "cli", "__main__.py"):
+        words = [w for w in argv[1:2] if not w.startswith("-")]
+        return " ".join(["toftwin", *words])
+    if path.name == "__main__.py":  # python -m PACKAGE
+        return f"python -m {path.parent.name}"
+    return path.name
 
 
 class DataDirLock:
