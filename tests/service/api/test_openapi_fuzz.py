@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import pytest
 import schemathesis
-from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, Phase, given, settings
 from schemathesis.checks import not_a_server_error
+from schemathesis.python.asgi import shutdown_lifespans
 
 from service.api.app import API_PREFIX, create_app
 from tests.service.api.conftest import AUTH, make_settings
@@ -36,11 +36,18 @@ def _operations() -> list[tuple[str, str]]:
 
 @pytest.fixture(scope="module")
 def api_schema(tmp_path_factory):
-    """The app, started, as a schemathesis schema."""
+    """The app, started, as a schemathesis schema.
+
+    Schemathesis starts the app's lifespan itself (once per app, kept until it is shut down);
+    a ``TestClient`` around it would start a second service on the same data directory, which
+    the data-directory lock refuses.
+    """
     app = create_app(make_settings(tmp_path_factory.mktemp("fuzz"), stop_wait_s=2.0))
     config = schemathesis.Config.from_dict({"phases": {"coverage": {"enabled": False}}})
-    with TestClient(app):
+    try:
         yield schemathesis.openapi.from_asgi(f"{API_PREFIX}/openapi.json", app, config=config)
+    finally:
+        shutdown_lifespans()  # stops the app: the lab closes and unlocks its data directory
 
 
 @pytest.mark.parametrize(("method", "path"), _operations(), ids=lambda v: v)
