@@ -45,6 +45,7 @@ def serve(
 
     token = None
     if simulated and "TOFTWIN_TOKEN" not in os.environ and settings_file is None:
+        refuse_if_in_use(data_dir or Path("toftwin-data"))  # keep a running server's token
         token = session_token(data_dir or Path("toftwin-data"))
     try:
         settings = Settings.load(
@@ -56,11 +57,36 @@ def serve(
             field = ".".join(str(p) for p in e["loc"]) or "settings"
             err_console.print(f"[bold red]error:[/] TOFTWIN_{field.upper()}: {e['msg']}")
         raise typer.Exit(code=2) from None
+    refuse_if_in_use(settings.data_dir)
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     if settings.host not in ("127.0.0.1", "localhost", "::1"):
         err_console.print(f"[yellow]warning:[/] listening on {settings.host}, not loopback")
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level=log_level.lower())
+    try:
+        uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
+                    log_level=log_level.lower())
+    except SystemExit as exc:
+        if exc.code not in (0, None):  # start-up failed: another service took the lock since?
+            refuse_if_in_use(settings.data_dir)
+        raise
+
+
+def refuse_if_in_use(data_dir: Path) -> None:
+    """Exit with code 2, naming the holder, if another process holds ``data_dir``.
+
+    The lock itself is taken by :func:`service.lab.lab.open_lab` at start-up, inside uvicorn's
+    lifespan, where a refusal would only be a logged traceback and uvicorn's exit code 3; this
+    check makes the usual case (a second ``toftwin serve`` on the same directory) a one-line
+    error before anything (the session token file included) is written.
+    """
+    from rich.markup import escape
+
+    from service.store.data_lock import DataDirInUseError, DataDirLock
+
+    try:
+        DataDirLock.check(data_dir)
+    except DataDirInUseError as exc:
+        err_console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
+        raise typer.Exit(code=2) from None
 
 
 def session_token(data_dir: Path) -> str:

@@ -1,7 +1,9 @@
 """The lab: everything a running service holds, assembled in one place.
 
 :func:`open_lab` builds it (the app's lifespan and the campaign benchmark call it), in this
-order: the database (and every campaign a crash left ``running`` becomes ``interrupted``), the
+order: the data directory's lock (:mod:`service.store.data_lock`: a second service on the same
+directory is refused before it touches anything), the database (migrated to the newest schema,
+and every campaign a crash left ``running`` becomes ``interrupted``), the
 frame store (frames no row names are swept away), the executor, the rig (simulated or real; a
 real rig that cannot be opened leaves the service up with the devices reporting 503), the
 campaign runner. Each part gets what it uses, not the lab: the runner its sessions, rig lease,
@@ -13,7 +15,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from sqlalchemy import Engine
@@ -28,6 +30,7 @@ from service.lab.runner import CampaignRunner
 from service.lab.scenes import SceneSource, resolve_scene
 from service.settings import Settings
 from service.store import queries
+from service.store.data_lock import DataDirLock
 from service.store.database import init_db, make_engine
 from service.store.frame_files import FrameStore
 
@@ -46,6 +49,9 @@ class Lab:
     default_scene: SceneSource
     lease: RigLease
     runner: CampaignRunner
+    #: what startup recovered after a crash: campaigns marked interrupted, frames swept
+    recovered: dict[str, list[str]] = field(default_factory=dict)
+    lock: DataDirLock | None = None
 
     @contextlib.contextmanager
     def session(self) -> Iterator[Session]:
@@ -54,12 +60,16 @@ class Lab:
             yield s
 
     def close(self) -> None:
-        """Stop the runner, the executor and the rig; dispose of the engine."""
-        self.runner.shutdown()
-        with contextlib.suppress(Exception):
-            self.executor.close()
-        self.lease.close()
-        self.engine.dispose()
+        """Stop the runner, the executor and the rig; dispose of the engine; unlock the data."""
+        try:
+            self.runner.shutdown()
+            with contextlib.suppress(Exception):
+                self.executor.close()
+            self.lease.close()
+            self.engine.dispose()
+        finally:
+            if self.lock is not None:
+                self.lock.release()
 
 
 def open_rig(settings: Settings, scene: SceneSource) -> Rig:
@@ -92,9 +102,21 @@ def open_rig(settings: Settings, scene: SceneSource) -> Rig:
 
 
 def open_lab(settings: Settings) -> Lab:
-    """Build the service state; see the module docstring for the order."""
+    """Build the service state; see the module docstring for the order.
+
+    Raises :class:`service.store.data_lock.DataDirInUseError` if another process holds the data
+    directory; the lock is released by :meth:`Lab.close` (or if opening fails).
+    """
+    lock = DataDirLock.acquire(settings.data_dir, port=settings.port)
+    try:
+        return _open_locked(settings, lock)
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _open_locked(settings: Settings, lock: DataDirLock) -> Lab:
     data = Path(settings.data_dir)
-    data.mkdir(parents=True, exist_ok=True)
     engine = make_engine(settings.database)
     sessions = init_db(engine)
     with sessions() as s:
@@ -116,4 +138,5 @@ def open_lab(settings: Settings) -> Lab:
         _log.error("rig not available: %s", exc)
     lease = RigLease(rig, rig_error, settings.rig_wait_s)
     runner = CampaignRunner(sessions, lease, store, executor, settings)
-    return Lab(settings, engine, sessions, store, executor, scene, lease, runner)
+    return Lab(settings, engine, sessions, store, executor, scene, lease, runner,
+               recovered={"interrupted": interrupted, "swept_frames": swept}, lock=lock)

@@ -1,11 +1,15 @@
-"""The database: the engine (SQLite in WAL mode by default) and its sessions."""
+"""The database: the engine (SQLite in WAL mode by default), its schema and its sessions.
+
+The schema is made and kept up to date by Alembic migrations (:mod:`service.store.migrations`),
+never by ``create_all``: :func:`init_db` upgrades the database to the newest revision.
+"""
 
 from __future__ import annotations
 
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.orm import sessionmaker
 
-from service.store.tables import Base
+from service.store.migrations import upgrade
 
 
 def make_engine(url: str) -> Engine:
@@ -31,6 +35,10 @@ def make_engine(url: str) -> Engine:
 
 
 def init_db(engine: Engine) -> sessionmaker:
-    """Create the tables (if missing) and return a session factory."""
-    Base.metadata.create_all(engine)
+    """Migrate the database to the newest schema (creating it if empty); a session factory.
+
+    A database made before migrations is checked and stamped at the first revision; one whose
+    tables match no revision raises :class:`service.store.migrations.SchemaError`.
+    """
+    upgrade(engine)
     return sessionmaker(engine, expire_on_commit=False)

@@ -1,0 +1,84 @@
+"""A second ``toftwin serve`` on the data directory of a running one is refused, harmlessly.
+
+Before the lock, the second server's start-up marked the first one's running campaign
+``interrupted`` and swept its frames in flight. Now it exits with code 2 naming the holder, and
+the first server's campaign runs on to completion with all its frames.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.service.api.conftest import AUTH, TOKEN
+from tests.service.api.test_crash_resume import free_port, server, wait_for
+
+pytestmark = pytest.mark.timeout(180)
+
+#: long enough that the campaign is still running while the second server tries to start
+POSES = [{"turntable_deg": a, "solar_suns": 1.0, "repeats": 1} for a in range(-60, 61, 8)]
+
+
+def test_a_second_server_on_the_same_data_dir_is_refused(tmp_path):
+    data, log = tmp_path / "data", tmp_path / "server.log"
+    with server(data, log) as (client, proc):
+        res = client.post("/api/v1/campaigns", headers=AUTH,
+                          json={"name": "first", "poses": POSES, "seed": 3})
+        cid = res.json()["id"]
+        assert client.post(f"/api/v1/campaigns/{cid}/start", headers=AUTH).status_code == 200
+        wait_for(client, cid, lambda s: s["poses_done"] >= 1)
+
+        # the second one: no TOFTWIN_TOKEN, so it would write DATA_DIR/token if it got that far
+        env = {k: v for k, v in os.environ.items() if k != "TOFTWIN_TOKEN"}
+        second = subprocess.run(
+            [sys.executable, "-m", "service.cli", "serve", "--simulated",
+             "--port", str(free_port()), "--data-dir", str(data)],
+            env=env, capture_output=True, text=True, timeout=60, cwd=Path(__file__).parents[3],
+        )
+        assert second.returncode == 2, second.stderr
+        message = " ".join(second.stderr.split())
+        assert f"error: data directory {data} is in use by toftwin serve (pid {proc.pid} " \
+               in message, message
+        assert "stop it or use --data-dir" in message
+        assert not (data / "token").exists()
+
+        status = client.get(f"/api/v1/campaigns/{cid}").json()
+        assert status["state"] in ("running", "completed"), status
+        status = wait_for(client, cid, lambda s: s["state"] != "running")
+        assert status["state"] == "completed", status
+        rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
+        assert sorted(r["pose_index"] for r in rows) == list(range(len(POSES)))
+        named = {r[k] for r in rows for k in ("measured_frame_id", "simulated_frame_id")}
+        assert {p.name for p in (data / "frames").iterdir()} == named
+        campaigns = client.get("/api/v1/campaigns").json()
+        assert [c["state"] for c in campaigns] == ["completed"]
+    assert "interrupted" not in log.read_text()
+
+
+def test_serve_maps_a_refusal_at_start_up_to_exit_code_2(tmp_path, monkeypatch):
+    """The lock taken between serve's early check and the app's start-up: still exit code 2."""
+    from typer.testing import CliRunner
+
+    from service.cli import app
+    from service.store import data_lock
+
+    data = tmp_path / "data"
+    real_check, calls = data_lock.DataDirLock.check, []
+
+    def late_check(path):  # the early check passes, as if the other server came just after
+        calls.append(path)
+        if len(calls) > 1:
+            real_check(path)
+
+    monkeypatch.setattr(data_lock.DataDirLock, "check", staticmethod(late_check))
+    monkeypatch.setenv("TOFTWIN_TOKEN", TOKEN)
+    with data_lock.DataDirLock.acquire(data, port=1234):
+        result = CliRunner().invoke(app, ["serve", "--simulated", "--executor", "thread",
+                                          "--port", str(free_port()), "--data-dir", str(data)])
+    assert result.exit_code == 2, result.output
+    assert len(calls) == 2
+    assert f"pid {os.getpid()} " in " ".join(result.output.split())
