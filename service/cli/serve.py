@@ -15,6 +15,7 @@ from typing import Annotated
 import typer
 
 from service.cli.common import err_console
+from service.store.data_lock import make_private
 
 
 def serve(
@@ -89,17 +90,27 @@ def refuse_if_in_use(data_dir: Path) -> None:
         raise typer.Exit(code=2) from None
 
 
+#: open flag that refuses a symlink as the last path component (0 where the OS has none)
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+
+
 def session_token(data_dir: Path) -> str:
     """A random bearer token for a simulated service started without one.
 
     Written to ``DATA_DIR/token`` (mode 0600) and printed once, so that the first command of the
     README works on a fresh machine without a placeholder secret; a real rig needs TOFTWIN_TOKEN.
     """
-    data_dir.mkdir(parents=True, exist_ok=True)
+    make_private(data_dir)
     path = data_dir / "token"
     token = secrets.token_urlsafe(24)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:  # never through a symlink (it could point anywhere), and 0600 even if it existed
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | _NOFOLLOW, 0o600)
+    except OSError as exc:
+        err_console.print(f"[bold red]error:[/] cannot write the session token to {path}: "
+                          f"{exc.strerror} (a symlink is refused); remove it or set TOFTWIN_TOKEN")
+        raise typer.Exit(code=2) from None
     with os.fdopen(fd, "w") as fh:
+        os.fchmod(fh.fileno(), 0o600)
         fh.write(token + "\n")
     err_console.print(f"simulated rig: no TOFTWIN_TOKEN given, this session's token is in {path}")
     return token

@@ -53,6 +53,18 @@ def describe(holder: dict[str, Any] | None) -> str:
     return f"{holder.get('command') or 'a toftwin process'} ({', '.join(details)})"
 
 
+def make_private(data_dir: Path) -> None:
+    """Create ``data_dir`` (and parents) if missing; make it readable by its owner only (0700).
+
+    The data directory holds the database, the frames and the session token: nobody else on
+    the machine needs to read them. An existing directory owned by someone else is left as it
+    is (chmod would fail; the service does not own it).
+    """
+    data_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
+    if hasattr(os, "getuid") and data_dir.stat().st_uid == os.getuid():
+        os.chmod(data_dir, 0o700)
+
+
 def read_holder(data_dir: str | Path) -> dict[str, Any] | None:
     """The description in the lock file (None if absent, empty or unreadable)."""
     try:
@@ -97,8 +109,8 @@ class DataDirLock:
     def acquire(cls, data_dir: str | Path, *, port: int | None = None) -> DataDirLock:
         """Lock ``data_dir`` (created if missing) or raise :class:`DataDirInUseError`."""
         data_dir = Path(data_dir)
-        data_dir.mkdir(parents=True, exist_ok=True)
-        fd = os.open(data_dir / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        make_private(data_dir)
+        fd = os.open(data_dir / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o600)
         try:
             locked = _try_lock(fd)
         except BaseException:

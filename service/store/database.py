@@ -6,7 +6,9 @@ never by ``create_all``: :func:`init_db` upgrades the database to the newest rev
 
 from __future__ import annotations
 
-from sqlalchemy import Engine, create_engine, event
+import os
+
+from sqlalchemy import Engine, create_engine, event, make_url
 from sqlalchemy.orm import sessionmaker
 
 from service.store.migrations import upgrade
@@ -20,6 +22,7 @@ def make_engine(url: str) -> Engine:
     """
     if not url.startswith("sqlite"):
         return create_engine(url, pool_pre_ping=True)
+    _private_file(make_url(url).database)
     engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30.0})
 
     @event.listens_for(engine, "connect")
@@ -32,6 +35,18 @@ def make_engine(url: str) -> Engine:
         cur.close()
 
     return engine
+
+
+def _private_file(database: str | None) -> None:
+    """The SQLite file readable by its owner only (0600); its WAL and shared-memory files take
+    the database file's permissions when SQLite creates them."""
+    if not database or database == ":memory:" or database.startswith("file:"):
+        return
+    fd = os.open(database, os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+    finally:
+        os.close(fd)
 
 
 def init_db(engine: Engine) -> sessionmaker:

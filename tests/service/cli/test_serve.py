@@ -2,6 +2,9 @@
 
 import stat
 
+import pytest
+import typer
+
 from service.cli.serve import session_token
 
 
@@ -12,3 +15,25 @@ def test_session_token_is_random_private_and_stored(tmp_path):
     assert stat.S_IMODE(path.stat().st_mode) == 0o600
     assert len(a) >= 24
     assert session_token(tmp_path) != a  # a new one every start
+
+
+def test_a_loose_existing_token_file_becomes_private(tmp_path):
+    path = tmp_path / "token"
+    path.write_text("old\n")
+    path.chmod(0o644)
+    token = session_token(tmp_path)
+    assert path.read_text().strip() == token
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    assert stat.S_IMODE(tmp_path.stat().st_mode) == 0o700  # the data directory too
+
+
+def test_a_token_path_that_is_a_symlink_is_refused_and_its_target_untouched(tmp_path):
+    target = tmp_path / "elsewhere"
+    target.write_text("precious\n")
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "token").symlink_to(target)
+    with pytest.raises(typer.Exit) as info:
+        session_token(data)
+    assert info.value.exit_code == 2
+    assert target.read_text() == "precious\n"
