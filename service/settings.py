@@ -13,8 +13,11 @@ import re
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from drivers.errors import DeviceInputError
+from drivers.sim.faults import parse_rig_fault
 
 #: the bundled example scenes (``scene: "satellite_ground_test"`` names one of them)
 EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
@@ -95,6 +98,24 @@ class Settings(BaseSettings):
     sse_interval_s: float = Field(0.5, gt=0.0)
     sse_max_s: float = Field(3600.0, gt=0.0)
     sse_max_streams: int = Field(100, ge=1, le=10000)
+    faults: list[str] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _faults_need_simulators(self) -> Settings:
+        if self.faults and not self.simulated:
+            raise ValueError("faults: arming device faults needs the simulated rig "
+                             "(TOFTWIN_SIMULATED=true, serve --simulated)")
+        return self
+
+    @field_validator("faults")
+    @classmethod
+    def _known_faults(cls, v: list[str]) -> list[str]:
+        for i, text in enumerate(v):
+            try:
+                parse_rig_fault(text)
+            except DeviceInputError as exc:
+                raise ValueError(f"[{i}] {exc.message}") from None
+        return v
     stop_wait_s: float = Field(30.0, ge=0.0)
 
     @field_validator("token")

@@ -26,11 +26,13 @@ from drivers.errors import DeviceInputError
 __all__ = [
     "FAULTS",
     "FAULT_NAMES",
+    "RIG_DEVICE_FAULTS",
     "SOLAR_FAULTS",
     "TURNTABLE_FAULTS",
     "FaultInjector",
     "FaultSpec",
     "parse_fault",
+    "parse_rig_fault",
 ]
 
 #: Every fault name with what it does and what one "event" is.
@@ -56,6 +58,13 @@ CAMERA_FAULT_NAMES: tuple[str, ...] = ("no-data", "truncated", "corrupt", "drop"
 _COMMON = ("no-reply", "garbled", "truncated", "disconnect")
 TURNTABLE_FAULTS: tuple[str, ...] = (*_COMMON, "stall", "stall-hang")
 SOLAR_FAULTS: tuple[str, ...] = (*_COMMON, "lamp-fault", "interlock")
+
+#: the devices of a simulated rig and the faults each can have
+RIG_DEVICE_FAULTS: dict[str, tuple[str, ...]] = {
+    "turntable": TURNTABLE_FAULTS,
+    "solar-simulator": SOLAR_FAULTS,
+    "camera": CAMERA_FAULT_NAMES,
+}
 
 _SPEC = re.compile(r"^(?P<name>[a-z][a-z-]*)(?::(?P<count>\d+))?(?:@(?P<skip>\d+))?$")
 
@@ -95,6 +104,23 @@ class FaultSpec:
     def __str__(self) -> str:
         text = self.name if self.count is None else f"{self.name}:{self.count}"
         return text if not self.skip else f"{text}@{self.skip}"
+
+
+def parse_rig_fault(text: str) -> tuple[str, FaultSpec]:
+    """Parse ``DEVICE:name[:count][@skip]``, a fault armed on one device of a simulated rig.
+
+    >>> parse_rig_fault("solar-simulator:lamp-fault:1@6")
+    ('solar-simulator', FaultSpec(name='lamp-fault', count=1, skip=6, params={}))
+    """
+    device, _, spec = text.strip().partition(":")
+    if device not in RIG_DEVICE_FAULTS or not spec:
+        raise DeviceInputError(
+            "fault", f"cannot parse {text!r}; expected DEVICE:name[:count][@skip] with DEVICE "
+            f"one of {', '.join(RIG_DEVICE_FAULTS)}, e.g. 'solar-simulator:lamp-fault:1@6'")
+    try:
+        return device, parse_fault(spec, RIG_DEVICE_FAULTS[device])
+    except DeviceInputError as exc:
+        raise DeviceInputError("fault", f"{device}: {exc.message}") from None
 
 
 def parse_fault(text: str, allowed: tuple[str, ...] = FAULT_NAMES) -> FaultSpec:

@@ -36,6 +36,12 @@ def serve(
         Path | None, typer.Option("--settings", help="Settings file (dotenv, TOFTWIN_* keys).")
     ] = None,
     log_level: Annotated[str, typer.Option(help="debug, info, warning, error.")] = "info",
+    fault: Annotated[
+        list[str] | None,
+        typer.Option("--fault", help="Arm a fault on a simulated device (repeatable): "
+                     "DEVICE:name[:count][@skip], DEVICE turntable, solar-simulator or camera, "
+                     "e.g. solar-simulator:lamp-fault:1@6. Needs --simulated."),
+    ] = None,
 ) -> None:
     """Start the REST API (uvicorn); --simulated runs on the simulators and the satellite scene."""
     import uvicorn
@@ -52,6 +58,7 @@ def serve(
         settings = Settings.load(
             settings_file, host=host, port=port, data_dir=data_dir,
             simulated=simulated or None, executor=executor, workers=workers, token=token,
+            faults=fault or None,
         )
     except ValidationError as exc:
         for e in exc.errors():

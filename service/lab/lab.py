@@ -89,7 +89,14 @@ def open_rig(settings: Settings, scene: SceneSource) -> Rig:
             with RENDER_LOCK:  # never two renders at once in this process (see RENDER_LOCK)
                 return source(request)
 
-        return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed)
+        armed: dict[str, list[str]] = {"turntable": [], "solar-simulator": [], "camera": []}
+        for text in settings.faults:  # validated by Settings: DEVICE:name[:count][@skip]
+            device, _, spec = text.strip().partition(":")
+            armed[device].append(spec)
+        return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed,
+                             turntable_faults=armed["turntable"],
+                             solar_faults=armed["solar-simulator"],
+                             camera_faults=armed["camera"])
     missing = [n for n in ("turntable_port", "lamp_port", "shutter_port")
                if getattr(settings, n) is None]
     if missing:

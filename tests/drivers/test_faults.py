@@ -85,3 +85,16 @@ def test_inject_keeps_parameters():
     assert spec.params == {"downtime_s": 0.2}
     fired = injector.fire("disconnect")
     assert fired is not None and fired.params["downtime_s"] == 0.2
+
+
+def test_a_rig_fault_names_its_device_and_a_fault_that_device_can_have():
+    from drivers.sim.faults import parse_rig_fault
+
+    device, spec = parse_rig_fault("solar-simulator:lamp-fault:1@6")
+    assert (device, spec.name, spec.count, spec.skip) == ("solar-simulator", "lamp-fault", 1, 6)
+    assert parse_rig_fault("camera:drop")[0] == "camera"
+    for text, words in [("lamp-fault", "expected DEVICE:"), ("oven:stall", "expected DEVICE:"),
+                        ("turntable:lamp-fault", "turntable: fault 'lamp-fault' does not apply"),
+                        ("camera:smoke", "camera: unknown fault 'smoke'")]:
+        with pytest.raises(DeviceInputError, match=words):
+            parse_rig_fault(text)

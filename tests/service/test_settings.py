@@ -51,3 +51,18 @@ def test_every_setting_is_documented():
     assert not missing, (
         f"Settings fields (service/settings.py) missing from the settings table of "
         f"{SERVICE_DOC.name}: {missing}; add TOFTWIN_<FIELD> with its default and meaning")
+
+
+def test_faults_are_checked_and_need_the_simulated_rig(tmp_path):
+    from pydantic import ValidationError
+
+    from service.settings import Settings
+
+    ok = Settings(token="t" * 16, data_dir=tmp_path, simulated=True,
+                  faults=["solar-simulator:lamp-fault:1@6", "turntable:stall"])
+    assert len(ok.faults) == 2
+    with pytest.raises(ValidationError, match=r"\[1\] .*unknown fault 'smoke'"):
+        Settings(token="t" * 16, data_dir=tmp_path, simulated=True,
+                 faults=["camera:drop", "camera:smoke"])
+    with pytest.raises(ValidationError, match="needs the simulated rig"):
+        Settings(token="t" * 16, data_dir=tmp_path, faults=["turntable:stall"])

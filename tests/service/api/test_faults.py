@@ -112,3 +112,17 @@ def test_enable_and_reset_are_refused_while_a_campaign_holds_the_rig(client):
         res = client.post(f"/api/v1/devices/turntable/{verb}", headers=AUTH)
         assert res.status_code == 409 and cid in res.json()["detail"], res.text
     client.post(f"/api/v1/campaigns/{cid}/cancel", headers=AUTH)
+
+
+def test_a_lamp_fault_armed_at_start_pauses_the_campaign_with_no_unlit_result(make_client):
+    """The operator's rehearsal: ``serve --simulated --fault solar-simulator:lamp-fault@40``."""
+    client = make_client(faults=["solar-simulator:lamp-fault@40"])
+    poses = [{"turntable_deg": a, "solar_suns": 1.0} for a in range(-60, 70, 10)]
+    cid = start_campaign(client, poses)
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "paused" and "lamp" in status["error"], status
+    rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
+    assert len(rows) == status["poses_done"] < len(poses)
+    for row in rows:
+        rig = client.get(f"/api/v1/frames/{row['measured_frame_id']}").json()["rig"]
+        assert rig["solar_suns"] == pytest.approx(1.0, abs=0.02)

@@ -37,3 +37,16 @@ def test_a_token_path_that_is_a_symlink_is_refused_and_its_target_untouched(tmp_
         session_token(data)
     assert info.value.exit_code == 2
     assert target.read_text() == "precious\n"
+
+
+def test_serve_refuses_a_bad_fault_with_exit_code_2_before_starting(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    monkeypatch.delenv("TOFTWIN_TOKEN", raising=False)
+    res = CliRunner().invoke(app, ["serve", "--simulated", "--data-dir", str(tmp_path),
+                                   "--fault", "turntable:stall", "--fault", "oven:smoke"])
+    assert res.exit_code == 2, res.output
+    text = " ".join(res.output.split())
+    assert "[1] cannot parse 'oven:smoke'" in text and "expected DEVICE:" in text, text
