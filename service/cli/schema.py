@@ -37,7 +37,7 @@ def scene_schema() -> dict[str, Any]:
     """
     from sim_core.scene_spec import SceneSpec
 
-    body = SceneSpec.model_json_schema()
+    body = _without_redundant_enums(SceneSpec.model_json_schema())
     return {
         "$schema": DIALECT,
         "$id": SCENE_SCHEMA_ID,
@@ -46,6 +46,20 @@ def scene_schema() -> dict[str, Any]:
         "description": "A toftwin scene file (docs/scene-format.md); "
         f"regenerate with `toftwin schema scene --out {SCENE_SCHEMA_FILE}`.",
     }
+
+
+def _without_redundant_enums(node: Any) -> Any:
+    """Drop ``enum: [x]`` beside ``const: x``: pydantic before 2.10 writes both for a one-value
+    ``Literal``, later releases only ``const``; without this the file would depend on the
+    pydantic version that generated it."""
+    if isinstance(node, list):
+        return [_without_redundant_enums(v) for v in node]
+    if not isinstance(node, dict):
+        return node
+    out = {k: _without_redundant_enums(v) for k, v in node.items()}
+    if "const" in out and out.get("enum") == [out["const"]]:
+        del out["enum"]
+    return out
 
 
 def schema_text(schema: dict[str, Any]) -> str:
