@@ -396,8 +396,9 @@ class _Context:
             prof_angle = np.zeros(0)
             prof_rel = np.zeros(0)
         else:
-            prof_angle = np.asarray(light.profile_angle_rad, dtype=np.float64)
-            prof_rel = np.asarray(light.profile_relative, dtype=np.float64)
+            # contiguous: a strided view would make numba compile ``bounce`` for 'A' layout
+            prof_angle = np.ascontiguousarray(light.profile_angle_rad, dtype=np.float64)
+            prof_rel = np.ascontiguousarray(light.profile_relative, dtype=np.float64)
         self.light = CameraLight(
             np.asarray(light.position_m - self.origin, dtype=np.float64),
             np.asarray(light.axis, dtype=np.float64),
