@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from sim_core import frame_io
-from sim_core.camera import F_60_24_MHZ
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.raw import reconstruct_raw
 from sim_core.sensor import (
@@ -21,6 +20,7 @@ from sim_core.sensor import (
     predicted_range_std_m,
     tap_means,
 )
+from tests.hard_cases.test_sensor_properties import RANGES_M, bright_electrons
 from tests.sim_core.scenes import fronto_parallel_wall
 
 F = 60.24e6
@@ -59,14 +59,6 @@ def test_noise_free_frame_reconstructs_the_exact_range(camera):
     np.testing.assert_allclose(img.range_m, RANGE_M, atol=1e-9)
 
 
-RANGES_M = np.linspace(0.1, 2.4, 12)[None]
-
-
-def bright_electrons(active_e: float) -> PixelElectrons:
-    phase = 4.0 * np.pi * F_60_24_MHZ * RANGES_M / SPEED_OF_LIGHT_M_S
-    shape = RANGES_M.shape
-    return PixelElectrons(np.full(shape, active_e), np.zeros(shape), 1.0,
-                          (active_e * np.exp(-1j * phase))[None])
 
 
 # (from tests/hard_cases: the same behaviour as the test above, over a range sweep and with
