@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import uuid
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 import event_model
@@ -60,11 +61,20 @@ def _data_keys() -> dict[str, dict[str, Any]]:
 
 def campaign_documents(sessions: sessionmaker, campaign_id: str) -> list[dict[str, Any]]:
     """``[{"name": "start", "doc": {...}}, ...]`` in emission order."""
+    return list(iter_campaign_documents(sessions, campaign_id))
+
+
+def iter_campaign_documents(sessions: sessionmaker, campaign_id: str) -> Iterator[dict[str, Any]]:
+    """The documents one by one, reading the results in batches (404 before the first)."""
     with sessions() as s:
         row = queries.get_campaign(s, campaign_id)
         if row is None:
             raise NotFoundError(f"no campaign {campaign_id}")
-        results = queries.campaign_results(s, campaign_id)
+    return _documents(row, queries.iter_campaign_results(sessions, campaign_id))
+
+
+def _documents(row, results: Iterable) -> Iterator[dict[str, Any]]:
+    campaign_id = row.id
     run_uid = _uid(campaign_id, "start")
     t_start = row.started_at or row.created_at
     bundle = event_model.compose_run(
@@ -84,7 +94,7 @@ def campaign_documents(sessions: sessionmaker, campaign_id: str) -> list[dict[st
             "spp": row.spp,
         },
     )
-    docs = [{"name": "start", "doc": bundle.start_doc}]
+    yield {"name": "start", "doc": bundle.start_doc}
     desc = bundle.compose_descriptor(
         name="primary", data_keys=_data_keys(), time=t_start, uid=_uid(campaign_id, "primary"),
         hints={"camera": {"fields": ["measured_frame_id"]},
@@ -94,7 +104,7 @@ def campaign_documents(sessions: sessionmaker, campaign_id: str) -> list[dict[st
                      "camera": ["measured_frame_id"],
                      "simulator": ["simulated_frame_id"]},
     )
-    docs.append({"name": "descriptor", "doc": desc.descriptor_doc})
+    yield {"name": "descriptor", "doc": desc.descriptor_doc}
     keys = desc.descriptor_doc["data_keys"]
     for seq, r in enumerate(results, start=1):
         metrics = json.loads(r.metrics_json)
@@ -114,11 +124,10 @@ def campaign_documents(sessions: sessionmaker, campaign_id: str) -> list[dict[st
             data=data, timestamps={k: r.created_at for k in keys}, seq_num=seq,
             time=r.created_at, uid=_uid(campaign_id, "event", r.pose_index, r.repeat),
         )
-        docs.append({"name": "event", "doc": event})
+        yield {"name": "event", "doc": event}
     if row.state in _EXIT_STATUS:
         stop = bundle.compose_stop(
             exit_status=_EXIT_STATUS[row.state], reason=row.error or "",
             time=row.finished_at or row.updated_at, uid=_uid(campaign_id, "stop"),
         )
-        docs.append({"name": "stop", "doc": stop})
-    return docs
+        yield {"name": "stop", "doc": stop}

@@ -5,36 +5,42 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 from sqlalchemy.orm import sessionmaker
 
 from service.errors import NotFoundError
 from service.store import queries
+from service.store.tables import PoseResultRow
 
 #: metric columns of the CSV export, from ``ComparisonReport.to_dict()``
 CHANNEL_FIELDS = ("mean_measured", "mean_simulated", "var_measured", "var_simulated", "mse",
                   "ssim", "psnr_db", "rel_err_mean", "rel_err_var")
 
 
-def result_rows(sessions: sessionmaker, campaign_id: str) -> list[dict[str, Any]]:
-    """One row per pose and repeat, in order."""
+def result_rows(
+    sessions: sessionmaker, campaign_id: str, limit: int | None = None, offset: int = 0
+) -> list[dict[str, Any]]:
+    """One row per pose and repeat, in order (``limit`` of them from ``offset``)."""
     with sessions() as s:
         if queries.get_campaign(s, campaign_id) is None:
             raise NotFoundError(f"no campaign {campaign_id}")
-        rows = queries.campaign_results(s, campaign_id)
-    out = []
-    for r in rows:
-        metrics = json.loads(r.metrics_json)
-        metrics.pop("table", None)
-        out.append({
-            "pose_index": r.pose_index, "repeat": r.repeat, "turntable_deg": r.turntable_deg,
-            "solar_suns": r.solar_suns, "metrics": metrics,
-            "measured_frame_id": r.measured_frame_id,
-            "simulated_frame_id": r.simulated_frame_id, "created_at": r.created_at,
-            "timings_s": json.loads(r.timings_json),
-        })
-    return out
+        rows = queries.campaign_results(s, campaign_id, limit, offset)
+    return [result_dict(r) for r in rows]
+
+
+def result_dict(r: PoseResultRow) -> dict[str, Any]:
+    """The public form of one result row (metrics without the Table 5 text rows)."""
+    metrics = json.loads(r.metrics_json)
+    metrics.pop("table", None)
+    return {
+        "pose_index": r.pose_index, "repeat": r.repeat, "turntable_deg": r.turntable_deg,
+        "solar_suns": r.solar_suns, "metrics": metrics,
+        "measured_frame_id": r.measured_frame_id,
+        "simulated_frame_id": r.simulated_frame_id, "created_at": r.created_at,
+        "timings_s": json.loads(r.timings_json),
+    }
 
 
 def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
@@ -50,16 +56,22 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
     return flat
 
 
-def results_csv(rows: list[dict[str, Any]]) -> str:
-    """The rows as CSV, metrics flattened to one column each."""
-    buf = io.StringIO()
+def results_csv(rows: Iterable[dict[str, Any]]) -> Iterator[str]:
+    """The rows as CSV, metrics flattened to one column each: the header, then a line a row."""
     head = ["pose_index", "repeat", "turntable_deg", "solar_suns", "measured_frame_id",
             "simulated_frame_id", "created_at"]
     metric_cols = list(flat_metrics({}).keys())
+    buf = io.StringIO()
     writer = csv.writer(buf)
-    writer.writerow(head + metric_cols)
+
+    def line(values: list[Any]) -> str:
+        buf.seek(0)
+        buf.truncate()
+        writer.writerow(values)
+        return buf.getvalue()
+
+    yield line(head + metric_cols)
     for row in rows:
         flat = flat_metrics(row["metrics"])
-        writer.writerow([row[h] for h in head] + ["" if flat[c] is None else flat[c]
-                                                  for c in metric_cols])
-    return buf.getvalue()
+        yield line([row[h] for h in head] + ["" if flat[c] is None else flat[c]
+                                             for c in metric_cols])

@@ -8,11 +8,11 @@ the states it names (a compare-and-set), so two requests cannot both start a cam
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 from sqlalchemy import func, select, update
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 from service.store.tables import CampaignRow, FrameRow, PlannedPoseRow, PoseResultRow
 from sim_core.json_safe import dumps_strict
@@ -186,10 +186,34 @@ def done_units(session: Session, campaign_id: str) -> set[tuple[int, int]]:
     return {(int(p), int(r)) for p, r in session.execute(q)}
 
 
-def campaign_results(session: Session, campaign_id: str) -> list[PoseResultRow]:
+def count_results(session: Session, campaign_id: str) -> int:
+    """How many results a campaign has."""
+    q = select(func.count()).select_from(PoseResultRow).where(
+        PoseResultRow.campaign_id == campaign_id)
+    return int(session.scalar(q) or 0)
+
+
+def campaign_results(
+    session: Session, campaign_id: str, limit: int | None = None, offset: int = 0
+) -> list[PoseResultRow]:
+    """A campaign's results in pose and repeat order (``limit`` of them from ``offset``)."""
     q = (select(PoseResultRow).where(PoseResultRow.campaign_id == campaign_id)
-         .order_by(PoseResultRow.pose_index, PoseResultRow.repeat))
+         .order_by(PoseResultRow.pose_index, PoseResultRow.repeat).offset(offset).limit(limit))
     return list(session.scalars(q))
+
+
+def iter_campaign_results(
+    sessions: sessionmaker, campaign_id: str, batch: int = 1000
+) -> Iterator[PoseResultRow]:
+    """Every result of a campaign in order, read ``batch`` rows at a time (bounded memory)."""
+    offset = 0
+    while True:
+        with sessions() as s:
+            rows = campaign_results(s, campaign_id, batch, offset)
+        yield from rows
+        if len(rows) < batch:
+            return
+        offset += batch
 
 
 def get_result(session: Session, result_id: int) -> PoseResultRow | None:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from collections.abc import AsyncIterator
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Depends, Path, Query
+from fastapi import APIRouter, Depends, Path, Query, Response
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import HTMLResponse, PlainTextResponse
+from fastapi.responses import HTMLResponse, StreamingResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from service.api.deps import (
@@ -24,12 +25,13 @@ from service.api.deps import (
     errors,
 )
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
-from service.export.bluesky import campaign_documents
+from service.export.bluesky import iter_campaign_documents
 from service.export.report import campaign_report
-from service.export.results_table import result_rows, results_csv
+from service.export.results_table import result_dict, result_rows, results_csv
 from service.lab.campaigns import campaign_status, create_campaign, status_key
 from service.lab.requests import CampaignCreate
 from service.store import queries
+from sim_core.json_safe import json_safe
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 CampaignId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A campaign id.")]
@@ -142,17 +144,36 @@ async def events(
         slots.give_back()
 
 
+#: results a page of ``GET /campaigns/{id}/results`` holds unless ``limit`` says otherwise
+RESULTS_PAGE = 1000
+
+
 @router.get("/{campaign_id}/results", response_model=list[ResultPublic], responses={
-    200: {"content": {"text/csv": {}}}, **errors(404)})
+    200: {"content": {"text/csv": {}},
+          "description": "A page of results; `X-Total-Count` holds how many there are, a `Link` "
+                         "header with `rel=\"next\"` the next page while there is one."},
+    **errors(404)})
 def results(
     campaign_id: CampaignId,
     sessions: SessionsDep,
+    response: Response,
     format: Annotated[Literal["json", "csv"], Query()] = "json",
+    limit: Annotated[int, Query(ge=1, le=10000)] = RESULTS_PAGE,
+    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
 ):
-    """One row per pose and repeat: metrics and both frame ids (``?format=csv``: CSV)."""
-    rows = result_rows(sessions, campaign_id)
+    """One row per pose and repeat: metrics and both frame ids, a page at a time (``limit``
+    rows from ``offset``, 1000 by default). ``?format=csv``: every row as CSV, streamed."""
     if format == "csv":
-        return PlainTextResponse(results_csv(rows), media_type="text/csv")
+        result_rows(sessions, campaign_id, limit=0)  # 404 before the stream starts
+        rows = (result_dict(r) for r in queries.iter_campaign_results(sessions, campaign_id))
+        return StreamingResponse(results_csv(rows), media_type="text/csv")
+    rows = result_rows(sessions, campaign_id, limit=limit, offset=offset)
+    with sessions() as s:
+        total = queries.count_results(s, campaign_id)
+    response.headers["X-Total-Count"] = str(total)
+    if offset + len(rows) < total:
+        nxt = f"/api/v1/campaigns/{campaign_id}/results?limit={limit}&offset={offset + limit}"
+        response.headers["Link"] = f'<{nxt}>; rel="next"'
     return rows
 
 
@@ -163,6 +184,18 @@ def report(campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep) -> H
 
 
 @router.get("/{campaign_id}/documents", responses=errors(404))
-def documents(campaign_id: CampaignId, sessions: SessionsDep) -> list[dict]:
-    """The campaign as Bluesky event-model documents: ``[{"name": ..., "doc": ...}, ...]``."""
-    return campaign_documents(sessions, campaign_id)
+def documents(campaign_id: CampaignId, sessions: SessionsDep) -> StreamingResponse:
+    """The campaign as Bluesky event-model documents: ``[{"name": ..., "doc": ...}, ...]``.
+
+    Streamed as it is read (the results in batches), so a campaign of any size costs the
+    service bounded memory.
+    """
+    docs = iter_campaign_documents(sessions, campaign_id)  # 404 here, before the stream
+
+    def json_array():
+        yield "["
+        for i, doc in enumerate(docs):
+            yield ("," if i else "") + json.dumps(json_safe(doc), allow_nan=False)
+        yield "]"
+
+    return StreamingResponse(json_array(), media_type="application/json")

@@ -29,8 +29,9 @@ pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]
 POSES, REPEATS, CLIENTS = 300, 100, 50
 
 
-def _big_campaign(data_dir: Path) -> str:
-    """A paused campaign with POSES x REPEATS results, written straight into the database."""
+def _big_campaign(data_dir: Path, poses: int = POSES, repeats: int = REPEATS) -> str:
+    """A paused campaign with ``poses`` x ``repeats`` results, written straight into the
+    database."""
     data_dir.mkdir(parents=True)
     engine = make_engine(f"sqlite:///{data_dir / 'toftwin.db'}")
     sessions = init_db(engine)
@@ -39,11 +40,11 @@ def _big_campaign(data_dir: Path) -> str:
         queries.create_campaign(
             s, campaign_id=cid, name="big", scene_name="satellite_ground_test",
             scene_json="{}", scene_base_dir=".", mask={"kind": "all"}, seed=0, spp=1,
-            poses=[(float(i % 340 - 170), 1.0, REPEATS) for i in range(POSES)],
+            poses=[(float(i % 340 - 170), 1.0, repeats) for i in range(poses)],
         )
         frames, results, t = [], [], time.time()
-        for p in range(POSES):
-            for r in range(REPEATS):
+        for p in range(poses):
+            for r in range(repeats):
                 m, sim = uuid.uuid4().hex, uuid.uuid4().hex
                 frames += [{"id": m, "kind": "measured", "campaign_id": cid, "created_at": t},
                            {"id": sim, "kind": "simulated", "campaign_id": cid, "created_at": t}]
