@@ -14,13 +14,14 @@ from typing import Any
 from sqlalchemy.orm import sessionmaker
 
 from drivers.rig import Rig
-from service.errors import NotFoundError
+from service.errors import ConflictError, NotFoundError
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate
 from service.lab.runner import CampaignRunner
 from service.lab.scenes import check_mask, image_shape, scene_from_request
 from service.settings import Settings
 from service.store import queries
+from service.store.frame_files import FrameStore
 from sim_core.errors import InvalidInputError
 
 
@@ -106,3 +107,34 @@ def campaign_status(
         "links": {k: f"{base}/{k}" for k in ("events", "results", "report", "documents")}
         | {"self": base},
     }
+
+
+def delete_campaign(
+    sessions: sessionmaker, runner: CampaignRunner, store: FrameStore, campaign_id: str
+) -> int:
+    """Delete a campaign that is not running, its results and its frames; returns how many
+    frames went. The rows go first in one transaction, then the folders: a crash in between
+    leaves folders without rows, which the next start sweeps away."""
+    with sessions() as s:
+        row = queries.get_campaign(s, campaign_id)
+        if row is None:
+            raise NotFoundError(f"no campaign {campaign_id}")
+        if row.state == "running" or runner.live(campaign_id) is not None:
+            raise ConflictError(f"campaign {campaign_id} is running; pause or cancel it first")
+        frame_ids = queries.delete_campaign(s, campaign_id)
+    store.delete(frame_ids)
+    return len(frame_ids)
+
+
+def delete_frame(sessions: sessionmaker, store: FrameStore, frame_id: str) -> None:
+    """Delete a frame no pose result compares (409 naming the results that do)."""
+    with sessions() as s:
+        if queries.get_frame(s, frame_id) is None:
+            raise NotFoundError(f"no frame {frame_id}")
+        results = queries.results_naming_frame(s, frame_id)
+        if results:
+            raise ConflictError(
+                f"frame {frame_id} is compared in pose result(s) {results}; delete its "
+                "campaign instead (DELETE /api/v1/campaigns/{id})")
+        queries.delete_frame(s, frame_id)
+    store.delete([frame_id])

@@ -11,7 +11,7 @@ import time
 from collections.abc import Iterable, Iterator
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import delete, func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.store.tables import CampaignRow, FrameRow, PlannedPoseRow, PoseResultRow
@@ -250,3 +250,30 @@ def add_result(
                         .values(updated_at=row.created_at))
     session.commit()
     return row
+
+
+# -- deleting --------------------------------------------------------------------------------
+def delete_campaign(session: Session, campaign_id: str) -> list[str]:
+    """Delete a campaign with its planned poses, results and frame rows in one transaction;
+    returns the ids of the frames whose folders the caller removes next."""
+    frame_ids = list(session.scalars(select(FrameRow.id).where(
+        FrameRow.campaign_id == campaign_id)))
+    session.execute(delete(PoseResultRow).where(PoseResultRow.campaign_id == campaign_id))
+    session.execute(delete(FrameRow).where(FrameRow.campaign_id == campaign_id))
+    session.execute(delete(PlannedPoseRow).where(PlannedPoseRow.campaign_id == campaign_id))
+    session.execute(delete(CampaignRow).where(CampaignRow.id == campaign_id))
+    session.commit()
+    return frame_ids
+
+
+def results_naming_frame(session: Session, frame_id: str) -> list[int]:
+    """Ids of the results that compare ``frame_id`` (as measured or as simulated frame)."""
+    q = select(PoseResultRow.id).where((PoseResultRow.measured_frame_id == frame_id)
+                                       | (PoseResultRow.simulated_frame_id == frame_id))
+    return [int(i) for i in session.scalars(q)]
+
+
+def delete_frame(session: Session, frame_id: str) -> None:
+    """Delete a frame row no result names (the caller checks) and commit."""
+    session.execute(delete(FrameRow).where(FrameRow.id == frame_id))
+    session.commit()

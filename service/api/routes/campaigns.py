@@ -28,7 +28,12 @@ from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.export.bluesky import iter_campaign_documents
 from service.export.report import campaign_report
 from service.export.results_table import result_dict, result_rows, results_csv
-from service.lab.campaigns import campaign_status, create_campaign, status_key
+from service.lab.campaigns import (
+    campaign_status,
+    create_campaign,
+    delete_campaign,
+    status_key,
+)
 from service.lab.requests import CampaignCreate
 from service.store import queries
 from sim_core.json_safe import json_safe
@@ -65,6 +70,16 @@ def list_campaigns(
 def get_campaign(campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep) -> dict:
     """State, poses done of total, the current pose and the estimated time left."""
     return campaign_status(sessions, runner, campaign_id)
+
+
+@router.delete("/{campaign_id}", status_code=204, responses=errors(401, 404, 409))
+def delete(
+    campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, store: StoreDep,
+    _: TokenDep,
+) -> Response:
+    """Delete a campaign that is not running, with its results and frames (reclaims space)."""
+    delete_campaign(sessions, runner, store, campaign_id)
+    return Response(status_code=204)
 
 
 @router.post("/{campaign_id}/start", response_model=CampaignPublic, responses=COMMAND)

@@ -6,11 +6,12 @@ import json
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Path, Query
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, Response
 
-from service.api.deps import SessionDep, StoreDep, errors
+from service.api.deps import SessionDep, SessionsDep, StoreDep, TokenDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
+from service.lab.campaigns import delete_frame
 from service.store import queries
 from sim_core import frame_io
 from sim_core.json_safe import json_safe
@@ -35,6 +36,13 @@ def list_frames(
 def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> dict:
     """A frame's metadata (its ``frame.json``: rig state, effect plan, timings, ...)."""
     return frame_public(store, _row(session, frame_id))
+
+
+@router.delete("/{frame_id}", status_code=204, responses=errors(401, 404, 409))
+def delete(frame_id: FrameIdPath, sessions: SessionsDep, store: StoreDep, _: TokenDep) -> Response:
+    """Delete a frame that no pose result compares (a capture, a simulation) and its files."""
+    delete_frame(sessions, store, frame_id)
+    return Response(status_code=204)
 
 
 @router.get("/{frame_id}/arrays", response_class=FileResponse, responses={
