@@ -40,3 +40,9 @@ class GoneError(ServiceError):
     """The resource is known but its files are gone from the data directory."""
 
     status_code = 410
+
+
+class InsufficientStorageError(ServiceError):
+    """The data directory's disk is (nearly) full."""
+
+    status_code = 507

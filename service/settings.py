@@ -99,6 +99,7 @@ class Settings(BaseSettings):
     sse_max_s: float = Field(3600.0, gt=0.0)
     sse_max_streams: int = Field(100, ge=1, le=10000)
     faults: list[str] = Field(default_factory=list)
+    min_free_bytes: int = Field(1_000_000_000, ge=0)
 
     @model_validator(mode="after")
     def _faults_need_simulators(self) -> Settings:

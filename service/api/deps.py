@@ -132,6 +132,7 @@ ERRORS = {
     404: {"description": "No such resource."},
     409: {"description": "A campaign holds the rig, or the resource is in the wrong state."},
     410: {"description": "The resource is known but its files are gone from the data directory."},
+    507: {"description": "Too little free space on the data directory's disk."},
     422: {"description": "Invalid input; the message names the field and the allowed range."},
     503: {"description": "A device fault (the device's message) or a device not available."},
 }

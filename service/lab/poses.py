@@ -40,6 +40,7 @@ from service.lab.scenes import (
 )
 from service.settings import Settings
 from service.store import queries
+from service.store.disk_space import require_free
 from service.store.frame_files import FrameStore, new_frame_id
 from service.store.tables import FrameRow, PoseResultRow
 from sim_core.errors import InvalidInputError
@@ -233,6 +234,7 @@ def run_single_pose(
     rig = lease.require()
     check_angle(rig, req.turntable_deg, "turntable_deg")
     check_mask(req.mask, scene, image_shape(scene, rig.camera.use_case))
+    require_free(store.root, settings.min_free_bytes)  # 507 before anything moves
     plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp)
     with lease.manual() as rig:
         m = measure(rig, store, plan, settings.solar_stable_timeout_s)

@@ -43,6 +43,7 @@ from service.lab.rig_lease import RigLease
 from service.lab.scenes import SceneSource
 from service.settings import Settings
 from service.store import queries
+from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
 
 _log = logging.getLogger(__name__)
@@ -200,8 +201,13 @@ class CampaignRunner:
         try:
             to, error = self._units(run)
         except Exception as exc:  # a bug or a broken executor: record it, never lose the thread
-            _log.exception("campaign %s failed", run.campaign_id)
-            to, error = "failed", f"{type(exc).__name__}: {exc}"
+            if is_disk_full(exc):  # the operator frees space and resumes: not a failure
+                _log.warning("campaign %s paused: disk full: %s", run.campaign_id, exc)
+                to, error = "paused", low_space_message(
+                    self.store.root, free_bytes(self.store.root), self.settings.min_free_bytes)
+            else:
+                _log.exception("campaign %s failed", run.campaign_id)
+                to, error = "failed", f"{type(exc).__name__}: {exc}"
         finally:
             # One critical section with start(): whoever sees the final state in the database
             # also sees the rig free, and the next campaign cannot start before it is written.
@@ -228,6 +234,12 @@ class CampaignRunner:
             for pose, repeat in todo:
                 if run.stop.is_set():
                     to, error = run.stop_to, run.stop_error
+                    break
+                free = free_bytes(self.store.root)
+                if free < settings.min_free_bytes:
+                    to, error = "paused", low_space_message(self.store.root, free,
+                                                            settings.min_free_bytes)
+                    _log.warning("campaign %s paused: %s", run.campaign_id, error)
                     break
                 plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,
                                 camp.spp, run.campaign_id, pose.pose_index, repeat)

@@ -27,7 +27,7 @@ from service.store.tables import PoseResultRow
 router = APIRouter(prefix="/poses", tags=["poses"])
 
 
-@router.post("", response_model=PosePublic, status_code=201, responses=errors(401, 409, 503))
+@router.post("", response_model=PosePublic, status_code=201, responses=errors(401, 409, 503, 507))
 def pose(
     body: PoseCreate, lease: LeaseDep, sessions: SessionsDep, store: StoreDep,
     executor: ExecutorDep, settings: SettingsDep, _: TokenDep,

@@ -1,0 +1,49 @@
+"""A disk that is (nearly) full pauses a campaign with what to do; it never fails it."""
+
+from __future__ import annotations
+
+import errno
+import sqlite3
+
+import sqlalchemy.exc
+
+from service.store.disk_space import is_disk_full
+from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+
+
+def test_below_the_free_space_kept_a_campaign_pauses_and_a_pose_is_refused(make_client):
+    client = make_client(min_free_bytes=10**18)  # more than any disk has
+    before = client.get("/api/v1/devices/turntable/position").json()["angle_deg"]
+    cid = start_campaign(client, [{"turntable_deg": 0.0}, {"turntable_deg": 20.0}])
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "paused" and status["poses_done"] == 0, status
+    assert "GB free" in status["error"] and "TOFTWIN_MIN_FREE_BYTES" in status["error"]
+    res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)  # still full: pauses
+    assert res.status_code == 200
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "paused" and status["runs"] == 2
+    res = client.post("/api/v1/poses", headers=AUTH,
+                      json={"turntable_deg": before + 20.0, "solar_suns": 1.0})
+    assert res.status_code == 507 and "TOFTWIN_MIN_FREE_BYTES" in res.json()["detail"]
+    assert client.get("/api/v1/devices/turntable/position").json()["angle_deg"] == before
+    assert client.get("/api/v1/frames").json() == []
+
+
+def test_what_a_full_disk_looks_like_from_a_file_write_and_from_sqlite():
+    assert is_disk_full(OSError(errno.ENOSPC, "No space left on device"))
+    try:
+        try:
+            raise sqlite3.OperationalError("database or disk is full")
+        except sqlite3.OperationalError as inner:
+            raise sqlalchemy.exc.OperationalError("INSERT ...", {}, inner) from inner
+    except sqlalchemy.exc.OperationalError as wrapped:
+        assert is_disk_full(wrapped)
+    try:
+        try:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        except OSError as exc:
+            raise RuntimeError("saving frame.npz failed") from exc
+    except RuntimeError as chained:
+        assert is_disk_full(chained)
+    assert not is_disk_full(sqlite3.OperationalError("database is locked"))
+    assert not is_disk_full(ValueError("something else"))
