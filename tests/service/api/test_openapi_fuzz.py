@@ -21,7 +21,9 @@ import pytest
 import schemathesis
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis.stateful import run_state_machine_as_test
 from schemathesis.checks import not_a_server_error
+from schemathesis.core.transport import Response
 
 from service.api.app import API_PREFIX, create_app
 from tests.service.api.conftest import AUTH, make_settings
@@ -74,3 +76,28 @@ def test_no_generated_request_is_a_server_error(api, method, path):
         case.validate_response(_send(client, case), checks=[not_a_server_error])
 
     check()
+
+
+@pytest.mark.slow
+def test_no_sequence_of_linked_requests_is_a_server_error(api):
+    """The stateful phase: schemathesis chains calls along the links it finds between
+    operations (a campaign's id from ``POST /campaigns`` into start, pause, results, ...)."""
+    client, schema = api
+    calls: list[tuple[str, str, int]] = []
+
+    class Machine(schema.as_state_machine()):
+        def call(self, case, **kwargs):
+            response = _send(client, case)
+            calls.append((case.method.upper(), case.operation.path, response.status_code))
+            return Response.from_any(response)
+
+        def validate_response(self, response, case, additional_checks=None, **kwargs):
+            case.validate_response(response, checks=[not_a_server_error])
+
+    run_state_machine_as_test(
+        Machine, settings=settings(max_examples=15, stateful_step_count=6, deadline=None,
+                                   derandomize=True, database=None,
+                                   suppress_health_check=list(HealthCheck)))
+    # the chains reached operations on resources that earlier steps created
+    followed = {(m, p) for m, p, code in calls if "{" in p and code < 300}
+    assert followed, f"no linked call succeeded: {sorted(set(calls))[:20]}"
