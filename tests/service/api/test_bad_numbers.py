@@ -141,3 +141,28 @@ def test_a_lone_surrogate_is_a_422_not_a_failure_to_encode_it(client):
                       content=b'{"name": "\\ud800", "poses": [{"turntable_deg": "\\udfff"}]}')
     assert res.status_code == 422, res.text
     assert "poses[0].turntable_deg" in res.json()["message"]
+
+
+def test_every_numeric_query_and_path_parameter_refuses_what_is_not_a_number(client):
+    doc = client.get("/api/v1/openapi.json").json()
+    cid = client.post("/api/v1/campaigns", headers=AUTH,
+                      json={"name": "q", "poses": [{"turntable_deg": 0.0}]}).json()["id"]
+    checked = 0
+    for path, item in doc["paths"].items():
+        for method, op in item.items():
+            params = op.get("parameters", [])
+            numeric = [p for p in params if _kinds(p["schema"], doc) & {"number", "integer"}]
+            for param in numeric:
+                for text in (*BAD_NUMBERS, "true"):
+                    url = path.replace("{campaign_id}", cid).replace("{frame_id}", "0" * 32)
+                    query = {}
+                    if param["in"] == "path":
+                        url = url.replace("{" + param["name"] + "}", text)
+                    else:
+                        query[param["name"]] = text
+                    res = client.request(method.upper(), url, params=query, headers=AUTH)
+                    where = f"{method.upper()} {path} {param['name']} = {text}"
+                    assert res.status_code == 422, f"{where}: {res.status_code} {res.text[:200]}"
+                    json.loads(res.text, parse_constant=_not_json)
+                    checked += 1
+    assert checked >= 25, checked
