@@ -6,6 +6,7 @@ import errno
 import sqlite3
 
 import sqlalchemy.exc
+from sqlalchemy import event
 
 from service.store.disk_space import is_disk_full
 from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
@@ -47,3 +48,32 @@ def test_what_a_full_disk_looks_like_from_a_file_write_and_from_sqlite():
         assert is_disk_full(chained)
     assert not is_disk_full(sqlite3.OperationalError("database is locked"))
     assert not is_disk_full(ValueError("something else"))
+
+
+def test_a_database_that_fills_up_mid_campaign_pauses_it_and_resume_finishes_it(client):
+    """SQLite's own "database or disk is full" (its page limit, as a full disk would give)."""
+    engine = client.app.state.lab.engine
+    limit = {"pages": None}
+
+    @event.listens_for(engine, "connect")
+    def _cap(dbapi_conn, _record):
+        if limit["pages"] is not None:
+            dbapi_conn.execute(f"PRAGMA max_page_count = {limit['pages']}")
+
+    poses = [{"turntable_deg": a} for a in range(-40, 60, 10)]
+    cid = start_campaign(client, poses)
+    wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
+    with engine.connect() as conn:
+        limit["pages"] = conn.exec_driver_sql("PRAGMA page_count").scalar()
+    engine.dispose()  # every new connection gets the cap: the next result cannot be stored
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    limit["pages"] = None
+    engine.dispose()
+    assert status["state"] == "paused", status
+    assert "GB free" in status["error"] and "resume" in status["error"]
+    rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
+    assert len(rows) == status["poses_done"] < len(poses)
+    res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)
+    assert res.status_code == 200, res.text
+    status = wait_campaign(client, cid, lambda s: s["state"] != "running")
+    assert status["state"] == "completed", status
