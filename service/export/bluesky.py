@@ -19,7 +19,6 @@ from typing import Any
 import event_model
 from sqlalchemy.orm import sessionmaker
 
-from service.errors import NotFoundError
 from service.export.results_table import CHANNEL_FIELDS
 from service.store import queries
 from sim_core.frame_io import package_version
@@ -67,9 +66,7 @@ def campaign_documents(sessions: sessionmaker, campaign_id: str) -> list[dict[st
 def iter_campaign_documents(sessions: sessionmaker, campaign_id: str) -> Iterator[dict[str, Any]]:
     """The documents one by one, reading the results in batches (404 before the first)."""
     with sessions() as s:
-        row = queries.get_campaign(s, campaign_id)
-        if row is None:
-            raise NotFoundError(f"no campaign {campaign_id}")
+        row = queries.require_campaign(s, campaign_id)
     return _documents(row, queries.iter_campaign_results(sessions, campaign_id))
 
 

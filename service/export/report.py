@@ -19,7 +19,7 @@ import numpy as np
 from PIL import Image
 from sqlalchemy.orm import sessionmaker
 
-from service.errors import GoneError, NotFoundError
+from service.errors import GoneError
 from service.export.results_table import result_rows
 from service.store import queries
 from service.store.frame_files import FrameStore
@@ -144,9 +144,7 @@ def _metric(row: dict[str, Any], ch: str, name: str) -> float | None:
 def campaign_report(sessions: sessionmaker, store: FrameStore, campaign_id: str) -> str:
     """The whole HTML page."""
     with sessions() as s:
-        camp = queries.get_campaign(s, campaign_id)
-    if camp is None:
-        raise NotFoundError(f"no campaign {campaign_id}")
+        camp = queries.require_campaign(s, campaign_id)
     rows = result_rows(sessions, campaign_id)
     first = [r for r in rows if r["repeat"] == 0]
     x = [r["turntable_deg"] for r in first]

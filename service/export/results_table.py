@@ -10,7 +10,6 @@ from typing import Any
 
 from sqlalchemy.orm import sessionmaker
 
-from service.errors import NotFoundError
 from service.store import queries
 from service.store.tables import PoseResultRow
 
@@ -24,8 +23,7 @@ def result_rows(
 ) -> list[dict[str, Any]]:
     """One row per pose and repeat, in order (``limit`` of them from ``offset``)."""
     with sessions() as s:
-        if queries.get_campaign(s, campaign_id) is None:
-            raise NotFoundError(f"no campaign {campaign_id}")
+        queries.require_campaign(s, campaign_id)
         rows = queries.campaign_results(s, campaign_id, limit, offset)
     return [result_dict(r) for r in rows]
 

@@ -78,9 +78,7 @@ def campaign_status(
     thousands of results answers in a few milliseconds.
     """
     with sessions() as s:
-        row = queries.get_campaign(s, campaign_id)
-        if row is None:
-            raise NotFoundError(f"no campaign {campaign_id}")
+        row = queries.require_campaign(s, campaign_id)
         poses = queries.planned_poses(s, campaign_id)
         per_pose = queries.results_per_pose(s, campaign_id)
         live = runner.live(campaign_id)
@@ -116,9 +114,7 @@ def delete_campaign(
     frames went. The rows go first in one transaction, then the folders: a crash in between
     leaves folders without rows, which the next start sweeps away."""
     with sessions() as s:
-        row = queries.get_campaign(s, campaign_id)
-        if row is None:
-            raise NotFoundError(f"no campaign {campaign_id}")
+        row = queries.require_campaign(s, campaign_id)
         if row.state == "running" or runner.live(campaign_id) is not None:
             raise ConflictError(f"campaign {campaign_id} is running; pause or cancel it first")
         frame_ids = queries.delete_campaign(s, campaign_id)

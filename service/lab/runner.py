@@ -36,7 +36,7 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.errors import DeviceError
 from service.compute.executors import Executor
-from service.errors import ConflictError, NotFoundError
+from service.errors import ConflictError
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec
 from service.lab.rig_lease import RigLease
@@ -119,9 +119,7 @@ class CampaignRunner:
                 )
             self.lease.require()
             with self.sessions() as s:
-                row = queries.get_campaign(s, campaign_id)
-                if row is None:
-                    raise NotFoundError(f"no campaign {campaign_id}")
+                row = queries.require_campaign(s, campaign_id)
                 if not queries.transition(s, campaign_id, allowed, "running", started=True,
                                        count_run=True):
                     verb = "resume" if resume else "start"
@@ -162,8 +160,7 @@ class CampaignRunner:
         if self.stop(campaign_id, "cancelled"):
             return
         with self.sessions() as s:
-            if queries.get_campaign(s, campaign_id) is None:
-                raise NotFoundError(f"no campaign {campaign_id}")
+            queries.require_campaign(s, campaign_id)
             if not queries.transition(s, campaign_id, ("created", "paused", "interrupted"),
                                    "cancelled", finished=True):
                 self._require_state(campaign_id, ("created", "paused", "interrupted"), "cancel")
@@ -187,9 +184,7 @@ class CampaignRunner:
 
     def _require_state(self, campaign_id: str, allowed: tuple[str, ...], verb: str) -> None:
         with self.sessions() as s:
-            row = queries.get_campaign(s, campaign_id)
-        if row is None:
-            raise NotFoundError(f"no campaign {campaign_id}")
+            row = queries.require_campaign(s, campaign_id)
         raise ConflictError(
             f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
             f"allowed from: {', '.join(allowed)}"

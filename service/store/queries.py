@@ -14,6 +14,7 @@ from typing import Any
 from sqlalchemy import delete, func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
+from service.errors import NotFoundError
 from service.store.tables import CampaignRow, FrameRow, PlannedPoseRow, PoseResultRow
 from sim_core.json_safe import dumps_strict
 
@@ -107,6 +108,14 @@ def create_campaign(
 
 def get_campaign(session: Session, campaign_id: str) -> CampaignRow | None:
     return session.get(CampaignRow, campaign_id)
+
+
+def require_campaign(session: Session, campaign_id: str) -> CampaignRow:
+    """The campaign's row, or :class:`NotFoundError` (404) naming it."""
+    row = session.get(CampaignRow, campaign_id)
+    if row is None:
+        raise NotFoundError(f"no campaign {campaign_id}")
+    return row
 
 
 def list_campaigns(session: Session, limit: int, offset: int) -> list[CampaignRow]:

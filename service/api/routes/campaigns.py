@@ -179,7 +179,8 @@ def results(
     """One row per pose and repeat: metrics and both frame ids, a page at a time (``limit``
     rows from ``offset``, 1000 by default). ``?format=csv``: every row as CSV, streamed."""
     if format == "csv":
-        result_rows(sessions, campaign_id, limit=0)  # 404 before the stream starts
+        with sessions() as s:
+            queries.require_campaign(s, campaign_id)  # 404 before the stream starts
         rows = (result_dict(r) for r in queries.iter_campaign_results(sessions, campaign_id))
         return StreamingResponse(results_csv(rows), media_type="text/csv")
     rows = result_rows(sessions, campaign_id, limit=limit, offset=offset)
