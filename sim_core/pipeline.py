@@ -3,8 +3,10 @@
     plan_effects -> render (LightField) -> MTF chain (seed eq. 33) -> PMD pixel (RawFrame)
     -> reconstruction (ToFImage, seed eqs. 4-7)
 
-With ``ideal=True`` the sensor is ideal: no noise, SBI or ADC; depth comes from the phase of
-the (filtered) rendered phasor and grey from its magnitude.
+With ``ideal=True`` the sensor is ideal: no noise, SBI, ADC or depth errors (a calibration's
+``camera.depth``); depth comes from the phase of the (filtered) rendered phasor and grey from its
+magnitude. Otherwise the scene's depth errors (:mod:`sim_core.depth_errors`) enter the phasors
+after the optics, before the sensor.
 """
 
 from __future__ import annotations
@@ -116,6 +118,9 @@ def simulate(
     dc_active = np.maximum(apply_mtf(lf.dc_active, comps), 0.0)
     dc_ambient = np.maximum(apply_mtf(lf.dc_ambient, comps), 0.0)
     phasor = apply_mtf(lf.phasor, comps)
+    if not ideal and scene.depth_errors is not None:
+        # The camera's own phase errors act on each pixel's correlation, after the optics.
+        phasor = scene.depth_errors.apply_to_phasor(phasor)
     timings["optics"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -15,6 +15,7 @@ import numpy as np
 from sim_core import geometry
 from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics, look_at
 from sim_core.constants import ONE_SUN_W_M2
+from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError, SceneError
 from sim_core.lights import CollimatedLight, PointLight, beam_cross_section_basis
 from sim_core.materials import PRESETS, Material, make_material
@@ -25,6 +26,8 @@ from sim_core.radiometry import (
 )
 from sim_core.scene_spec import MaterialSpec, ObjectSpec, OpticsSpec, SceneSpec
 from sim_core.sensor import SensorParams
+from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
+from sim_core.twin_file import RealityFile, TwinParameters, load_calibration, twin_hash
 
 #: largest solar level a rig state may report; beyond it the lamp supply is out of its range
 MAX_MEASURED_SUNS = 2.0
@@ -50,7 +53,9 @@ class Scene:
     materials : tuple of Material
     object_names : tuple of str
     scene_hash : str
-        SHA-256 over the spec, the mesh files' bytes and the rig state.
+        SHA-256 over the spec, the mesh files' bytes, the rig state and the twin parameters.
+    depth_errors : DepthErrorModel or None
+    twin_hash : str or None
     """
 
     camera: Camera
@@ -65,6 +70,10 @@ class Scene:
     scene_hash: str
     sensor: SensorParams = field(default_factory=SensorParams)
     optics: OpticsSpec = field(default_factory=OpticsSpec)
+    #: the camera's systematic depth errors (from the calibration or reality applied), if any
+    depth_errors: DepthErrorModel | None = field(default=None, repr=False)
+    #: :func:`sim_core.twin_file.twin_hash` of the calibration (or reality) applied, if any
+    twin_hash: str | None = None
 
     @property
     def n_triangles(self) -> int:
@@ -263,13 +272,26 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
     return h.hexdigest()
 
 
+def scene_twin(spec: SceneSpec, base_dir: str | Path = ".") -> TwinParameters | None:
+    """The calibration the scene references (``calibration: FILE``, relative to ``base_dir``)."""
+    if spec.calibration is None:
+        return None
+    path = Path(spec.calibration)
+    return load_calibration(path if path.is_absolute() else Path(base_dir) / path)
+
+
 def build_scene(
     spec: SceneSpec,
     base_dir: str | Path = ".",
     turntable_deg: float | None = None,
     solar_suns: float | None = None,
+    twin: TwinParameters | None = None,
 ) -> Scene:
     """Pose a scene: load meshes, apply object poses and the turntable, build lights.
+
+    ``twin`` (a calibration, or the simulated lab's reality) says how the rig really is
+    (:mod:`sim_core.twin_file`); without it the scene's own ``calibration`` file applies, if it
+    names one. Reported turntable angles and set solar levels are converted to true ones.
 
     Parameters
     ----------
@@ -281,6 +303,8 @@ def build_scene(
         Overrides ``spec.turntable.angle_deg`` (the rig's measured angle) [deg].
     solar_suns : float, optional
         Overrides the solar simulator level [sun]; 0 closes its shutter.
+    twin : TwinParameters, optional
+        The calibration or reality to apply.
 
     Raises
     ------
@@ -288,6 +312,13 @@ def build_scene(
         For anything invalid, naming the field.
     """
     base = Path(base_dir)
+    if twin is None:
+        twin = scene_twin(spec, base)
+    if twin is not None:
+        spec = apply_to_spec(spec, twin)
+        if solar_suns is None and spec.ambient.solar_simulator is not None:
+            solar_suns = spec.ambient.solar_simulator.irradiance_suns
+        solar_suns = true_suns(solar_suns, twin)
     camera = build_camera(spec)
     light = build_light(spec, camera)
     ambient = build_ambient(spec, camera, solar_suns)
@@ -300,6 +331,11 @@ def build_scene(
                 "turntable_deg", f"{turntable_deg} is outside [-360, 360] degrees"
             )
         angle = float(turntable_deg)
+    angle = true_turntable_deg(angle, twin)
+    scales = twin.objects if isinstance(twin, RealityFile) else {}
+    unknown = sorted(set(scales) - {o.name for o in spec.objects})
+    if unknown:
+        raise SceneError("reality.objects", f"names no object of the scene: {unknown}")
     for i, obj in enumerate(spec.objects):
         fname = f"objects[{i}]"
         tris = _object_triangles(obj, base, fname)
@@ -313,7 +349,10 @@ def build_scene(
             m[:3, :3] = r
             m[:3, 3] = c - r @ c
             tris = geometry.transform_triangles(tris, m)
-        materials.append(build_material(obj.material, f"{fname}.material"))
+        material = build_material(obj.material, f"{fname}.material")
+        if obj.name in scales:
+            material = scale_reflectance(material, scales[obj.name].reflectance_scale)
+        materials.append(material)
         tris_all.append(tris)
         mat_all.append(np.full(tris.shape[0], i, dtype=np.int32))
         obj_all.append(np.full(tris.shape[0], i, dtype=np.int32))
@@ -324,6 +363,8 @@ def build_scene(
         tris = np.zeros((0, 3, 3))
         mat_idx = obj_idx = np.zeros(0, dtype=np.int32)
     rig = {"turntable_deg": angle, "solar_suns": solar_suns}
+    t_hash = twin_hash(twin) if twin is not None else None
+    depth = twin.camera.depth if twin is not None else None
     return Scene(
         camera=camera,
         light=light,
@@ -334,7 +375,10 @@ def build_scene(
         object_index=obj_idx,
         materials=tuple(materials),
         object_names=tuple(o.name for o in spec.objects),
-        scene_hash=_hash_inputs(spec, base, rig),
+        scene_hash=_hash_inputs(spec, base, {**rig, "twin": t_hash}),
         sensor=SensorParams(**spec.camera.sensor.model_dump(exclude_none=True)),
         optics=spec.optics,
+        depth_errors=None if depth is None else DepthErrorModel.from_spec(
+            depth, camera.modulation_frequencies_hz, camera.intrinsics.shape),
+        twin_hash=t_hash,
     )

@@ -1,0 +1,288 @@
+"""The twin's measurable parameters: the calibration file and the simulated lab's reality file.
+
+Both files share one set of keys (:class:`TwinParameters`): what calibration can measure about
+the camera (intrinsics, distortion, depth errors, sensor gain and noise), its light source
+(effective optical power), the turntable (true axis and zero) and the solar simulator (the scale
+of its level). A calibration file (:class:`CalibrationFile`) adds its provenance; a reality file
+(:class:`RealityFile`) adds what only the object twin can measure: the pose of what is mounted
+on the turntable and the objects' reflectance. Every key is optional; a missing key means "as
+the nominal scene says". The format is documented in ``docs/calibration.md``; unknown keys and
+out-of-range values are errors naming the field (:class:`sim_core.errors.InvalidInputError`).
+
+Conventions (issue 13, section 1)
+---------------------------------
+- measured phase = true phase + ``phase_offset_rad[k]`` + sum over the wiggling terms of
+  ``amplitude_rad * sin(harmonic * true phase + phase_rad)`` + the pixel's fixed-pattern
+  offset, given as a range and converted with seed eq. 7 (:mod:`sim_core.depth_errors`);
+- ``illumination.power_w`` replaces the scene's nominal source power;
+- true turntable angle = reported angle + ``turntable.zero_offset_deg``;
+- true solar level = set level x ``solar_simulator.irradiance_scale``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from sim_core.errors import InvalidInputError
+from sim_core.scene_spec import (
+    Distortion,
+    ObjectPose,
+    SensorOverrides,
+    Vec3,
+    scene_error_from_validation,
+)
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+#: largest phase offset or wiggling amplitude a file may give [rad]
+MAX_PHASE_ERROR_RAD = 3.141592653589793
+#: largest fixed-pattern offset a calibration may store [mm]
+MAX_PIXEL_OFFSET_MM = 500.0
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# --- camera ---------------------------------------------------------------------------------
+class WigglingTerm(_Strict):
+    """A harmonic of the phase error: ``amplitude_rad * sin(harmonic * phi + phase_rad)``.
+
+    ``frequency_index`` restricts the term to one modulation frequency of the use case (0 the
+    first); None applies it to every frequency.
+    """
+
+    harmonic: Annotated[int, Field(ge=1, le=16)]
+    amplitude_rad: Annotated[float, Field(ge=0.0, le=0.5, allow_inf_nan=False)]
+    phase_rad: Annotated[float, Field(ge=-10.0, le=10.0, allow_inf_nan=False)] = 0.0
+    frequency_index: Annotated[int, Field(ge=0, le=3)] | None = None
+
+
+class PixelOffsetPattern(_Strict):
+    """Fixed-pattern range offsets drawn at random (a reality's way to say "some pattern").
+
+    A Gaussian random field: white noise from ``seed``, smoothed by a Gaussian of standard
+    deviation ``correlation_px``, scaled to standard deviation ``sigma`` [m].
+    """
+
+    sigma: Annotated[float, Field(ge=0.0, le=0.1, allow_inf_nan=False)]
+    correlation_px: Annotated[float, Field(ge=0.0, le=200.0, allow_inf_nan=False)] = 10.0
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
+
+
+class PixelOffsetGrid(_Strict):
+    """Fixed-pattern range offsets as measured: values on a grid of pixels, interpolated between.
+
+    Knot ``[i][j]`` sits at pixel (column ``j * grid_step_px``, row ``i * grid_step_px``); the
+    grid covers the image (its last knots may lie beyond the last pixel). Cubic spline
+    interpolation in between (:func:`sim_core.depth_errors.pixel_offsets_m`).
+    """
+
+    grid_step_px: Annotated[int, Field(ge=1, le=64)]
+    offsets_mm: list[list[Annotated[float, Field(ge=-MAX_PIXEL_OFFSET_MM, le=MAX_PIXEL_OFFSET_MM,
+                                                  allow_inf_nan=False)]]] = Field(min_length=1)
+
+    @field_validator("offsets_mm")
+    @classmethod
+    def _rectangular(cls, v):
+        widths = {len(row) for row in v}
+        if len(widths) != 1 or 0 in widths:
+            raise ValueError("every row of the grid must have the same, non-zero length")
+        return v
+
+
+class DepthErrors(_Strict):
+    """The camera's systematic phase (depth) errors; see the module docstring for the model."""
+
+    phase_offset_rad: list[Annotated[float, Field(ge=-MAX_PHASE_ERROR_RAD, le=MAX_PHASE_ERROR_RAD,
+                                                  allow_inf_nan=False)]] = Field(
+        default_factory=list, max_length=4)
+    wiggling: list[WigglingTerm] = Field(default_factory=list, max_length=16)
+    pixel_offset_m: PixelOffsetPattern | PixelOffsetGrid | None = None
+
+
+class CameraParameters(_Strict):
+    """What the camera really is: intrinsics, distortion, depth errors, sensor."""
+
+    fx_px: Annotated[float, Field(gt=1.0, le=1e5, allow_inf_nan=False)] | None = None
+    fy_px: Annotated[float, Field(gt=1.0, le=1e5, allow_inf_nan=False)] | None = None
+    cx_px: Annotated[float, Field(ge=-1e4, le=1e4, allow_inf_nan=False)] | None = None
+    cy_px: Annotated[float, Field(ge=-1e4, le=1e4, allow_inf_nan=False)] | None = None
+    distortion: Distortion | None = None
+    depth: DepthErrors | None = None
+    sensor: SensorOverrides = SensorOverrides()
+
+
+class IlluminationParameters(_Strict):
+    """The camera's source: its effective mean optical power [W] (replaces the scene's)."""
+
+    power_w: Annotated[float, Field(gt=0.0, le=1000.0, allow_inf_nan=False)] | None = None
+
+
+class TurntableParameters(_Strict):
+    """The turntable's true axis (world frame) and the error of its zero."""
+
+    axis_point_m: Vec3 | None = None
+    axis_direction: Vec3 | None = None
+    zero_offset_deg: Annotated[float, Field(ge=-180.0, le=180.0, allow_inf_nan=False)] = 0.0
+
+    @field_validator("axis_direction")
+    @classmethod
+    def _axis_nonzero(cls, v):
+        if v is not None and sum(c * c for c in v) < 1e-18:
+            raise ValueError("axis_direction has zero length")
+        return v
+
+
+class SolarParameters(_Strict):
+    """True solar level = set level x ``irradiance_scale``."""
+
+    irradiance_scale: Annotated[float, Field(gt=0.0, le=10.0, allow_inf_nan=False)] = 1.0
+
+
+class TwinParameters(_Strict):
+    """The keys calibration measures (shared by calibration and reality files)."""
+
+    camera: CameraParameters = CameraParameters()
+    illumination: IlluminationParameters = IlluminationParameters()
+    turntable: TurntableParameters = TurntableParameters()
+    solar_simulator: SolarParameters = SolarParameters()
+
+
+# --- reality-only keys ----------------------------------------------------------------------
+class MountParameters(_Strict):
+    """What is on the turntable, as one rigid body: its pose error.
+
+    The offset acts in the world frame at the turntable's zero, about the nominal axis point:
+    ``x' = c + R (x - c) + t`` with ``R`` from ``rotation_deg`` (extrinsic x, y, z) and ``t`` =
+    ``position_m``; the turntable then turns the result.
+    """
+
+    pose_offset: ObjectPose = ObjectPose()
+
+
+class ObjectParameters(_Strict):
+    """Per object: a factor on its material's reflectance parameters."""
+
+    reflectance_scale: Annotated[float, Field(gt=0.0, le=10.0, allow_inf_nan=False)] = 1.0
+
+
+class RealityFile(TwinParameters):
+    """The simulated lab's world: calibration keys plus the object twin's (issue 13, section 1)."""
+
+    mount: MountParameters = MountParameters()
+    objects: dict[Annotated[str, Field(min_length=1, max_length=100)], ObjectParameters] = Field(
+        default_factory=dict)
+
+
+# --- calibration-only keys ------------------------------------------------------------------
+class Provenance(_Strict):
+    """Where a calibration came from."""
+
+    created_utc: str = ""
+    rig: str = ""
+    software: str = ""
+    frames_used: Annotated[int, Field(ge=0)] = 0
+    procedures: dict[str, dict[str, Any]] = Field(default_factory=dict)
+
+
+class CalibrationFile(TwinParameters):
+    """``calibration.yaml``: the measured keys plus their provenance (issue 13, section 3)."""
+
+    provenance: Provenance = Provenance()
+
+    @model_validator(mode="after")
+    def _json_safe_provenance(self):
+        try:
+            json.dumps(self.provenance.procedures, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"provenance.procedures must be plain finite JSON: {exc}") from None
+        return self
+
+
+def twin_hash(params: TwinParameters) -> str:
+    """SHA-256 of the parameters that change a simulation (provenance excluded), 16 hex digits.
+
+    Every simulated frame and pose result records this, so a result says which calibration made
+    it. Two files with the same measured values have the same hash.
+
+    >>> twin_hash(TwinParameters()) == twin_hash(CalibrationFile(provenance=Provenance(rig="x")))
+    True
+    """
+    data = params.model_dump(mode="json", exclude={"provenance"})
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _parse(model: type[_Strict], data: Any, what: str):
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise InvalidInputError(what, f"must be a mapping, got {type(data).__name__}")
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        err = scene_error_from_validation(exc)
+        message = err.message.replace("docs/scene-format.md", "docs/calibration.md")
+        raise InvalidInputError(f"{what}.{err.field}", message) from None
+
+
+def parse_calibration(data: Any) -> CalibrationFile:
+    """Validate a calibration given as a dict; errors name the field and the allowed range.
+
+    >>> parse_calibration({"camera": {"fx_px": 210.0}}).camera.fx_px
+    210.0
+    >>> parse_calibration({"camera": {"fx": 210.0}})
+    Traceback (most recent call last):
+    ...
+    sim_core.errors.InvalidInputError: calibration.camera.fx: unknown field (see ...)
+    """
+    return _parse(CalibrationFile, data, "calibration")
+
+
+def parse_reality(data: Any) -> RealityFile:
+    """Validate a reality given as a dict (same errors as :func:`parse_calibration`)."""
+    return _parse(RealityFile, data, "reality")
+
+
+def _read_mapping(path: str | Path, what: str) -> Any:
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidInputError(what, f"file '{p}' does not exist")
+    try:
+        text = p.read_text(encoding="utf-8")
+        return json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InvalidInputError(what, f"file '{p}' is not valid YAML/JSON: {exc}") from None
+
+
+def load_calibration(path: str | Path) -> CalibrationFile:
+    """Read and validate a calibration file (YAML or JSON)."""
+    return parse_calibration(_read_mapping(path, "calibration"))
+
+
+def load_reality(path: str | Path) -> RealityFile:
+    """Read and validate a reality file (YAML or JSON)."""
+    return parse_reality(_read_mapping(path, "reality"))
+
+
+def dump_yaml(params: TwinParameters) -> str:
+    """The YAML text of a calibration or reality, without keys at their defaults."""
+    data = params.model_dump(mode="json", exclude_defaults=True)
+    return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
+
+
+def write_calibration(path: str | Path, calibration: CalibrationFile) -> Path:
+    """Write ``calibration`` as YAML, atomically (a temporary file renamed over the target)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(dump_yaml(calibration), encoding="utf-8")
+    tmp.replace(p)
+    return p

@@ -1,0 +1,118 @@
+"""Calibration and reality files: validation, hashing, and their effect on a built scene."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim_core.errors import InvalidInputError
+from sim_core.scene import build_scene
+from sim_core.scene_spec import load_scene_spec
+from sim_core.twin_file import (
+    dump_yaml,
+    load_calibration,
+    parse_calibration,
+    parse_reality,
+    twin_hash,
+    write_calibration,
+)
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+ISSUE_REALITY = {
+    "camera": {
+        "fx_px": 211.4, "fy_px": 210.7, "cx_px": 113.1, "cy_px": 84.2,
+        "distortion": {"k1": -0.11, "k2": 0.04, "p1": 0.0005, "p2": -0.0004, "k3": 0.0},
+        "depth": {
+            "phase_offset_rad": [0.03],
+            "wiggling": [{"harmonic": 4, "amplitude_rad": 0.015, "phase_rad": 0.6}],
+            "pixel_offset_m": {"sigma": 0.004, "correlation_px": 12, "seed": 5},
+        },
+        "sensor": {"adc_gain_e_per_dn": 9.0, "read_noise_e": 30.0},
+    },
+    "illumination": {"power_w": 1.35},
+    "turntable": {"axis_point_m": [0.004, -0.002, 0.0], "axis_direction": [0.01, 0.02, 0.9997],
+                  "zero_offset_deg": 0.7},
+    "solar_simulator": {"irradiance_scale": 1.06},
+    "mount": {"pose_offset": {"position_m": [0.003, 0.0, -0.002], "rotation_deg": [0, 0, 0.8]}},
+    "objects": {"body": {"reflectance_scale": 0.92}},
+}
+
+
+def test_the_issues_example_reality_is_valid():
+    r = parse_reality(ISSUE_REALITY)
+    assert r.camera.depth.wiggling[0].harmonic == 4
+    assert r.objects["body"].reflectance_scale == 0.92
+
+
+@pytest.mark.parametrize(
+    ("data", "field"),
+    [
+        ({"camera": {"fx_px": -1}}, "calibration.camera.fx_px"),
+        ({"camera": {"depth": {"wiggling": [{"harmonic": 0, "amplitude_rad": 0.01}]}}},
+         "calibration.camera.depth.wiggling[0].harmonic"),
+        ({"camera": {"sensor": {"adc_gain_e_per_dn": 0}}},
+         "calibration.camera.sensor.adc_gain_e_per_dn"),
+        ({"turntable": {"zero_offset_deg": float("nan")}}, "calibration.turntable.zero_offset_deg"),
+        ({"colour": 1}, "calibration.colour"),
+        ({"mount": {}}, "calibration.mount"),  # a reality key is not a calibration key
+    ],
+)
+def test_bad_values_name_the_field(data, field):
+    with pytest.raises(InvalidInputError) as err:
+        parse_calibration(data)
+    assert err.value.field == field
+
+
+def test_hash_ignores_provenance_but_not_values(tmp_path):
+    a = parse_calibration({"camera": {"fx_px": 210.0}, "provenance": {"rig": "lab 1"}})
+    b = parse_calibration({"camera": {"fx_px": 210.0}})
+    c = parse_calibration({"camera": {"fx_px": 210.5}})
+    assert twin_hash(a) == twin_hash(b) != twin_hash(c)
+    path = write_calibration(tmp_path / "calibration.yaml", a)
+    assert load_calibration(path) == a
+    assert "provenance" in dump_yaml(a)
+
+
+def test_a_reality_changes_the_built_scene_as_the_conventions_say():
+    spec = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
+    reality = parse_reality(ISSUE_REALITY)
+    nominal = build_scene(spec, EXAMPLES, turntable_deg=30.0, solar_suns=1.0)
+    real = build_scene(spec, EXAMPLES, turntable_deg=30.0, solar_suns=1.0, twin=reality)
+    assert real.camera.intrinsics.fx_px == 211.4
+    assert real.camera.intrinsics.distortion[0] == -0.11
+    assert real.light.power_w == 1.35
+    assert real.sensor.adc_gain_e_per_dn == 9.0
+    expect = 1.06 * nominal.ambient[0].irradiance_w_m2
+    assert real.ambient[0].irradiance_w_m2 == pytest.approx(expect)
+    body = real.object_names.index("body")
+    assert real.materials[body] != nominal.materials[body]
+    assert real.depth_errors is not None and real.depth_errors.pixel_offsets_m.shape == (171, 224)
+    assert real.twin_hash == twin_hash(reality) and nominal.twin_hash is None
+    assert real.scene_hash != nominal.scene_hash
+    # The background does not move; the mounted objects do (mount offset, axis, zero offset).
+    bg = np.asarray(real.object_index) == real.object_names.index("background")
+    assert np.array_equal(real.triangles_m[bg], nominal.triangles_m[bg])
+    moved = np.asarray(real.object_index) == body
+    shift = np.abs(real.triangles_m[moved] - nominal.triangles_m[moved]).max()
+    assert 1e-3 < shift < 0.02
+
+
+def test_zero_offset_is_added_to_the_reported_angle():
+    spec = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
+    twin = parse_calibration({"turntable": {"zero_offset_deg": 0.7}})
+    a = build_scene(spec, EXAMPLES, turntable_deg=30.0, twin=twin)
+    b = build_scene(spec, EXAMPLES, turntable_deg=30.7)
+    assert np.allclose(a.triangles_m, b.triangles_m)
+
+
+def test_a_scene_applies_the_calibration_it_references(tmp_path):
+    spec = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
+    write_calibration(tmp_path / "cal.yaml", parse_calibration({"camera": {"cy_px": 86.0}}))
+    spec = spec.model_copy(update={"calibration": "cal.yaml"})
+    scene = build_scene(spec, tmp_path)  # no mesh files: the base dir only resolves the file
+    assert scene.camera.intrinsics.cy_px == 86.0 and scene.twin_hash is not None
+    missing = spec.model_copy(update={"calibration": "nope.yaml"})
+    with pytest.raises(InvalidInputError, match="does not exist"):
+        build_scene(missing, tmp_path)
