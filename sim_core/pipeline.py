@@ -63,7 +63,27 @@ def z_over_range(scene: Scene) -> np.ndarray:
     return camera_z_over_range(scene.camera.intrinsics)
 
 
-def simulate(
+@dataclass
+class RenderedLight:
+    """The renderer's part of a frame: the light field and what it took (before optics).
+
+    :func:`expose_light` turns it into a frame; exposing the same one several times gives
+    frames that differ by sensor noise only, as repeated frames of a static scene do.
+    """
+
+    light_field: LightField
+    settings: RenderSettings
+    plan: EffectPlan
+    timings_s: dict[str, float]
+    rays_traced: int
+    embree_share: float
+    render_thread_seconds: dict[str, float]
+    adaptive: AdaptiveReport | None = None
+    #: wall time of :func:`render_light`, set-up included [s]
+    seconds: float = 0.0
+
+
+def render_light(
     scene: Scene,
     settings: RenderSettings,
     effects: str = "auto",
@@ -73,15 +93,8 @@ def simulate(
     progress=None,
     target_range_error_mm: float | None = None,
     time_budget_s: float | None = None,
-    noise_rng: np.random.Generator | None = None,
-) -> SimulatedFrame:
-    """Simulate one frame of ``scene``; see the module docstring for the stages.
-
-    With ``target_range_error_mm`` and/or ``time_budget_s`` the render samples adaptively
-    (:mod:`sim_core.adaptive`) instead of taking ``settings.spp`` samples everywhere.
-    ``noise_rng`` replaces the sensor-noise generator derived from ``settings.seed`` (the camera
-    simulator draws each frame's noise from its own seed and frame number).
-    """
+) -> RenderedLight:
+    """Plan the effects and render the light field (the first stages of :func:`simulate`)."""
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     own_tracer = tracer is None
@@ -108,10 +121,26 @@ def simulate(
     finally:
         if own_tracer:
             tracer.close()
-    lf = result.light_field
     timings["render"] = result.seconds
     timings.update({f"render.{k}": v for k, v in result.timings_s.items()})
+    return RenderedLight(
+        light_field=result.light_field, settings=run, plan=plan, timings_s=timings,
+        rays_traced=result.rays_traced, embree_share=result.embree_share,
+        render_thread_seconds=dict(result.stage_thread_seconds), adaptive=adaptive,
+        seconds=time.perf_counter() - t0,
+    )
 
+
+def expose_light(
+    scene: Scene,
+    rendered: RenderedLight,
+    ideal: bool = False,
+    noise_rng: np.random.Generator | None = None,
+) -> SimulatedFrame:
+    """Optics, depth errors, sensor and reconstruction of a rendered light field."""
+    t0 = time.perf_counter()
+    timings = dict(rendered.timings_s)
+    lf, plan, run = rendered.light_field, rendered.plan, rendered.settings
     t = time.perf_counter()
     comps = plan.mtf_components(scene)
     # Ringing of the MTF can leave tiny negative radiance next to a bright edge: clamp DC.
@@ -135,8 +164,8 @@ def simulate(
         e = mean_electrons(dc_active, dc_ambient, phasor, scene.camera, sensor)
         rng = None
         if plan.enabled("noise"):
-            rng = noise_rng or np.random.default_rng([settings.seed, NOISE_STREAM])
-        raw = expose(e, scene.camera, sensor, rng, meta={"seed": settings.seed})
+            rng = noise_rng or np.random.default_rng([run.seed, NOISE_STREAM])
+        raw = expose(e, scene.camera, sensor, rng, meta={"seed": run.seed})
         timings["sensor"] = time.perf_counter() - t
         t = time.perf_counter()
         image = reconstruct_raw(raw, z_over_range(scene))
@@ -144,22 +173,47 @@ def simulate(
         image.amplitude, image.valid, None if ideal else sensor.adc_bits
     )
     timings["reconstruct"] = time.perf_counter() - t
-    timings["total"] = time.perf_counter() - t0
+    timings["total"] = rendered.seconds + (time.perf_counter() - t0)
     return SimulatedFrame(
         image=image,
         light_field=lf,
         settings=run,
         scene_hash=scene.scene_hash,
         timings_s=timings,
-        rays_traced=result.rays_traced,
-        embree_share=result.embree_share,
-        render_thread_seconds=dict(result.stage_thread_seconds),
+        rays_traced=rendered.rays_traced,
+        embree_share=rendered.embree_share,
+        render_thread_seconds=dict(rendered.render_thread_seconds),
         plan=plan,
         raw=raw,
         ideal=ideal,
         grey_full_scale=grey_full_scale,
-        adaptive=adaptive,
+        adaptive=rendered.adaptive,
     )
+
+
+def simulate(
+    scene: Scene,
+    settings: RenderSettings,
+    effects: str = "auto",
+    ideal: bool = False,
+    tolerance_mm: float | None = None,
+    tracer: RayTracer | None = None,
+    progress=None,
+    target_range_error_mm: float | None = None,
+    time_budget_s: float | None = None,
+    noise_rng: np.random.Generator | None = None,
+) -> SimulatedFrame:
+    """Simulate one frame of ``scene``; see the module docstring for the stages.
+
+    :func:`render_light` then :func:`expose_light`. With ``target_range_error_mm`` and/or
+    ``time_budget_s`` the render samples adaptively (:mod:`sim_core.adaptive`) instead of taking
+    ``settings.spp`` samples everywhere. ``noise_rng`` replaces the sensor-noise generator
+    derived from ``settings.seed`` (the camera simulator draws each frame's noise from its own
+    seed and frame number).
+    """
+    rendered = render_light(scene, settings, effects, ideal, tolerance_mm, tracer, progress,
+                            target_range_error_mm, time_budget_s)
+    return expose_light(scene, rendered, ideal, noise_rng)
 
 
 def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "") -> Path:
