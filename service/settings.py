@@ -18,6 +18,8 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from drivers.errors import DeviceInputError
 from drivers.sim.faults import parse_rig_fault
+from sim_core.errors import InvalidInputError
+from sim_core.twin_file import load_reality
 
 #: the bundled example scenes (``scene: "satellite_ground_test"`` names one of them)
 EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
@@ -51,6 +53,10 @@ class Settings(BaseSettings):
         debugging) or ``dask://HOST:PORT`` (an existing Dask scheduler).
     workers : int
         Processes (or threads) of a local executor.
+    reality : Path or None
+        The simulated lab's reality file (:mod:`sim_core.twin_file`): how its world differs from
+        the nominal scene. None: the default reality (:func:`drivers.sim.world.default_reality`).
+        Only with ``simulated``; never visible through the API.
     pipeline_depth : int or None
         Poses of a campaign in flight at once (rig stage of the next pose overlapping the
         simulation of the previous ones); None: as many as the executor has workers. 1 makes
@@ -99,6 +105,7 @@ class Settings(BaseSettings):
     sse_max_s: float = Field(3600.0, gt=0.0)
     sse_max_streams: int = Field(100, ge=1, le=10000)
     faults: list[str] = Field(default_factory=list)
+    reality: Path | None = None
     min_free_bytes: int = Field(1_000_000_000, ge=0)
 
     @model_validator(mode="after")
@@ -106,7 +113,20 @@ class Settings(BaseSettings):
         if self.faults and not self.simulated:
             raise ValueError("faults: arming device faults needs the simulated rig "
                              "(TOFTWIN_SIMULATED=true, serve --simulated)")
+        if self.reality is not None and not self.simulated:
+            raise ValueError("reality: a reality file describes the simulated lab's world; it "
+                             "needs the simulated rig (TOFTWIN_SIMULATED=true, serve --simulated)")
         return self
+
+    @field_validator("reality")
+    @classmethod
+    def _valid_reality(cls, v: Path | None) -> Path | None:
+        if v is not None:
+            try:
+                load_reality(v)
+            except InvalidInputError as exc:
+                raise ValueError(str(exc)) from None
+        return v
 
     @field_validator("faults")
     @classmethod

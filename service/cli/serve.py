@@ -42,6 +42,11 @@ def serve(
                      "DEVICE:name[:count][@skip], DEVICE turntable, solar-simulator or camera, "
                      "e.g. solar-simulator:lamp-fault:1@6. Needs --simulated."),
     ] = None,
+    reality: Annotated[
+        Path | None,
+        typer.Option("--reality", help="The simulated lab's reality file (how its world differs "
+                     "from the nominal scene; docs/calibration.md). Needs --simulated."),
+    ] = None,
 ) -> None:
     """Start the REST API (uvicorn); --simulated runs on the simulators and the satellite scene."""
     import uvicorn
@@ -58,7 +63,7 @@ def serve(
         settings = Settings.load(
             settings_file, host=host, port=port, data_dir=data_dir,
             simulated=simulated or None, executor=executor, workers=workers, token=token,
-            faults=fault or None,
+            faults=fault or None, reality=reality,
         )
     except ValidationError as exc:
         for e in exc.errors():

@@ -75,14 +75,16 @@ class Lab:
 def open_rig(settings: Settings, scene: SceneSource) -> Rig:
     """The simulated rig (rendering ``scene``) or the real one on the configured ports."""
     if settings.simulated:
+        from drivers.sim.world import SimulatedWorld
         from service.compute.jobs import RENDER_LOCK
-        from service.lab.simulated_camera import RenderedFrameSource
         from sim_core.render import RenderSettings
+        from sim_core.twin_file import load_reality
 
-        source = RenderedFrameSource(
+        source = SimulatedWorld(
             scene.spec, scene.base_dir,
             RenderSettings(integrator=settings.camera_integrator, spp=settings.camera_spp,
                            max_bounces=2),
+            reality=None if settings.reality is None else load_reality(settings.reality),
         )
 
         def frame_source(request):

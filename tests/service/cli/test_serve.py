@@ -50,3 +50,23 @@ def test_serve_refuses_a_bad_fault_with_exit_code_2_before_starting(tmp_path, mo
     assert res.exit_code == 2, res.output
     text = " ".join(res.output.split())
     assert "[1] cannot parse 'oven:smoke'" in text and "expected DEVICE:" in text, text
+
+
+def test_serve_refuses_a_bad_reality_with_exit_code_2_naming_the_field(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    monkeypatch.delenv("TOFTWIN_TOKEN", raising=False)
+    bad = tmp_path / "reality.yaml"
+    bad.write_text("camera:\n  fx_px: -3\n")
+    res = CliRunner().invoke(app, ["serve", "--simulated", "--data-dir", str(tmp_path / "d"),
+                                   "--reality", str(bad)])
+    assert res.exit_code == 2, res.output
+    text = " ".join(res.output.split())
+    assert "reality.camera.fx_px" in text and "greater than 1" in text, text
+    good = tmp_path / "good.yaml"
+    good.write_text("turntable: {zero_offset_deg: 0.7}\n")
+    res = CliRunner().invoke(app, ["serve", "--data-dir", str(tmp_path / "e"), "--reality",
+                                   str(good)], env={"TOFTWIN_TOKEN": "a-long-enough-token"})
+    assert res.exit_code == 2 and "needs the simulated rig" in " ".join(res.output.split())

@@ -1,0 +1,166 @@
+"""The simulated lab's world: the scene as it really is, rendered for the rig's state.
+
+The simulated pico flexx (:mod:`drivers.sim.usb_camera`) asks a frame source for every frame
+it streams. :class:`SimulatedWorld` is that source for the simulated lab: it renders the scene
+for the rig's current turntable angle, solar level and shutter, through the full imaging chain,
+as a *reality* says the world differs from the nominal scene (:class:`sim_core.twin_file.
+RealityFile`: the camera's true intrinsics, depth errors, gain and noise, the source's power,
+the turntable's true axis and zero, the solar simulator's scale, the mount's pose, the objects'
+reflectance). Code that estimates parameters sees only the frames; nothing here is reachable
+through the service's API.
+
+Repeated frames of one rig state are exposures of the *same* rendered light field with new
+sensor noise (the render is cached), as repeated frames of a static scene are: their
+differences are the camera's noise alone, which the noise calibration relies on.
+
+The operator's swap of what stands on the turntable is :meth:`SimulatedWorld.mount`: the
+scene's own mounted objects, or other objects (a calibration board in its fixture).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections import OrderedDict
+from collections.abc import Sequence
+from pathlib import Path
+
+from drivers.rig import RigState
+from drivers.sim.usb_camera import CameraRequest
+from sim_core.pipeline import RenderedLight, expose_light, render_light
+from sim_core.raw import RawFrame
+from sim_core.render import RenderSettings
+from sim_core.scene import Scene, build_scene
+from sim_core.scene_spec import ObjectPose, ObjectSpec, SceneSpec
+from sim_core.twin_file import MountParameters, ObjectParameters, RealityFile, TurntableParameters
+
+#: rendered light fields kept per world (one per rig state and use case, most recent first)
+CACHE_STATES = 4
+
+
+def default_reality(spec: SceneSpec) -> RealityFile:
+    """The simulated lab's world when no reality file is given: small differences everywhere.
+
+    The mounted objects sit 4 mm / -3 mm / 2 mm off their nominal place, the turntable's zero is
+    0.5 deg off, and every object reflects 8 % less than its nominal material says. Comparing a
+    measured frame with a simulation of the nominal scene is then never trivially perfect.
+    """
+    return RealityFile(
+        turntable=TurntableParameters(zero_offset_deg=0.5),
+        mount=MountParameters(pose_offset=ObjectPose(position_m=(0.004, -0.003, 0.002))),
+        objects={o.name: ObjectParameters(reflectance_scale=0.92) for o in spec.objects},
+    )
+
+
+class SimulatedWorld:
+    """``CameraRequest -> RawFrame`` by rendering the rig's current state in the reality.
+
+    Parameters
+    ----------
+    spec : SceneSpec
+        The nominal scene.
+    base_dir : path
+        Folder relative mesh paths resolve against.
+    settings : RenderSettings
+        Render settings of the simulated camera (few spp keep it fast).
+    reality : RealityFile, optional
+        How the world differs from ``spec``; :func:`default_reality` if not given.
+    """
+
+    def __init__(
+        self,
+        spec: SceneSpec,
+        base_dir: str | Path,
+        settings: RenderSettings | None = None,
+        reality: RealityFile | None = None,
+    ) -> None:
+        self.spec = spec
+        self.base_dir = Path(base_dir)
+        self.settings = settings or RenderSettings(integrator="path", spp=8, max_bounces=2)
+        self.reality = reality if reality is not None else default_reality(spec)
+        self._mounted: tuple[ObjectSpec, ...] | None = None
+        self._generation = 0
+        self._cache: OrderedDict[tuple, tuple[Scene, RenderedLight]] = OrderedDict()
+        self._lock = threading.Lock()
+        # Fail now, not at the first frame, if the reality does not fit the scene.
+        build_scene(spec, self.base_dir, twin=self.reality)
+
+    # -- the operator's swap ---------------------------------------------------------------
+    def mount(self, objects: Sequence[ObjectSpec] | None = None) -> None:
+        """Put ``objects`` on the turntable instead of the scene's mounted objects.
+
+        ``objects`` are given in the world frame at the turntable's zero and are mounted exactly
+        (a fixture: the reality's mount offset and reflectance scales do not apply to them);
+        they are marked ``on_turntable``. ``None`` puts the scene's own objects back.
+        """
+        with self._lock:
+            self._mounted = None if objects is None else tuple(
+                o.model_copy(update={"on_turntable": True}) for o in objects)
+            self._generation += 1
+            self._cache.clear()
+
+    @property
+    def mounted(self) -> str:
+        """``"scene"`` or the names of the objects mounted instead, comma-separated."""
+        m = self._mounted
+        return "scene" if m is None else ",".join(o.name for o in m)
+
+    def _world(self) -> tuple[SceneSpec, RealityFile]:
+        if self._mounted is None:
+            return self.spec, self.reality
+        fixed = [o for o in self.spec.objects if not o.on_turntable]
+        spec = self.spec.model_copy(update={"objects": fixed + list(self._mounted)})
+        reality = self.reality.model_copy(update={
+            "mount": MountParameters(),
+            "objects": {k: v for k, v in self.reality.objects.items()
+                        if k in {o.name for o in fixed}},
+        })
+        return spec, reality
+
+    # -- frames ----------------------------------------------------------------------------
+    def _state(self, request: CameraRequest) -> RigState:
+        state = request.rig_state
+        if isinstance(state, RigState):
+            return state
+        # A camera simulator without a rig: the nominal state.
+        angle = self.spec.turntable.angle_deg if self.spec.turntable else 0.0
+        sim = self.spec.ambient.solar_simulator
+        return RigState(turntable_angle_deg=angle, solar_suns=sim.irradiance_suns if sim else 0.0,
+                        shutter_open=sim is not None)
+
+    def _rendered(self, request: CameraRequest, state: RigState) -> tuple[Scene, RenderedLight]:
+        uc = request.use_case
+        suns = state.solar_suns if state.shutter_open and state.solar_suns > 0.0 else 0.0
+        key = (self._generation, round(state.turntable_angle_deg, 6), round(suns, 6), uc.name,
+               tuple(uc.frequencies_hz), uc.exposure_s, uc.shape, request.seed)
+        hit = self._cache.get(key)
+        if hit is not None:
+            self._cache.move_to_end(key)
+            return hit
+        spec, reality = self._world()
+        spec = spec.model_copy(update={"camera": spec.camera.model_copy(update={
+            "modulation_frequencies_hz": list(uc.frequencies_hz),
+            "exposure_s": uc.exposure_s,
+            "width_px": uc.shape[1],
+            "height_px": uc.shape[0],
+        })})
+        scene = build_scene(spec, self.base_dir, turntable_deg=state.turntable_angle_deg,
+                            solar_suns=suns, twin=reality)
+        settings = dataclasses.replace(self.settings, seed=request.seed * 1_000_003
+                                       + self._generation)
+        entry = (scene, render_light(scene, settings))
+        self._cache[key] = entry
+        while len(self._cache) > CACHE_STATES:
+            self._cache.popitem(last=False)
+        return entry
+
+    def __call__(self, request: CameraRequest) -> RawFrame:
+        state = self._state(request)
+        with self._lock:  # one render at a time; the camera thread and tests may both ask
+            scene, rendered = self._rendered(request, state)
+            frame = expose_light(scene, rendered, noise_rng=request.rng())
+        raw = frame.raw
+        # Nothing about the reality goes into the frame: only what a camera would report.
+        meta = {"source": "rendered", "frame_index": request.frame_index,
+                "rig": dataclasses.asdict(state)}
+        return dataclasses.replace(raw, timestamp_s=request.timestamp_s, meta=meta)
