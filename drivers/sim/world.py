@@ -25,7 +25,6 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
-from drivers.rig import RigState
 from drivers.sim.usb_camera import CameraRequest
 from sim_core.pipeline import RenderedLight, expose_light, render_light
 from sim_core.raw import RawFrame
@@ -36,6 +35,15 @@ from sim_core.twin_file import MountParameters, ObjectParameters, RealityFile, T
 
 #: rendered light fields kept per world (one per rig state and use case, most recent first)
 CACHE_STATES = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class WorldState:
+    """The physical state a frame is rendered for (what :class:`drivers.rig.RigState` holds)."""
+
+    turntable_angle_deg: float
+    solar_suns: float
+    shutter_open: bool
 
 
 def default_reality(spec: SceneSpec) -> RealityFile:
@@ -118,17 +126,17 @@ class SimulatedWorld:
         return spec, reality
 
     # -- frames ----------------------------------------------------------------------------
-    def _state(self, request: CameraRequest) -> RigState:
+    def _state(self, request: CameraRequest) -> WorldState:
         state = request.rig_state
-        if isinstance(state, RigState):
-            return state
+        if state is not None:  # a drivers.rig.RigState (the rig imports this module: no import)
+            return WorldState(float(state.turntable_angle_deg), float(state.solar_suns),
+                              bool(state.shutter_open))
         # A camera simulator without a rig: the nominal state.
         angle = self.spec.turntable.angle_deg if self.spec.turntable else 0.0
         sim = self.spec.ambient.solar_simulator
-        return RigState(turntable_angle_deg=angle, solar_suns=sim.irradiance_suns if sim else 0.0,
-                        shutter_open=sim is not None)
+        return WorldState(angle, sim.irradiance_suns if sim else 0.0, sim is not None)
 
-    def _rendered(self, request: CameraRequest, state: RigState) -> tuple[Scene, RenderedLight]:
+    def _rendered(self, request: CameraRequest, state: WorldState) -> tuple[Scene, RenderedLight]:
         uc = request.use_case
         suns = state.solar_suns if state.shutter_open and state.solar_suns > 0.0 else 0.0
         key = (self._generation, round(state.turntable_angle_deg, 6), round(suns, 6), uc.name,
