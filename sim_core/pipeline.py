@@ -136,8 +136,13 @@ def expose_light(
     rendered: RenderedLight,
     ideal: bool = False,
     noise_rng: np.random.Generator | None = None,
+    noise: bool = True,
 ) -> SimulatedFrame:
-    """Optics, depth errors, sensor and reconstruction of a rendered light field."""
+    """Optics, depth errors, sensor and reconstruction of a rendered light field.
+
+    ``noise=False`` gives the sensor's mean response (no shot or read noise, no quantisation):
+    what a calibration compares averaged frames with.
+    """
     t0 = time.perf_counter()
     timings = dict(rendered.timings_s)
     lf, plan, run = rendered.light_field, rendered.plan, rendered.settings
@@ -163,7 +168,7 @@ def expose_light(
         sensor = dataclasses.replace(scene.sensor, sbi_enabled=plan.enabled("sbi"))
         e = mean_electrons(dc_active, dc_ambient, phasor, scene.camera, sensor)
         rng = None
-        if plan.enabled("noise"):
+        if noise and plan.enabled("noise"):
             rng = noise_rng or np.random.default_rng([run.seed, NOISE_STREAM])
         raw = expose(e, scene.camera, sensor, rng, meta={"seed": run.seed})
         timings["sensor"] = time.perf_counter() - t

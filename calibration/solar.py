@@ -1,0 +1,147 @@
+"""The solar simulator's irradiance scale from the frames' response to its level (issue 13, §4).
+
+Ambient light adds to both taps of every phase step, so it raises the frames' intensity (the
+mean tap sum, seed eq. 6) in proportion to the true irradiance, until SBI (seed section 2.2.3)
+starts removing the common charge. The twin predicts the intensity for a true level; the scale
+``s`` (true suns = set suns x s) is the one whose predictions match the measured intensities at
+every set level, by least squares over the pixels the beam reaches. SBI's clipping is part of
+the prediction, so a level range that SBI flattens simply carries less information.
+
+Whether the frames *determine* the scale is judged from that information: the standard error
+``sigma / sqrt(sum (dI/ds)^2)``. Beyond :data:`MAX_REL_UNCERTAINTY` the frames do not determine it
+and the scale must come from a reference-cell reading the operator enters; the result says which.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from sim_core.errors import InvalidInputError
+
+#: relative standard error beyond which the frames do not determine the scale
+MAX_REL_UNCERTAINTY = 0.01
+#: the scale is searched in this range
+SCALE_BOUNDS = (0.2, 5.0)
+
+
+@dataclass(frozen=True)
+class SolarScaleResult:
+    """The solar simulator's scale and where it came from.
+
+    Attributes
+    ----------
+    irradiance_scale : float
+        True suns = set suns x this.
+    std_error : float
+        Standard error of the scale (from the frames; 0 for a reference-cell reading).
+    method : str
+        ``"frames"`` (the frames' intensity response) or ``"reference-cell"``.
+    n_pixels : int
+        Pixels the fit used (0 for a reference-cell reading).
+    residual_rms_dn : float
+        RMS of measured minus predicted intensity at the fitted scale [DN].
+    reason : str
+        Why the frames did or did not determine it.
+    """
+
+    irradiance_scale: float
+    std_error: float
+    method: str
+    n_pixels: int
+    residual_rms_dn: float
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {"irradiance_scale": self.irradiance_scale, "std_error": self.std_error,
+                "method": self.method, "n_pixels": self.n_pixels,
+                "residual_rms_dn": self.residual_rms_dn, "reason": self.reason}
+
+
+def fit_solar_scale(
+    set_suns: Sequence[float],
+    measured_intensity: Sequence[np.ndarray],
+    intensity_std: Sequence[np.ndarray],
+    predict: Callable[[float], np.ndarray],
+    reference_cell_suns: float | None = None,
+) -> SolarScaleResult:
+    """Fit the scale from intensity frames at several set levels.
+
+    Parameters
+    ----------
+    set_suns : sequence of float
+        The levels the lamp was set to (0 for shutter closed is allowed and useful: it pins the
+        active light's share).
+    measured_intensity : sequence of (H, W)
+        Mean intensity [DN] over the frames at each level.
+    intensity_std : sequence of (H, W)
+        Standard error of each mean [DN] (temporal std / sqrt(frames)).
+    predict : callable
+        ``true_suns -> (H, W)`` noise-free intensity [DN] the twin predicts.
+    reference_cell_suns : float, optional
+        A reference cell's reading at set level 1 sun, used when the frames do not determine the
+        scale.
+
+    Raises
+    ------
+    InvalidInputError
+        Mismatched inputs, fewer than two levels, or the frames do not determine the scale and
+        no reference-cell reading was given.
+    """
+    levels = [float(s) for s in set_suns]
+    if len(levels) != len(measured_intensity) or len(levels) != len(intensity_std):
+        raise InvalidInputError("set_suns", "needs one measured image and one std per level")
+    if len({round(s, 6) for s in levels}) < 2:
+        raise InvalidInputError(
+            "set_suns", f"got the levels {levels}; at least two different ones are needed")
+    meas = [np.asarray(m, dtype=np.float64) for m in measured_intensity]
+    std = [np.asarray(s, dtype=np.float64) for s in intensity_std]
+    # Pixels the beam reaches: the prediction at the highest level differs from the lowest.
+    lo, hi = min(levels), max(levels)
+    reach = np.abs(predict(hi) - predict(lo))
+    finite = np.all([np.isfinite(m) & np.isfinite(s) & (s > 0) for m, s in zip(meas, std,
+                                                                                 strict=True)],
+                    axis=0)
+    noise = float(np.median(np.concatenate([s[finite] for s in std]))) if finite.any() else 0.0
+    use = finite & (reach > 3.0 * noise)
+    n = int(np.count_nonzero(use))
+
+    def cost(scale: float) -> float:
+        return float(sum(np.sum(((m[use] - predict(s * scale)[use]) / e[use]) ** 2)
+                         for s, m, e in zip(levels, meas, std, strict=True)))
+
+    reason = ""
+    if n >= 10:
+        best = minimize_scalar(cost, bounds=SCALE_BOUNDS, method="bounded",
+                               options={"xatol": 1e-5})
+        scale = float(best.x)
+        h = 1e-3 * scale
+        info = sum(np.sum(((predict(s * (scale + h))[use] - predict(s * (scale - h))[use])
+                           / (2 * h) / e[use]) ** 2) for s, e in zip(levels, std, strict=True))
+        se = float(1.0 / np.sqrt(info)) if info > 0 else np.inf
+        res = np.concatenate([m[use] - predict(s * scale)[use] for s, m in zip(levels, meas,
+                                                                              strict=True)])
+        rms = float(np.sqrt(np.mean(res**2)))
+        at_bound = min(abs(scale - b) for b in SCALE_BOUNDS) < 1e-3
+        if se / scale <= MAX_REL_UNCERTAINTY and not at_bound:
+            return SolarScaleResult(scale, se, "frames", n, rms,
+                                    f"{n} pixels respond to the level; standard error "
+                                    f"{100 * se / scale:.2f} %")
+        reason = (f"the frames' response gives a standard error of {100 * se / scale:.1f} % "
+                  f"(more than {100 * MAX_REL_UNCERTAINTY:g} %)" if not at_bound else
+                  f"the fit ran to the bound {scale:.3g} of {SCALE_BOUNDS}")
+    else:
+        reason = f"only {n} pixels respond to the level (SBI or a beam outside the view)"
+    if reference_cell_suns is None:
+        raise InvalidInputError(
+            "solar_simulator.irradiance_scale",
+            f"the frames do not determine it: {reason}; measure the beam with a reference cell "
+            "at a set level of 1 sun and enter the reading (--solar-reference-suns)",
+        )
+    if not (np.isfinite(reference_cell_suns) and 0.0 < reference_cell_suns <= 5.0):
+        raise InvalidInputError("solar_reference_suns",
+                                f"{reference_cell_suns} is outside (0, 5] sun")
+    return SolarScaleResult(float(reference_cell_suns), 0.0, "reference-cell", 0, 0.0, reason)
