@@ -1,0 +1,120 @@
+"""Averaged captures on the rig: the raw material of every calibration procedure.
+
+A calibration view is several frames of one static rig state, averaged: the mean of the phase
+images (averaging the phasors, not the amplitudes, so noise adds no bias), the amplitude and
+phases of that mean, the mean intensity and the frames' temporal standard deviation. Averaging
+``n`` frames divides the noise of corners and depth by sqrt(n) (CALIBRATION-NOTES.md: what brings
+the principal point under half a pixel). The individual frames are kept only where a procedure
+needs them (the noise stacks).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sim_core.errors import InvalidInputError
+from sim_core.raw import RawFrame, reconstruct_raw
+from sim_core.tof import phase_from_phasor
+
+
+@dataclass(frozen=True)
+class AveragedCapture:
+    """The mean of ``n_frames`` frames of one rig state.
+
+    Attributes
+    ----------
+    turntable_angle_deg, solar_suns : float
+        The state the rig reported.
+    shutter_open : bool
+    n_frames : int
+    phase_images : (n_f, 4, H, W) float64
+        Mean C_i per frequency and phase step [DN].
+    intensity : (H, W) float64
+        Mean intensity [DN].
+    intensity_std : (H, W) float64
+        Temporal standard deviation of the intensity over the frames [DN] (ddof 1).
+    amplitude : (H, W) float64
+        Amplitude of the mean phasor [DN] (seed eq. 5).
+    phase_rad : (n_f, H, W) float64
+        Phase of the mean phasor in [0, 2 pi) (seed eq. 4).
+    valid : (H, W) bool
+        Valid in every frame (not saturated, not in the SBI limit, enough amplitude).
+    frequencies_hz : (n_f,) float64
+    exposure_s : float
+    frames : tuple of RawFrame
+        The frames themselves, when kept (noise stacks).
+    """
+
+    turntable_angle_deg: float
+    solar_suns: float
+    shutter_open: bool
+    n_frames: int
+    phase_images: np.ndarray = field(repr=False)
+    intensity: np.ndarray = field(repr=False)
+    intensity_std: np.ndarray = field(repr=False)
+    amplitude: np.ndarray = field(repr=False)
+    phase_rad: np.ndarray = field(repr=False)
+    valid: np.ndarray = field(repr=False)
+    frequencies_hz: np.ndarray = field(repr=False)
+    exposure_s: float = 0.0
+    frames: tuple[RawFrame, ...] = field(default=(), repr=False)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.intensity.shape
+
+
+def average_frames(frames: list[RawFrame], keep_frames: bool = False) -> AveragedCapture:
+    """Average frames of one rig state (see :class:`AveragedCapture`).
+
+    Raises
+    ------
+    InvalidInputError
+        No frames, or frames of different shapes, frequencies or exposures.
+    """
+    if not frames:
+        raise InvalidInputError("frames", "no frames to average")
+    first = frames[0]
+    for i, f in enumerate(frames[1:], start=1):
+        if (f.phase_images.shape != first.phase_images.shape
+                or not np.allclose(f.frequencies_hz, first.frequencies_hz)
+                or not np.isclose(f.exposure_s, first.exposure_s)):
+            raise InvalidInputError(f"frames[{i}]", "differs from frame 0 in shape, modulation "
+                                    "frequencies or exposure: one capture is one use case")
+    c = np.mean([f.phase_images.astype(np.float64) for f in frames], axis=0)
+    grey = np.stack([f.intensity.astype(np.float64) for f in frames])
+    rig = first.meta.get("rig", {})
+    mean = RawFrame(
+        phase_images=c, intensity=grey.mean(axis=0), frequencies_hz=first.frequencies_hz,
+        saturated=np.any([f.saturated for f in frames], axis=0),
+        sbi_limit=np.any([f.sbi_limit for f in frames], axis=0), exposure_s=first.exposure_s,
+    )
+    # z/range does not matter here: only amplitude and phase are kept.
+    img = reconstruct_raw(mean, np.ones(mean.shape))
+    phasor = mean.phasor()
+    return AveragedCapture(
+        turntable_angle_deg=float(rig.get("turntable_angle_deg", np.nan)),
+        solar_suns=float(rig.get("solar_suns", np.nan)),
+        shutter_open=bool(rig.get("shutter_open", False)),
+        n_frames=len(frames),
+        phase_images=c,
+        intensity=grey.mean(axis=0),
+        intensity_std=grey.std(axis=0, ddof=1) if len(frames) > 1 else np.zeros(mean.shape),
+        amplitude=img.amplitude,
+        phase_rad=phase_from_phasor(phasor),
+        valid=img.valid,
+        frequencies_hz=np.asarray(first.frequencies_hz, dtype=np.float64),
+        exposure_s=float(first.exposure_s),
+        frames=tuple(frames) if keep_frames else (),
+    )
+
+
+#: ``progress(done, total, message)`` callbacks of the procedures
+Progress = Callable[[int, int, str], None]
+
+
+def no_progress(done: int, total: int, message: str) -> None:
+    """A progress callback that does nothing."""

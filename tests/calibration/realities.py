@@ -1,0 +1,55 @@
+"""Random realities for the calibration round trips: plausible ranges, never one set of values.
+
+Code under test never sees these: it gets frames from the simulated lab built with them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim_core.camera import CAMERA_PRESETS
+from sim_core.constants import SPEED_OF_LIGHT_M_S
+from sim_core.twin_file import RealityFile, parse_reality
+
+PRESET = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
+#: range of a radian of phase at 60.24 MHz [m]
+M_PER_RAD = SPEED_OF_LIGHT_M_S / (4.0 * np.pi * 60.24e6)
+
+
+def random_reality(seed: int, nominal_power_w: float = 1.0, wiggling_mm: float = 15.0,
+                   pattern_mm: float = 4.0, object_differences: bool = False) -> RealityFile:
+    """A reality drawn from plausible ranges (issue 13's round trip)."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform
+    tilt = np.radians(u(0.0, 1.5))
+    azim = u(-np.pi, np.pi)
+    axis = [float(np.sin(tilt) * np.cos(azim)), float(np.sin(tilt) * np.sin(azim)),
+            float(np.cos(tilt))]
+    data = {
+        "camera": {
+            "fx_px": float(PRESET["fx_px"] * u(0.97, 1.03)),
+            "fy_px": float(PRESET["fy_px"] * u(0.97, 1.03)),
+            "cx_px": float(PRESET["cx_px"] + u(-3.0, 3.0)),
+            "cy_px": float(PRESET["cy_px"] + u(-3.0, 3.0)),
+            "distortion": {"k1": float(u(-0.15, 0.05)), "k2": float(u(-0.05, 0.05)),
+                           "p1": float(u(-1e-3, 1e-3)), "p2": float(u(-1e-3, 1e-3)), "k3": 0.0},
+            "depth": {
+                "phase_offset_rad": [float(u(-0.1, 0.1))],
+                "wiggling": [{"harmonic": int(rng.integers(2, 5)),
+                              "amplitude_rad": wiggling_mm * 1e-3 / M_PER_RAD,
+                              "phase_rad": float(u(-np.pi, np.pi))}],
+                "pixel_offset_m": {"sigma": pattern_mm * 1e-3, "correlation_px": float(u(8, 20)),
+                                   "seed": int(rng.integers(0, 2**31))},
+            },
+            "sensor": {"adc_gain_e_per_dn": float(u(8.0, 40.0)),
+                       "read_noise_e": float(u(15.0, 50.0))},
+        },
+        "illumination": {"power_w": float(nominal_power_w * u(0.8, 1.3))},
+        "turntable": {"axis_point_m": [float(u(-0.005, 0.005)), float(u(-0.005, 0.005)), 0.0],
+                      "axis_direction": axis, "zero_offset_deg": float(u(-1.0, 1.0))},
+        "solar_simulator": {"irradiance_scale": float(u(0.9, 1.15))},
+    }
+    if object_differences:
+        data["mount"] = {"pose_offset": {"position_m": [float(u(-3e-3, 3e-3)) for _ in range(3)],
+                                         "rotation_deg": [0.0, 0.0, float(u(-1.0, 1.0))]}}
+    return parse_reality(data)
