@@ -49,6 +49,11 @@ def simulate(
         float | None,
         typer.Option("--time-budget-s", help="Best accuracy within this many seconds."),
     ] = None,
+    calibration: Annotated[
+        Path | None,
+        typer.Option("--calibration", help="Calibration file to apply (docs/calibration.md); "
+                     "replaces the scene's own 'calibration'."),
+    ] = None,
 ) -> None:
     """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
     from sim_core.pipeline import save_frame
@@ -56,6 +61,7 @@ def simulate(
     from sim_core.render import RenderSettings
     from sim_core.scene import build_scene
     from sim_core.scene_spec import load_scene_spec
+    from sim_core.twin_file import load_calibration
 
     try:
         spec = load_scene_spec(scene)
@@ -75,7 +81,8 @@ def simulate(
             raise InvalidInputError(
                 "--effect-tolerance-mm", f"{effect_tolerance_mm} is outside (0, 10000] mm"
             )
-        built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg)
+        twin = None if calibration is None else load_calibration(calibration)
+        built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg, twin=twin)
     except InvalidInputError as exc:
         fail_invalid(exc)
         return

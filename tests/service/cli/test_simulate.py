@@ -172,3 +172,24 @@ def test_ideal_frame_has_no_raw_file_and_no_noise(tmp_path):
         # range gradient across a pixel (mm at the corners), not by noise (cm).
         diff = np.abs(a["range_m"] - b["range_m"])
         assert np.median(diff) < 1e-3 and diff.max() < 1e-2
+
+
+def test_simulate_applies_a_calibration_file(tmp_path):
+    """A calibration's phase offset shifts the depth; a bad file is exit 2 naming the field."""
+    cal = tmp_path / "calibration.yaml"
+    # 0.1 rad at 60.24 MHz is 39.6 mm of range.
+    cal.write_text("camera:\n  depth: {phase_offset_rad: [0.1]}\n")
+    base, shifted = tmp_path / "a", tmp_path / "b"
+    for out, extra in ((base, ()), (shifted, ("--calibration", cal))):
+        res = run("simulate", EXAMPLES / "plane.yaml", "--out", out, "--spp", 2, "-q", *extra)
+        assert res.exit_code == 0, res.output
+    with np.load(base / "frame.npz") as a, np.load(shifted / "frame.npz") as b:
+        ok = a["valid"] & b["valid"]
+        diff = np.median((b["range_m"] - a["range_m"])[ok])
+    assert diff == pytest.approx(0.0396, abs=0.002)
+    cal.write_text("camera:\n  depth: {phase_offset_rad: [7.0]}\n")
+    res = run("simulate", EXAMPLES / "plane.yaml", "--out", tmp_path / "c", "-q",
+              "--calibration", cal)
+    assert res.exit_code == 2
+    assert "calibration.camera.depth.phase_offset_rad[0]" in " ".join(res.output.split())
+    assert not (tmp_path / "c").exists()

@@ -1,0 +1,66 @@
+"""What the twin predicts for a calibration view: noise-free frames at the calibrated geometry.
+
+Photometry and the solar scale compare averaged frames with the twin's prediction of the same
+view, made with everything calibrated so far (intrinsics, distortion, gain, turntable axis and
+zero) and the board in its fixture. The prediction is the sensor's mean response: no shot or
+read noise, no quantisation (:func:`sim_core.pipeline.expose_light` with ``noise=False``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from sim_core.pipeline import RenderedLight, SimulatedFrame, expose_light, render_light
+from sim_core.render import RenderSettings
+from sim_core.scene import Scene, build_scene
+from sim_core.scene_spec import ObjectSpec, SceneSpec
+from sim_core.twin_file import TwinParameters
+
+#: samples per pixel of a prediction (direct light only: the board is flat and matte)
+PREDICTION_SPP = 64
+
+
+def mounted_spec(spec: SceneSpec, objects: list[ObjectSpec], use_case) -> SceneSpec:
+    """``spec`` with ``objects`` on the turntable instead of its own, for ``use_case``'s frames."""
+    fixed = [o for o in spec.objects if not o.on_turntable]
+    camera = spec.camera.model_copy(update={
+        "modulation_frequencies_hz": [float(f) for f in use_case.frequencies_hz],
+        "exposure_s": use_case.exposure_s,
+        "width_px": use_case.shape[1],
+        "height_px": use_case.shape[0],
+    })
+    return spec.model_copy(update={"objects": fixed + list(objects), "camera": camera})
+
+
+@dataclasses.dataclass
+class Prediction:
+    """A rendered view of the twin, ready to be exposed at any solar level."""
+
+    scene: Scene
+    rendered: RenderedLight
+
+    def frame(self, ambient_scale: float = 1.0) -> SimulatedFrame:
+        """The noise-free frame, with the ambient light scaled by ``ambient_scale``."""
+        rendered = self.rendered
+        if ambient_scale != 1.0:
+            lf = dataclasses.replace(rendered.light_field,
+                                     dc_ambient=rendered.light_field.dc_ambient * ambient_scale)
+            rendered = dataclasses.replace(rendered, light_field=lf)
+        return expose_light(self.scene, rendered, noise=False)
+
+
+def predict_view(
+    spec: SceneSpec,
+    base_dir: str | Path,
+    twin: TwinParameters,
+    turntable_deg: float,
+    solar_suns: float = 0.0,
+    spp: int = PREDICTION_SPP,
+    seed: int = 0,
+) -> Prediction:
+    """Render the view the rig reported (``turntable_deg``, ``solar_suns`` as set) in the twin."""
+    scene = build_scene(spec, base_dir, turntable_deg=turntable_deg, solar_suns=solar_suns,
+                        twin=twin)
+    settings = RenderSettings(integrator="direct", spp=spp, seed=seed)
+    return Prediction(scene, render_light(scene, settings, effects="auto"))
