@@ -24,6 +24,12 @@ from sim_core.errors import InvalidInputError
 
 #: relative standard error beyond which the frames do not determine the scale
 MAX_REL_UNCERTAINTY = 0.01
+#: relative error of the twin's predicted intensity (calibrated gain and power)
+MODEL_ERROR_REL = 0.01
+#: Huber threshold of the normalised residuals
+HUBER = 3.0
+#: a pixel is "flat" when its 3 x 3 neighbourhood in the prediction varies by less than this
+FLAT_VARIATION = 0.05
 #: the scale is searched in this range
 SCALE_BOUNDS = (0.2, 5.0)
 
@@ -61,12 +67,21 @@ class SolarScaleResult:
                 "residual_rms_dn": self.residual_rms_dn, "reason": self.reason}
 
 
+def _flat(image: np.ndarray) -> np.ndarray:
+    from scipy import ndimage
+
+    q = np.nan_to_num(np.asarray(image, dtype=np.float64))
+    span = ndimage.maximum_filter(q, size=3) - ndimage.minimum_filter(q, size=3)
+    return span <= FLAT_VARIATION * np.maximum(np.abs(q), 1e-12)
+
+
 def fit_solar_scale(
     set_suns: Sequence[float],
     measured_intensity: Sequence[np.ndarray],
     intensity_std: Sequence[np.ndarray],
     predict: Callable[[float], np.ndarray],
     reference_cell_suns: float | None = None,
+    saturation_dn: float = 4000.0,
 ) -> SolarScaleResult:
     """Fit the scale from intensity frames at several set levels.
 
@@ -84,6 +99,8 @@ def fit_solar_scale(
     reference_cell_suns : float, optional
         A reference cell's reading at set level 1 sun, used when the frames do not determine the
         scale.
+    saturation_dn : float
+        Pixels at or above this intensity at any level are left out (ADC and full well).
 
     Raises
     ------
@@ -98,24 +115,41 @@ def fit_solar_scale(
         raise InvalidInputError(
             "set_suns", f"got the levels {levels}; at least two different ones are needed")
     meas = [np.asarray(m, dtype=np.float64) for m in measured_intensity]
-    std = [np.asarray(s, dtype=np.float64) for s in intensity_std]
+    # The twin's own error (gain, power: a per cent or so) bounds how well a pixel can agree,
+    # however many frames were averaged: without the floor a few bright pixels near SBI or
+    # saturation, where a small gain error changes the response most, would decide the fit.
+    std = [np.hypot(np.asarray(s, dtype=np.float64), MODEL_ERROR_REL * np.abs(m))
+           for s, m in zip(intensity_std, meas, strict=True)]
     # Pixels the beam reaches: the prediction at the highest level differs from the lowest.
     lo, hi = min(levels), max(levels)
     reach = np.abs(predict(hi) - predict(lo))
-    finite = np.all([np.isfinite(m) & np.isfinite(s) & (s > 0) for m, s in zip(meas, std,
-                                                                                 strict=True)],
-                    axis=0)
+    finite = np.all([np.isfinite(m) & np.isfinite(s) & (s > 0) & (m < saturation_dn)
+                     for m, s in zip(meas, std, strict=True)], axis=0)
     noise = float(np.median(np.concatenate([s[finite] for s in std]))) if finite.any() else 0.0
-    use = finite & (reach > 3.0 * noise)
+    # Pixels on an edge of the prediction (a board square's border, an object's outline) are
+    # left out: a fraction of a pixel of geometry error changes them more than the level does.
+    flat = _flat(predict(lo)) & _flat(predict(hi))
+    use = finite & flat & (reach > 3.0 * noise)
     n = int(np.count_nonzero(use))
 
     def cost(scale: float) -> float:
-        return float(sum(np.sum(((m[use] - predict(s * scale)[use]) / e[use]) ** 2)
-                         for s, m, e in zip(levels, meas, std, strict=True)))
+        # Huber loss of the normalised residuals: a few pixels the twin gets wrong (multipath,
+        # a shadow edge) cannot outweigh the many it gets right.
+        total = 0.0
+        for s, m, e in zip(levels, meas, std, strict=True):
+            r = np.abs((m[use] - predict(s * scale)[use]) / e[use])
+            total += float(np.sum(np.where(r <= HUBER, 0.5 * r**2, HUBER * (r - 0.5 * HUBER))))
+        return total
 
     reason = ""
     if n >= 10:
-        best = minimize_scalar(cost, bounds=SCALE_BOUNDS, method="bounded",
+        # SBI and clipping make the cost uneven far from the optimum: a grid first, then a
+        # bounded search between the best grid point's neighbours.
+        grid = np.geomspace(SCALE_BOUNDS[0], SCALE_BOUNDS[1], 161)
+        costs = [cost(g) for g in grid]
+        j = int(np.argmin(costs))
+        lo_b, hi_b = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+        best = minimize_scalar(cost, bounds=(lo_b, hi_b), method="bounded",
                                options={"xatol": 1e-5})
         scale = float(best.x)
         h = 1e-3 * scale

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from sim_core import geometry
+from sim_core.boards import board_triangles
 from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics, look_at
 from sim_core.constants import ONE_SUN_W_M2
 from sim_core.depth_errors import DepthErrorModel
@@ -24,7 +25,7 @@ from sim_core.radiometry import (
     moon_albedo_irradiance_w_m2,
     solar_in_band_irradiance_w_m2,
 )
-from sim_core.scene_spec import MaterialSpec, ObjectSpec, OpticsSpec, SceneSpec
+from sim_core.scene_spec import BOARD_KINDS, MaterialSpec, ObjectSpec, OpticsSpec, SceneSpec
 from sim_core.sensor import SensorParams
 from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
 from sim_core.twin_file import RealityFile, TwinParameters, load_calibration, twin_hash
@@ -51,6 +52,7 @@ class Scene:
     object_index : (n,) int32
         Index into ``object_names`` per triangle.
     materials : tuple of Material
+        One per object, two for a board (its black and white cells).
     object_names : tuple of str
     scene_hash : str
         SHA-256 over the spec, the mesh files' bytes, the rig state and the twin parameters.
@@ -243,7 +245,9 @@ def _preset(name: str) -> tuple[str, dict]:
 
 def _object_triangles(obj: ObjectSpec, base_dir: Path, field_name: str) -> np.ndarray:
     mesh = obj.mesh
-    if mesh.kind == "box":
+    if mesh.kind in BOARD_KINDS:
+        tris = board_triangles(mesh)[0]
+    elif mesh.kind == "box":
         tris = geometry.box_triangles(mesh.size_m)
     elif mesh.kind == "rectangle":
         tris = geometry.rectangle_triangles(mesh.size_m)
@@ -349,12 +353,20 @@ def build_scene(
             m[:3, :3] = r
             m[:3, 3] = c - r @ c
             tris = geometry.transform_triangles(tris, m)
-        material = build_material(obj.material, f"{fname}.material")
+        if obj.mesh.kind in BOARD_KINDS:
+            # Two materials: black cells (0) and white cells (1) of the pattern.
+            own = [build_material(obj.mesh.black, f"{fname}.mesh.black"),
+                   build_material(obj.mesh.white, f"{fname}.mesh.white")]
+            local = board_triangles(obj.mesh)[1]
+        else:
+            own = [build_material(obj.material, f"{fname}.material")]
+            local = np.zeros(tris.shape[0], dtype=np.int32)
         if obj.name in scales:
-            material = scale_reflectance(material, scales[obj.name].reflectance_scale)
-        materials.append(material)
+            own = [scale_reflectance(m, scales[obj.name].reflectance_scale) for m in own]
+        first_material = len(materials)
+        materials.extend(own)
         tris_all.append(tris)
-        mat_all.append(np.full(tris.shape[0], i, dtype=np.int32))
+        mat_all.append((first_material + local).astype(np.int32))
         obj_all.append(np.full(tris.shape[0], i, dtype=np.int32))
     if tris_all:
         tris = np.concatenate(tris_all)

@@ -180,6 +180,24 @@ class Ambient(_Strict):
 
 
 # --- objects --------------------------------------------------------------------------------
+class MaterialSpec(_Strict):
+    """A material: a preset name, or a model ``kind`` with its parameters.
+
+    ``{preset: thermal-control-film}`` or ``{kind: lambertian, params: {albedo: 0.5}}``;
+    a preset may be adjusted with ``params``.
+    """
+
+    preset: str | None = None
+    kind: str | None = None
+    params: dict[str, Finite | str] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _preset_or_kind(self):
+        if (self.preset is None) == (self.kind is None):
+            raise ValueError("give exactly one of 'preset' or 'kind'")
+        return self
+
+
 class BoxMesh(_Strict):
     kind: Literal["box"]
     size_m: tuple[PositiveLength, PositiveLength, PositiveLength]
@@ -202,26 +220,48 @@ class FileMesh(_Strict):
     scale: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] = 1.0
 
 
-_MESH_KINDS = ("box", "rectangle", "sphere", "file")
-MeshSpec = Annotated[BoxMesh | RectangleMesh | SphereMesh | FileMesh, Field(discriminator="kind")]
+def _lambertian(albedo: float):
+    return lambda: MaterialSpec(kind="lambertian", params={"albedo": albedo})
 
 
-class MaterialSpec(_Strict):
-    """A material: a preset name, or a model ``kind`` with its parameters.
+class CharucoBoardMesh(_Strict):
+    """A ChArUco calibration board (OpenCV's pattern), flat in the local xy plane, facing +z."""
 
-    ``{preset: thermal-control-film}`` or ``{kind: lambertian, params: {albedo: 0.5}}``;
-    a preset may be adjusted with ``params``.
-    """
-
-    preset: str | None = None
-    kind: str | None = None
-    params: dict[str, Finite | str] = Field(default_factory=dict)
+    kind: Literal["charuco_board"]
+    squares_x: Annotated[int, Field(ge=3, le=40)]
+    squares_y: Annotated[int, Field(ge=3, le=40)]
+    square_m: PositiveLength
+    marker_m: PositiveLength
+    dictionary: Annotated[str, Field(pattern=r"^DICT_[A-Z0-9_]+$")] = "DICT_4X4_50"
+    white: MaterialSpec = Field(default_factory=_lambertian(0.85))
+    black: MaterialSpec = Field(default_factory=_lambertian(0.04))
+    margin_m: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.0
 
     @model_validator(mode="after")
-    def _preset_or_kind(self):
-        if (self.preset is None) == (self.kind is None):
-            raise ValueError("give exactly one of 'preset' or 'kind'")
+    def _marker_fits(self):
+        if self.marker_m >= self.square_m:
+            raise ValueError("marker_m must be smaller than square_m")
         return self
+
+
+class CheckerboardMesh(_Strict):
+    """A plain checkerboard (top-left square black), flat in the local xy plane, facing +z."""
+
+    kind: Literal["checkerboard"]
+    squares_x: Annotated[int, Field(ge=3, le=40)]
+    squares_y: Annotated[int, Field(ge=3, le=40)]
+    square_m: PositiveLength
+    white: MaterialSpec = Field(default_factory=_lambertian(0.85))
+    black: MaterialSpec = Field(default_factory=_lambertian(0.04))
+    margin_m: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.0
+
+
+_MESH_KINDS = ("box", "rectangle", "sphere", "file", "charuco_board", "checkerboard")
+BOARD_KINDS = ("charuco_board", "checkerboard")
+MeshSpec = Annotated[
+    BoxMesh | RectangleMesh | SphereMesh | FileMesh | CharucoBoardMesh | CheckerboardMesh,
+    Field(discriminator="kind"),
+]
 
 
 class ObjectPose(_Strict):
@@ -232,11 +272,24 @@ class ObjectPose(_Strict):
 
 
 class ObjectSpec(_Strict):
+    """An object: a mesh, its material (boards bring their own two), a pose."""
+
     name: Annotated[str, Field(min_length=1, max_length=100)]
     mesh: MeshSpec
-    material: MaterialSpec | str
+    material: MaterialSpec | str | None = None
     pose: ObjectPose = ObjectPose()
     on_turntable: bool = False
+
+    @model_validator(mode="after")
+    def _material_unless_board(self):
+        board = self.mesh.kind in BOARD_KINDS
+        if board and self.material is not None:
+            raise ValueError("a board brings its own materials (mesh.white, mesh.black); "
+                             "remove 'material'")
+        if not board and self.material is None:
+            raise ValueError("material: Field required for a mesh of kind "
+                             f"'{self.mesh.kind}'")
+        return self
 
 
 class TurntableSpec(_Strict):

@@ -16,6 +16,7 @@ from typing import Any
 
 from drivers.camera import UseCase
 from service.lab.requests import MaskSpec
+from sim_core.boards import board_triangles
 from sim_core.camera import Camera
 from sim_core.errors import InvalidInputError
 from sim_core.scene import build_camera, build_scene
@@ -63,7 +64,9 @@ def bundled_scenes(examples_dir: Path) -> list[str]:
 
 #: triangles of each generated mesh kind (icosphere: 20 * 4**subdivisions)
 _TRIANGLES = {"box": lambda m: 12, "rectangle": lambda m: 2,
-              "sphere": lambda m: 20 * 4 ** m.subdivisions}
+              "sphere": lambda m: 20 * 4 ** m.subdivisions,
+              "charuco_board": lambda m: len(board_triangles(m)[0]),
+              "checkerboard": lambda m: len(board_triangles(m)[0])}
 
 
 def resolve_scene(

@@ -1,0 +1,149 @@
+"""Gain and read noise from a stack of frames of a static view (photon transfer, EMVA 1288).
+
+Through the camera's wire a frame has the tap differences C_i = A_i - B_i and the intensity I
+(the mean tap sum, both in DN), not the taps. With g the conversion gain [e-/DN] (EMVA 1288's
+K = 1/g), N_A + N_B = N the electrons of a phase step (shot noise: var = mean), sigma_r the read
+noise per tap [e-] (sim_core.sensor):
+
+    var(C_i) = (N + 2 sigma_r^2) / g^2 + 1/6 = I / g + 2 sigma_r^2 / g^2 + 1/6   [DN^2]
+
+(each rounded tap adds 1/12 DN^2 of quantisation). The temporal variance of every pixel's C_i
+over the stack, against its mean intensity, is a line (the photon transfer curve): slope 1/g,
+intercept 2 sigma_r^2 / g^2 + 1/6. The pixels of one view span a wide intensity range (white
+and black squares, the source's fall-off, the dark background), so one stack determines it. The
+fit is robust (soft-L1) and uses intensities below half the largest seen, where SBI (which adds
+the compensation charge's own noise above n_SBI,start) has not started; the linearity over the
+range used is reported. With taps in the frames (the simulator's own files) the same holds per
+tap (var(A) = N_A / g^2 + sigma_r^2 / g^2 + 1/12) and is reported beside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from sim_core.errors import InvalidInputError
+from sim_core.raw import RawFrame
+
+QUANTISATION_DN2 = 1.0 / 6.0
+#: pixel-intensity bins of the photon transfer curve
+BINS = 40
+#: share of the largest mean intensity the fit uses (SBI starts above)
+LINEAR_SHARE = 0.5
+#: pixels darker than this [DN] or this share of the range used are left out (tap clipping)
+MIN_INTENSITY_DN = 20.0
+MIN_INTENSITY_SHARE = 0.05
+
+
+@dataclass(frozen=True)
+class NoiseCalibration:
+    """Gain and read noise with their standard errors, and the curve they came from."""
+
+    adc_gain_e_per_dn: float
+    read_noise_e: float
+    gain_std_error: float
+    read_noise_std_error: float
+    dark_signal_dn: float
+    intensity_range_dn: tuple[float, float]
+    nonlinearity: float
+    frames: int
+    method: str
+    curve: tuple[np.ndarray, np.ndarray]
+
+    def to_sensor_overrides(self) -> dict:
+        return {"adc_gain_e_per_dn": self.adc_gain_e_per_dn, "read_noise_e": self.read_noise_e}
+
+    def summary(self) -> dict:
+        return {"adc_gain_e_per_dn": self.adc_gain_e_per_dn, "read_noise_e": self.read_noise_e,
+                "gain_std_error": self.gain_std_error,
+                "read_noise_std_error": self.read_noise_std_error,
+                "dark_signal_dn": self.dark_signal_dn,
+                "intensity_range_dn": list(self.intensity_range_dn),
+                "nonlinearity_rms_rel": self.nonlinearity, "frames": self.frames,
+                "method": self.method}
+
+    def plot(self, ax) -> str:
+        mean, var = self.curve
+        ax.plot(mean, var, "o", ms=3)
+        x = np.linspace(0, mean.max(), 50)
+        g, s = self.adc_gain_e_per_dn, self.read_noise_e
+        ax.plot(x, x / g + 2 * s**2 / g**2 + QUANTISATION_DN2, "-")
+        ax.set_xlabel("mean intensity [DN]")
+        ax.set_ylabel("temporal variance of C_i [DN^2]")
+        return f"Photon transfer: gain {g:.2f} e-/DN, read noise {s:.1f} e-"
+
+
+def calibrate_noise(stacks: list[list[RawFrame]]) -> NoiseCalibration:
+    """Fit gain and read noise from one or more stacks (module docstring)."""
+    means, variances = [], []
+    n_frames = 0
+    for i, stack in enumerate(stacks):
+        if len(stack) < 2:
+            raise InvalidInputError(f"stacks[{i}]", f"{len(stack)} frame(s) are too short for a "
+                                    "variance: at least 2 (better 16 or more) are needed")
+        shape = stack[0].phase_images.shape
+        if any(f.phase_images.shape != shape for f in stack):
+            raise InvalidInputError(f"stacks[{i}]", "frames of different shapes (use cases)")
+        c = np.stack([f.phase_images[0].astype(np.float64) for f in stack])  # (n, 4, H, W)
+        inten = np.stack([f.intensity.astype(np.float64) for f in stack])
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(inten))):
+            raise InvalidInputError(f"stacks[{i}]", "non-finite values in the frames")
+        sat = np.any([f.saturated | f.sbi_limit for f in stack], axis=0)
+        v = c.var(axis=0, ddof=1).mean(axis=0)  # mean over the 4 phase steps
+        m = inten.mean(axis=0)
+        means.append(m[~sat])
+        variances.append(v[~sat])
+        n_frames += len(stack)
+    m = np.concatenate(means)
+    v = np.concatenate(variances)
+    if m.size < 100:
+        raise InvalidInputError("stacks", f"only {m.size} unsaturated pixels; at least 100")
+    top = LINEAR_SHARE * float(np.percentile(m, 99.9))
+    # Near zero the taps are clipped at 0 (no black level), which truncates the read noise:
+    # only pixels whose mean is well above it are used.
+    bottom = max(MIN_INTENSITY_DN, MIN_INTENSITY_SHARE * top)
+    use = (m <= top) & (m >= bottom)
+    if np.count_nonzero(use) < 100:
+        raise InvalidInputError(
+            "stacks", f"only {np.count_nonzero(use)} pixels have a mean intensity between "
+            f"{bottom:.0f} and {top:.0f} DN: too few to determine the gain (a view with bright "
+            "and dark areas is needed)")
+    edges = np.unique(np.linspace(bottom, top, BINS + 1))
+    if edges.size < 6 or top <= 0 or (edges[-1] - edges[0]) < 50.0:
+        raise InvalidInputError(
+            "stacks", f"the pixels' mean intensities span {edges[0]:.0f}-{edges[-1]:.0f} DN: too "
+            "narrow a range to determine the gain (a view with bright and dark areas is needed)")
+    idx = np.clip(np.digitize(m[use], edges) - 1, 0, edges.size - 2)
+    bm = np.array([m[use][idx == b].mean() for b in range(edges.size - 1) if np.any(idx == b)])
+    bv = np.array([v[use][idx == b].mean() for b in range(edges.size - 1) if np.any(idx == b)])
+    cnt = np.array([np.sum(idx == b) for b in range(edges.size - 1) if np.any(idx == b)])
+    # Each bin's mean variance has a relative standard error sqrt(2 / (dof * pixels)).
+    dof = n_frames / len(stacks) - 1
+    sig = bv * np.sqrt(2.0 / (dof * 4 * cnt))
+
+    def resid(p):
+        return (p[0] * bm + p[1] - bv) / sig
+
+    fit = least_squares(resid, [max(bv[-1] - bv[0], 1e-6) / max(bm[-1] - bm[0], 1e-6),
+                                max(bv[0], QUANTISATION_DN2)], loss="soft_l1", f_scale=3.0)
+    slope, icpt = fit.x
+    jac = fit.jac
+    cov = np.linalg.pinv(jac.T @ jac)
+    if not slope > 0:
+        raise InvalidInputError("stacks", "the variance does not grow with the intensity: no "
+                                "shot noise seen (frames identical, or all dark)")
+    g = 1.0 / slope
+    read2 = (icpt - QUANTISATION_DN2) * g**2 / 2.0
+    read = float(np.sqrt(max(read2, 0.0)))
+    g_se = float(np.sqrt(cov[0, 0])) * g**2
+    d_read = np.sqrt(max(cov[1, 1], 0.0)) * g**2 / (4.0 * max(read, 1e-9))
+    pred = slope * bm + icpt
+    nonlin = float(np.sqrt(np.mean(((bv - pred) / pred) ** 2)))
+    dark = float(np.percentile(m, 0.5))
+    return NoiseCalibration(
+        adc_gain_e_per_dn=float(g), read_noise_e=read, gain_std_error=g_se,
+        read_noise_std_error=float(d_read), dark_signal_dn=dark,
+        intensity_range_dn=(float(edges[0]), float(edges[-1])), nonlinearity=nonlin,
+        frames=n_frames, method="differences", curve=(bm, bv))

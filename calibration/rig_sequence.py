@@ -1,0 +1,338 @@
+"""``toftwin calibrate rig``: the whole calibration sequence on the rig (issue 13, section 4).
+
+1. **Board sweeps.** For each fixture (tilt) the operator mounts the board
+   (:class:`Operator`; the simulated lab mounts it itself); the turntable sweeps the board
+   past the camera with the solar simulator off; each view averages several frames
+   (:mod:`calibration.captures`) and OpenCV finds the board's corners in its amplitude.
+2. **Intrinsics and distortion** from all views (:mod:`calibration.intrinsics`).
+3. **Turntable axis and zero** from the board poses (:mod:`calibration.turntable_axis`).
+4. **Depth errors**: measured phase on the board against the range its pose predicts
+   (:mod:`calibration.board_range`, :mod:`calibration.depth`).
+5. **Noise and gain**: a stack of frames of one static view, photon transfer
+   (:mod:`calibration.noise_gain`).
+6. **Effective source power**: the white squares' amplitude against the twin's prediction at
+   the calibrated geometry and gain (:mod:`calibration.photometry`).
+7. **Solar simulator scale**: the intensity's response to the lamp's level against the twin's
+   prediction (:mod:`calibration.solar`), or a reference-cell reading.
+
+Each step uses only what the frames (and the previous steps) say; the result is a
+:class:`sim_core.twin_file.CalibrationFile` with each procedure's residuals in its provenance.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
+from calibration.fixtures import BoardFixture, board_object, world_from_board
+from calibration.photometry import fit_source_power
+from calibration.solar import fit_solar_scale
+from calibration.twin_prediction import mounted_spec, predict_view
+from drivers.rig import Rig, RigState
+from sim_core.errors import InvalidInputError
+from sim_core.scene import build_camera
+from sim_core.scene_spec import ObjectSpec, SceneSpec
+from sim_core.twin_file import (
+    CalibrationFile,
+    CameraParameters,
+    IlluminationParameters,
+    Provenance,
+    SolarParameters,
+    TurntableParameters,
+    TwinParameters,
+)
+
+#: the board the sequence uses unless told otherwise (see docs/calibration.md for the choice)
+DEFAULT_BOARD: dict[str, Any] = {
+    "kind": "charuco_board", "squares_x": 5, "squares_y": 7, "square_m": 0.10,
+    "marker_m": 0.06, "dictionary": "DICT_4X4_50",
+}
+#: the fixtures: several tilts determine the principal point (CALIBRATION-NOTES.md)
+DEFAULT_FIXTURES = (BoardFixture("tilt+30", 30.0), BoardFixture("tilt-30", -30.0),
+                    BoardFixture("tilt0", 0.0))
+
+@dataclass(frozen=True)
+class RigCalibrationPlan:
+    """What the sequence captures.
+
+    Attributes
+    ----------
+    board : dict
+        The board's mesh spec (``charuco_board`` or ``checkerboard``, see scene-format.md).
+    fixtures : tuple of BoardFixture
+    sweep_deg : tuple of float
+        Reported turntable angles of the board sweep (each fixture).
+    frames_per_view : int
+        Frames averaged per view.
+    noise_frames : int
+        Frames of the noise stack (at least 2; 16 or more give a gain within 1-2 %).
+    solar_levels_suns : tuple of float
+        Set levels of the solar simulator for its scale (besides the shutter closed).
+    solar_frames : int
+        Frames averaged per solar level.
+    solar_reference_suns : float or None
+        A reference cell's reading at a set level of 1 sun, used if the frames do not
+        determine the scale.
+    """
+
+    board: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_BOARD))
+    fixtures: tuple[BoardFixture, ...] = DEFAULT_FIXTURES
+    sweep_deg: tuple[float, ...] = tuple(float(a) for a in range(-55, 56, 5))
+    frames_per_view: int = 4
+    noise_frames: int = 24
+    solar_levels_suns: tuple[float, ...] = (0.8, 1.0, 1.2)
+    solar_frames: int = 8
+    solar_reference_suns: float | None = None
+
+    def __post_init__(self) -> None:
+        if len(self.fixtures) < 1:
+            raise InvalidInputError("fixtures", "at least one board fixture is needed")
+        if len(self.sweep_deg) < 3:
+            raise InvalidInputError("sweep_deg", f"{len(self.sweep_deg)} angles; at least 3 "
+                                    "distinct angles are needed to determine the axis")
+        if self.frames_per_view < 1:
+            raise InvalidInputError("frames_per_view", f"{self.frames_per_view} is below 1")
+        if self.noise_frames < 2:
+            raise InvalidInputError("noise_frames", f"{self.noise_frames} frames are too few "
+                                    "for a variance; at least 2 (better 16 or more)")
+
+    @property
+    def n_captures(self) -> int:
+        """Rig states the sequence visits (for progress)."""
+        return (len(self.fixtures) * len(self.sweep_deg) + 2
+                + len(self.solar_levels_suns) + 1)
+
+class Operator(Protocol):
+    """Whoever swaps what stands on the turntable: the operator, or the simulated lab."""
+
+    def mount(self, objects: Sequence[ObjectSpec] | None, instruction: str) -> None:
+        """Mount ``objects`` (world frame at the turntable's zero) or, with None, the test
+        object again; ``instruction`` says it in words."""
+
+class SimulatedOperator:
+    """The simulated lab's swap: :meth:`drivers.sim.world.SimulatedWorld.mount`."""
+
+    def __init__(self, world) -> None:
+        self.world = world
+
+    def mount(self, objects: Sequence[ObjectSpec] | None, instruction: str) -> None:
+        self.world.mount(objects)
+
+@dataclass
+class RigCalibration:
+    """The sequence's outcome: the calibration file, every procedure's result, the captures."""
+
+    calibration: CalibrationFile
+    results: dict[str, Any]
+    views: list[Any]
+    frames_used: int
+
+def calibrate_rig(
+    rig: Rig,
+    operator: Operator,
+    spec: SceneSpec,
+    base_dir: str | Path,
+    plan: RigCalibrationPlan | None = None,
+    progress: Progress = no_progress,
+    rig_name: str = "rig",
+) -> RigCalibration:
+    """Run the sequence (module docstring) and return the calibration.
+
+    ``spec`` is the nominal scene (camera pose, turntable, solar simulator); its mounted objects
+    are swapped for the board during the sequence and mounted again at the end.
+    """
+    from calibration.board_detection import detect_board
+    from calibration.board_views import BoardView
+
+    plan = plan or RigCalibrationPlan()
+    base = Path(base_dir)
+    camera = build_camera(spec)
+    use_case = rig.camera.use_case
+    total = plan.n_captures
+    done = 0
+    frames_used = 0
+
+    def capture(state: RigState, n: int, keep: bool = False) -> AveragedCapture:
+        nonlocal done, frames_used
+        rig.apply(state)
+        cap = average_frames(rig.capture(n), keep_frames=keep)
+        frames_used += n
+        done += 1
+        return cap
+
+    # 1. board sweeps --------------------------------------------------------------------
+    views: list[tuple[BoardView, AveragedCapture, BoardFixture]] = []
+    missed: list[dict[str, str]] = []
+    for fixture in plan.fixtures:
+        board = board_object(plan.board, fixture, spec)
+        operator.mount([board], f"mount the calibration board in fixture '{fixture.name}' "
+                       f"(tilted {fixture.tilt_deg:+g} deg)")
+        for angle in plan.sweep_deg:
+            progress(done, total, f"board {fixture.name} at {angle:+.0f} deg")
+            cap = capture(RigState(angle, 0.0, False), plan.frames_per_view)
+            det = detect_board(cap.amplitude, board.mesh)
+            name = f"{fixture.name}@{angle:+.0f}"
+            if det is None:
+                missed.append({"name": name, "reason": "board not detected"})
+                continue
+            views.append((BoardView(name=name, turntable_angle_deg=cap.turntable_angle_deg,
+                                    mounting=fixture.name, object_points_m=det.object_points_m,
+                                    image_points_px=det.image_points_px,
+                                    corner_ids=det.corner_ids, image_shape=cap.shape),
+                          cap, fixture))
+    results: dict[str, Any] = {"views": {"used": len(views), "not_detected": missed}}
+
+    # 2. intrinsics ------------------------------------------------------------------------
+    progress(done, total, "intrinsics")
+    intr = _intrinsics(views, camera)
+    results["intrinsics"] = intr
+    # 3. turntable axis --------------------------------------------------------------------
+    axis = _axis(views, intr, plan, spec, camera)
+    results["turntable"] = axis
+    # 4. depth errors ----------------------------------------------------------------------
+    progress(done, total, "depth errors")
+    depth = _depth(views, intr, plan, use_case.frequencies_hz)
+    results["depth"] = depth
+    # 5. noise and gain --------------------------------------------------------------------
+    first = plan.fixtures[0]
+    operator.mount([board_object(plan.board, first, spec)],
+                   f"mount the calibration board in fixture '{first.name}'")
+    progress(done, total, "noise stack")
+    stacks = [capture(RigState(0.0, 0.0, False), plan.noise_frames, keep=True)]
+    if spec.ambient.solar_simulator is not None:
+        # The solar simulator lights the whole view: many more bright pixels for the curve.
+        level = max(plan.solar_levels_suns)
+        stacks.append(capture(RigState(0.0, level, True), plan.noise_frames, keep=True))
+    stack = stacks[0]
+    noise = _noise(stacks)
+    results["noise"] = noise
+
+    partial = TwinParameters(
+        camera=CameraParameters(**_camera_keys(intr), sensor=noise.to_sensor_overrides()),
+        turntable=_turntable_keys(axis),
+    )
+    board0 = board_object(plan.board, first, spec)
+    twin_spec = mounted_spec(spec, [board0], use_case)
+    # 6. effective source power ------------------------------------------------------------
+    progress(done, total, "source power")
+    nominal_power = spec.illumination.power_w
+    pred = predict_view(twin_spec, base, partial, stack.turntable_angle_deg)
+    power = fit_source_power(stack.amplitude, pred.frame().image.amplitude, nominal_power)
+    results["photometry"] = power
+    # 7. solar simulator -------------------------------------------------------------------
+    solar = None
+    if spec.ambient.solar_simulator is not None:
+        levels = [0.0, *plan.solar_levels_suns]
+        caps = []
+        for s in levels:
+            progress(done, total, f"solar simulator at {s:g} sun")
+            caps.append(capture(RigState(0.0, s, s > 0.0), plan.solar_frames))
+        lit = TwinParameters(camera=partial.camera, turntable=partial.turntable,
+                             illumination=IlluminationParameters(power_w=power.power_w))
+        sun1 = predict_view(twin_spec, base, lit, caps[0].turntable_angle_deg, solar_suns=1.0)
+        solar = fit_solar_scale(
+            levels, [c.intensity for c in caps],
+            [c.intensity_std / np.sqrt(c.n_frames) for c in caps],
+            lambda true_suns: sun1.frame(ambient_scale=true_suns).raw.intensity.astype(float),
+            reference_cell_suns=plan.solar_reference_suns,
+        )
+        results["solar"] = solar
+    operator.mount(None, "mount the test object again")
+    progress(total, total, "done")
+
+    cal = CalibrationFile(
+        camera=CameraParameters(**_camera_keys(intr), depth=depth.depth_errors,
+                                sensor=noise.to_sensor_overrides()),
+        illumination=IlluminationParameters(power_w=power.power_w),
+        turntable=_turntable_keys(axis),
+        solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
+        if solar is not None else SolarParameters(),
+        provenance=Provenance(
+            created_utc=dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            rig=rig_name, software=f"toftwin {_version()}", frames_used=frames_used,
+            procedures=procedure_summaries(results),
+        ),
+    )
+    return RigCalibration(cal, results, [v for v, _, _ in views], frames_used)
+
+def _version() -> str:
+    try:
+        return metadata.version("toftwin")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a checkout
+        return "unknown"
+
+# -- the procedures' adapters (one place that knows each procedure's API) ---------------------
+def _intrinsics(views, camera):
+    from calibration.intrinsics import calibrate_intrinsics
+
+    return calibrate_intrinsics([v for v, _, _ in views], camera.intrinsics.shape)
+
+def _camera_keys(intr) -> dict[str, Any]:
+    k = intr.intrinsics
+    d = k.distortion
+    return {"fx_px": k.fx_px, "fy_px": k.fy_px, "cx_px": k.cx_px, "cy_px": k.cy_px,
+            "distortion": {"k1": d[0], "k2": d[1], "p1": d[2], "p2": d[3], "k3": d[4]}}
+
+def _axis(views, intr, plan, spec, camera):
+    from calibration.turntable_axis import fit_turntable_axis
+
+    known = {f.name: world_from_board(plan.board, f, spec) for f in plan.fixtures}
+    tt = spec.turntable
+    return fit_turntable_axis([v for v, _, _ in views], intr.poses, camera.world_from_camera,
+                              known, tt.axis_point_m if tt else (0.0, 0.0, 0.0),
+                              tt.axis_direction if tt else (0.0, 0.0, 1.0))
+
+
+def _turntable_keys(axis) -> TurntableParameters:
+    return TurntableParameters(axis_point_m=tuple(float(v) for v in axis.axis_point_m),
+                               axis_direction=tuple(float(v) for v in axis.axis_direction),
+                               zero_offset_deg=float(axis.zero_offset_deg))
+
+def _depth(views, intr, plan, frequencies_hz):
+    from calibration.depth import depth_views_from_captures, fit_depth_errors
+
+    board = ObjectSpec.model_validate({"name": "b", "mesh": plan.board}).mesh
+    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board)
+    return fit_depth_errors(dviews, frequencies_hz)
+
+
+def _noise(stacks: list[AveragedCapture]):
+    from calibration.noise_gain import calibrate_noise
+
+    return calibrate_noise([list(s.frames) for s in stacks])
+
+def procedure_summaries(results: dict[str, Any]) -> dict[str, dict]:
+    """Each procedure's result as plain JSON (the calibration file's provenance)."""
+    out: dict[str, dict] = {}
+    for name, r in results.items():
+        if hasattr(r, "summary"):
+            out[name] = _plain(r.summary())
+        elif hasattr(r, "to_dict"):
+            out[name] = _plain(r.to_dict())
+        elif isinstance(r, dict):
+            out[name] = _plain(r)
+    return out
+
+def _plain(x: Any) -> Any:
+    """Plain, finite JSON values (arrays to lists, NaN/inf to None)."""
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _plain(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if np.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (str, int, bool)) or x is None:
+        return x
+    return str(x)

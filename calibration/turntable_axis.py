@@ -1,0 +1,184 @@
+"""The turntable's axis and zero from board poses over a sweep.
+
+Each view's board pose (from the intrinsics calibration, camera frame) becomes a world pose with
+the camera's ``world_from_camera``. A board in fixture ``m`` at reported angle ``theta_i`` sits at
+
+    W_i = A(theta_i) M_m,    A(theta) = rotation by theta about the axis (direction a, point c)
+
+with ``M_m`` its pose at reported zero. The axis (2 + 2 parameters) and every ``M_m`` (6 each)
+are fitted by least squares of the board's corner positions (scipy ``least_squares``); the zero
+offset then follows from the fixtures' known poses at the *true* zero ``F_m``:
+``M_m = A(z) F_m``, z the rotation about the axis of ``M_m F_m^-1`` (reported + z = true).
+The axis point reported is the axis' point closest to the nominal axis point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from sim_core.errors import InvalidInputError
+from sim_core.geometry import axis_angle_matrix
+
+MIN_ANGLES = 3
+MIN_SPAN_DEG = 20.0
+
+
+@dataclass(frozen=True)
+class TurntableAxisResult:
+    """Axis (world frame), zero offset and residuals.
+
+    Attributes
+    ----------
+    axis_point_m, axis_direction : (3,) float
+    zero_offset_deg : float
+        Reported angle + offset = true angle.
+    rms_mm : float
+        RMS distance of the board corners between fitted and measured poses.
+    per_view_mm : dict
+    zero_spread_deg : float
+        Spread of the zero offset between fixtures (0 with one fixture).
+    """
+
+    axis_point_m: np.ndarray
+    axis_direction: np.ndarray
+    zero_offset_deg: float
+    rms_mm: float
+    per_view_mm: dict[str, float]
+    zero_spread_deg: float
+
+    def summary(self) -> dict:
+        return {"axis_point_m": self.axis_point_m.tolist(),
+                "axis_direction": self.axis_direction.tolist(),
+                "zero_offset_deg": self.zero_offset_deg, "rms_mm": self.rms_mm,
+                "worst_view_mm": max(self.per_view_mm.values()),
+                "zero_spread_deg": self.zero_spread_deg}
+
+    def plot(self, ax) -> str:
+        names = list(self.per_view_mm)
+        ax.bar(range(len(names)), [self.per_view_mm[n] for n in names])
+        ax.set_xlabel("view")
+        ax.set_ylabel("board pose residual [mm]")
+        return f"Turntable model residual per view (RMS {self.rms_mm:.2f} mm)"
+
+
+def _pose(rvec, tvec) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))[0]
+    m[:3, 3] = np.asarray(tvec, dtype=np.float64).ravel()
+    return m
+
+
+def _basis(a):
+    a = a / np.linalg.norm(a)
+    t = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(a, t)
+    u /= np.linalg.norm(u)
+    return u, np.cross(a, u)
+
+
+def _rotate(points, axis, point, angle_rad):
+    r = axis_angle_matrix(axis, angle_rad)
+    return (points - point) @ r.T + point
+
+
+def fit_turntable_axis(
+    views,
+    poses: dict[str, tuple[np.ndarray, np.ndarray]],
+    world_from_camera: np.ndarray,
+    fixtures_world_from_board: dict[str, np.ndarray],
+    nominal_point_m=(0.0, 0.0, 0.0),
+    nominal_direction=(0.0, 0.0, 1.0),
+) -> TurntableAxisResult:
+    """Fit the axis and zero (module docstring).
+
+    Parameters
+    ----------
+    views : list of BoardView
+        Their ``turntable_angle_deg`` and ``mounting``; only views with a pose are used.
+    poses : dict
+        View name -> (rvec, tvec), board in the camera frame.
+    world_from_camera : (4, 4)
+    fixtures_world_from_board : dict
+        Mounting -> the board's known world pose at the true zero.
+    """
+    used = [v for v in views if v.name in poses]
+    mounts = sorted({v.mounting for v in used})
+    unknown = [m for m in mounts if m not in fixtures_world_from_board]
+    if unknown:
+        raise InvalidInputError("turntable.mounting",
+                                f"no known fixture pose for mountings {unknown}")
+    angles = sorted({round(v.turntable_angle_deg, 3) for v in used})
+    if len(angles) < MIN_ANGLES:
+        raise InvalidInputError("turntable.views", f"{len(angles)} distinct angles; at least "
+                                f"{MIN_ANGLES} are needed to determine the axis")
+    span = angles[-1] - angles[0]
+    if span < MIN_SPAN_DEG:
+        raise InvalidInputError("turntable.views", f"the sweep spans {span:.1f} deg; at least "
+                                f"{MIN_SPAN_DEG:g} deg are needed to determine the axis")
+    wfc = np.asarray(world_from_camera, dtype=np.float64)
+    # Measured corner positions in the world, per view (the board's 4 outer corners suffice:
+    # a rigid pose is fixed by them).
+    measured = []
+    for v in used:
+        pts = v.object_points_m
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        ref = np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0],
+                        [lo[0], hi[1], 0]])
+        w = wfc @ _pose(*poses[v.name])
+        measured.append((v, ref, ref @ w[:3, :3].T + w[:3, 3]))
+    a0 = np.asarray(nominal_direction, dtype=np.float64)
+    a0 /= np.linalg.norm(a0)
+    c0 = np.asarray(nominal_point_m, dtype=np.float64)
+    u0, v0 = _basis(a0)
+
+    def unpack(x):
+        a = a0 + x[0] * u0 + x[1] * v0
+        a /= np.linalg.norm(a)
+        c = c0 + x[2] * u0 + x[3] * v0
+        ms = {}
+        for i, m in enumerate(mounts):
+            p = x[4 + 6 * i: 10 + 6 * i]
+            mm = np.eye(4)
+            mm[:3, :3] = Rotation.from_rotvec(p[:3]).as_matrix()
+            mm[:3, 3] = p[3:]
+            ms[m] = mm
+        return a, c, ms
+
+    x0 = [0.0, 0.0, 0.0, 0.0]
+    for m in mounts:  # start each M at the fixture's known pose
+        f = fixtures_world_from_board[m]
+        x0 += list(Rotation.from_matrix(f[:3, :3]).as_rotvec()) + list(f[:3, 3])
+
+    def residuals(x):
+        a, c, ms = unpack(x)
+        out = []
+        for v, ref, meas in measured:
+            mm = ms[v.mounting]
+            at_zero = ref @ mm[:3, :3].T + mm[:3, 3]
+            pred = _rotate(at_zero, a, c, np.radians(v.turntable_angle_deg))
+            out.append((pred - meas).ravel())
+        return np.concatenate(out)
+
+    sol = least_squares(residuals, np.asarray(x0), method="lm", x_scale="jac")
+    a, c, ms = unpack(sol.x)
+    if np.dot(a, a0) < 0:
+        a = -a
+    res = residuals(sol.x).reshape(len(measured), -1, 3)
+    per_view = {v.name: float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) * 1e3
+                for (v, _, _), r in zip(measured, res, strict=True)}
+    zeros = []
+    for m in mounts:
+        rel = ms[m][:3, :3] @ fixtures_world_from_board[m][:3, :3].T
+        rv = Rotation.from_matrix(rel).as_rotvec()
+        zeros.append(float(np.degrees(np.dot(rv, a))))
+    # The axis' point closest to the nominal point.
+    point = c + np.dot(c0 - c, a) * a
+    return TurntableAxisResult(
+        axis_point_m=point, axis_direction=a, zero_offset_deg=float(np.mean(zeros)),
+        rms_mm=float(np.sqrt(np.mean(np.sum(res**2, axis=2)))) * 1e3, per_view_mm=per_view,
+        zero_spread_deg=float(np.ptp(zeros)) if len(zeros) > 1 else 0.0)

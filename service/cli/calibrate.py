@@ -1,0 +1,132 @@
+"""``toftwin calibrate rig``: measure the twin's camera and rig parameters on the rig.
+
+Runs :func:`calibration.rig_sequence.calibrate_rig` on the real rig (the operator swaps the
+board and the test object when asked) or on the simulated lab (``--simulated``, optionally
+``--reality FILE``: the lab's hidden truth), and writes ``DIR/calibration.yaml``,
+``DIR/report.json`` and ``DIR/report.html`` with the residual plots.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from service.cli.common import bounded, console, err_console, fail_invalid
+from sim_core.errors import InvalidInputError
+
+calibrate_app = typer.Typer(help="Measure the twin's camera and rig parameters.",
+                            no_args_is_help=True)
+
+
+class ConsoleOperator:
+    """The operator at the real rig: asked on the terminal to swap what is on the turntable."""
+
+    def mount(self, objects: Sequence | None, instruction: str) -> None:
+        typer.confirm(f"{instruction[0].upper()}{instruction[1:]}; ready?", default=True,
+                      abort=True, err=True)
+
+
+@calibrate_app.command("rig")
+def rig_command(
+    out: Annotated[Path, typer.Option("--out", help="Output folder (must not exist).")],
+    simulated: Annotated[
+        bool, typer.Option("--simulated", help="Calibrate the simulated lab's rig.")
+    ] = False,
+    reality: Annotated[
+        Path | None,
+        typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
+    ] = None,
+    scene: Annotated[
+        str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
+                          "solar simulator.")
+    ] = "satellite_ground_test",
+    frames_per_view: Annotated[
+        int, typer.Option("--frames-per-view", help="Frames averaged per board view (1-64).")
+    ] = 4,
+    solar_reference_suns: Annotated[
+        float | None,
+        typer.Option("--solar-reference-suns",
+                     help="A reference cell's reading at a set level of 1 sun, used when the "
+                          "frames do not determine the solar simulator's scale."),
+    ] = None,
+    camera_spp: Annotated[
+        int, typer.Option("--camera-spp", help="Samples per pixel of the simulated camera.")
+    ] = 32,
+    seed: Annotated[int, typer.Option(help="Noise seed of the simulated camera.")] = 0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
+    from calibration.report import write_report
+
+    from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
+    from drivers.rig import Rig
+    from drivers.sim.world import SimulatedWorld
+    from service.lab.scenes import SceneSource, resolve_scene
+    from service.settings import EXAMPLES_DIR
+    from sim_core.render import RenderSettings
+    from sim_core.scene_spec import load_scene_spec
+    from sim_core.twin_file import load_reality
+
+    try:
+        if out.exists():
+            raise InvalidInputError("--out", f"'{out}' exists; give a new folder")
+        if reality is not None and not simulated:
+            raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
+        bounded("--frames-per-view", frames_per_view, 1, 64)
+        bounded("--camera-spp", camera_spp, 1, 4096)
+        if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
+            source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
+        else:
+            source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        plan = RigCalibrationPlan(frames_per_view=frames_per_view,
+                                  solar_reference_suns=solar_reference_suns)
+        world = None
+        if simulated:
+            world = SimulatedWorld(source.spec, source.base_dir,
+                                   RenderSettings(integrator="direct", spp=camera_spp),
+                                   reality=None if reality is None else load_reality(reality))
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    with contextlib.ExitStack() as stack:
+        if world is not None:
+            rig = stack.enter_context(Rig.simulated(frame_source=world, seed=seed))
+            operator, rig_name = SimulatedOperator(world), "simulated"
+        else:
+            rig = stack.enter_context(_real_rig())
+            operator, rig_name = ConsoleOperator(), "lab"
+        bar = stack.enter_context(Progress(
+            TextColumn("{task.description}"), BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TimeElapsedColumn(), console=err_console, transient=True,
+            disable=quiet or not err_console.is_terminal))
+        task = bar.add_task("calibrating", total=plan.n_captures)
+
+        def progress(done: int, total: int, message: str) -> None:
+            bar.update(task, completed=done, total=total, description=message)
+
+        try:
+            result = calibrate_rig(rig, operator, source.spec, source.base_dir, plan, progress,
+                                   rig_name=rig_name)
+        except InvalidInputError as exc:
+            fail_invalid(exc)
+    paths = write_report(out, result)
+    console.print(f"calibration written to {paths['calibration']} (report {paths['html']})")
+
+
+def _real_rig():
+    from drivers.rig import Rig
+
+    env = os.environ
+    missing = [k for k in ("TOFTWIN_TURNTABLE_PORT", "TOFTWIN_LAMP_PORT", "TOFTWIN_SHUTTER_PORT")
+               if not env.get(k)]
+    if missing:
+        err_console.print(f"[bold red]error:[/] no {', '.join(missing)} set (or use --simulated)")
+        raise typer.Exit(code=2)
+    return Rig.open(env["TOFTWIN_TURNTABLE_PORT"], env["TOFTWIN_LAMP_PORT"],
+                    env["TOFTWIN_SHUTTER_PORT"], camera_serial=env.get("TOFTWIN_CAMERA_SERIAL"))
