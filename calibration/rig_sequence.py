@@ -287,7 +287,8 @@ def _axis(views, intr, plan, spec, camera):
     tt = spec.turntable
     return fit_turntable_axis([v for v, _, _ in views], intr.poses, camera.world_from_camera,
                               known, tt.axis_point_m if tt else (0.0, 0.0, 0.0),
-                              tt.axis_direction if tt else (0.0, 0.0, 1.0))
+                              tt.axis_direction if tt else (0.0, 0.0, 1.0),
+                              intrinsics=intr.intrinsics)
 
 
 def _turntable_keys(axis) -> TurntableParameters:

@@ -6,7 +6,9 @@ the camera's ``world_from_camera``. A board in fixture ``m`` at reported angle `
     W_i = A(theta_i) M_m,    A(theta) = rotation by theta about the axis (direction a, point c)
 
 with ``M_m`` its pose at reported zero. The axis (2 + 2 parameters) and every ``M_m`` (6 each)
-are fitted by least squares of the board's corner positions (scipy ``least_squares``); the zero
+are fitted by least squares (scipy ``least_squares``): first the distance of the board's
+corners between the model and each view's PnP pose, then, given the intrinsics, the corners'
+reprojection error in the images (a bundle adjustment of the turntable model); the zero
 offset then follows from the fixtures' known poses at the *true* zero ``F_m``:
 ``M_m = A(z) F_m``, z the rotation about the axis of ``M_m F_m^-1`` (reported + z = true).
 The axis point reported is the axis' point closest to the nominal axis point.
@@ -93,6 +95,7 @@ def fit_turntable_axis(
     fixtures_world_from_board: dict[str, np.ndarray],
     nominal_point_m=(0.0, 0.0, 0.0),
     nominal_direction=(0.0, 0.0, 1.0),
+    intrinsics=None,
 ) -> TurntableAxisResult:
     """Fit the axis and zero (module docstring).
 
@@ -105,6 +108,11 @@ def fit_turntable_axis(
     world_from_camera : (4, 4)
     fixtures_world_from_board : dict
         Mounting -> the board's known world pose at the true zero.
+    intrinsics : Intrinsics, optional
+        With it, the fit minimises the corners' reprojection error in the images (a bundle
+        adjustment of the turntable model: every view's corners together, so the poses' weak
+        depth direction is weighted as the images determine it); without it, the distance of
+        the boards' corners between the model and the views' own poses.
     """
     used = [v for v in views if v.name in poses]
     mounts = sorted({v.mounting for v in used})
@@ -121,8 +129,7 @@ def fit_turntable_axis(
         raise InvalidInputError("turntable.views", f"the sweep spans {span:.1f} deg; at least "
                                 f"{MIN_SPAN_DEG:g} deg are needed to determine the axis")
     wfc = np.asarray(world_from_camera, dtype=np.float64)
-    # Measured corner positions in the world, per view (the board's 4 outer corners suffice:
-    # a rigid pose is fixed by them).
+    cfw = np.linalg.inv(wfc)
     measured = []
     for v in used:
         pts = v.object_points_m
@@ -131,6 +138,10 @@ def fit_turntable_axis(
                         [lo[0], hi[1], 0]])
         w = wfc @ _pose(*poses[v.name])
         measured.append((v, ref, ref @ w[:3, :3].T + w[:3, 3]))
+    if intrinsics is not None:
+        k = np.array([[intrinsics.fx_px, 0, intrinsics.cx_px],
+                      [0, intrinsics.fy_px, intrinsics.cy_px], [0, 0, 1.0]])
+        dist = np.asarray(intrinsics.distortion, dtype=np.float64)
     a0 = np.asarray(nominal_direction, dtype=np.float64)
     a0 /= np.linalg.norm(a0)
     c0 = np.asarray(nominal_point_m, dtype=np.float64)
@@ -154,21 +165,31 @@ def fit_turntable_axis(
         f = fixtures_world_from_board[m]
         x0 += list(Rotation.from_matrix(f[:3, :3]).as_rotvec()) + list(f[:3, 3])
 
-    def residuals(x):
+    def world_points(x, v, pts):
         a, c, ms = unpack(x)
+        mm = ms[v.mounting]
+        return _rotate(pts @ mm[:3, :3].T + mm[:3, 3], a, c, np.radians(v.turntable_angle_deg))
+
+    def pose_residuals(x):
+        return np.concatenate([(world_points(x, v, ref) - meas).ravel()
+                               for v, ref, meas in measured])
+
+    def image_residuals(x):
         out = []
-        for v, ref, meas in measured:
-            mm = ms[v.mounting]
-            at_zero = ref @ mm[:3, :3].T + mm[:3, 3]
-            pred = _rotate(at_zero, a, c, np.radians(v.turntable_angle_deg))
-            out.append((pred - meas).ravel())
+        for v in used:
+            pw = world_points(x, v, v.object_points_m)
+            pc = pw @ cfw[:3, :3].T + cfw[:3, 3]
+            img, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), k, dist)
+            out.append((img.reshape(-1, 2) - v.image_points_px).ravel())
         return np.concatenate(out)
 
-    sol = least_squares(residuals, np.asarray(x0), method="lm", x_scale="jac")
+    sol = least_squares(pose_residuals, np.asarray(x0), method="lm", x_scale="jac")
+    if intrinsics is not None:
+        sol = least_squares(image_residuals, sol.x, method="lm", x_scale="jac")
     a, c, ms = unpack(sol.x)
     if np.dot(a, a0) < 0:
         a = -a
-    res = residuals(sol.x).reshape(len(measured), -1, 3)
+    res = pose_residuals(sol.x).reshape(len(measured), -1, 3)
     per_view = {v.name: float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) * 1e3
                 for (v, _, _), r in zip(measured, res, strict=True)}
     zeros = []

@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from service.cli import compare, devices, schema, serve, simulate
+from service.cli import calibrate, compare, devices, schema, serve, simulate
 from service.cli.bench import bench_app
 from service.cli.common import err_console
 from sim_core.errors import InvalidInputError
@@ -28,6 +28,7 @@ app.add_typer(devices.devices_app, name="devices")
 app.command("sim-device")(devices.sim_device)
 app.add_typer(bench_app, name="bench")
 app.add_typer(schema.schema_app, name="schema")
+app.add_typer(calibrate.calibrate_app, name="calibrate")
 
 
 def main() -> None:
