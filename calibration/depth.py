@@ -67,6 +67,8 @@ class DepthCalibration:
     coverage: float
     residual_after_mm: np.ndarray = field(repr=False, default=None)
     residual_before_mm: np.ndarray = field(repr=False, default=None)
+    #: (H, W) pixels that saw the board in some view (where the fixed pattern is measured)
+    pixels_seen: np.ndarray = field(repr=False, default=None)
 
     def summary(self) -> dict:
         return {"rms_before_mm": self.rms_before_mm, "rms_after_mm": self.rms_after_mm,
@@ -184,7 +186,7 @@ def fit_depth_errors(views: list[DepthView], frequencies_hz) -> DepthCalibration
         phase_span_rad=(float(phi.min()), float(phi.max())),
         range_span_m=(float(rng_all.min()), float(rng_all.max())),
         determined_terms=int(rank), total_terms=n_terms,
-        coverage=float(np.mean(seen)),
+        coverage=float(np.mean(seen)), pixels_seen=seen.reshape(shape),
         residual_after_mm=after[keep] * 1e3, residual_before_mm=before[keep] * 1e3,
     )
 

@@ -10,7 +10,7 @@ import sys
 
 import typer
 
-from service.cli import calibrate, compare, devices, schema, serve, simulate
+from service.cli import calibrate, compare, correct, devices, schema, serve, simulate
 from service.cli.bench import bench_app
 from service.cli.common import err_console
 from sim_core.errors import InvalidInputError
@@ -24,6 +24,7 @@ app.command("simulate")(simulate.simulate)
 app.command("preview")(simulate.preview)
 app.command("serve")(serve.serve)
 app.command("compare")(compare.compare)
+app.command("correct")(correct.correct)
 app.add_typer(devices.devices_app, name="devices")
 app.command("sim-device")(devices.sim_device)
 app.add_typer(bench_app, name="bench")

@@ -1,0 +1,52 @@
+"""``toftwin correct``: a measured frame with a calibration's depth errors, corrected."""
+
+from __future__ import annotations
+
+import numpy as np
+from typer.testing import CliRunner
+
+from service.cli import app
+from sim_core import frame_io
+from sim_core.pipeline import simulate
+from sim_core.render import RenderSettings
+from sim_core.scene import build_scene
+from sim_core.scene_spec import load_scene_spec
+from sim_core.twin_file import parse_calibration, write_calibration
+from tests.sim_core.scenes import EXAMPLES
+
+CAL = {"camera": {"depth": {
+    "phase_offset_rad": [0.05],
+    "wiggling": [{"harmonic": 3, "amplitude_rad": 0.038, "phase_rad": 0.4}],
+    "pixel_offset_m": {"sigma": 0.004, "correlation_px": 10, "seed": 3}}}}
+
+
+def test_correct_removes_the_depth_errors(tmp_path):
+    spec = load_scene_spec(EXAMPLES / "plane.yaml")
+    cal = parse_calibration(CAL)
+    settings = RenderSettings(integrator="direct", spp=4, seed=1)
+    measured = simulate(build_scene(spec, EXAMPLES, twin=cal), settings)
+    truth = simulate(build_scene(spec, EXAMPLES), settings, ideal=True)
+    frame_io.write_measured(tmp_path / "m", measured.raw, build_scene(spec, EXAMPLES).camera, {})
+    write_calibration(tmp_path / "cal.yaml", cal)
+    res = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
+                                   str(tmp_path / "cal.yaml")])
+    assert res.exit_code == 0, res.output
+    fixed = frame_io.read_measured(tmp_path / "m-corrected")
+    ok = fixed.image.valid & truth.image.valid & measured.image.valid
+    before = (measured.image.range_m - truth.image.range_m)[ok]
+    after = (fixed.image.range_m - truth.image.range_m)[ok]
+    assert np.sqrt(np.mean(before**2)) > 0.015
+    assert abs(np.median(after)) < 0.001 and np.sqrt(np.mean(after**2)) < 0.5 * np.std(before)
+    assert fixed.meta["corrected"]["calibration_hash"]
+    # The input is never overwritten, an existing output needs --force.
+    again = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
+                                     str(tmp_path / "cal.yaml")])
+    assert again.exit_code == 2 and "--force" in again.output
+
+
+def test_a_bad_calibration_is_exit_2_naming_the_field(tmp_path):
+    bad = tmp_path / "cal.yaml"
+    bad.write_text("camera: {depth: {phase_offset_rad: [9]}}\n")
+    res = CliRunner().invoke(app, ["correct", str(tmp_path), "--calibration", str(bad)])
+    assert res.exit_code == 2
+    assert "calibration.camera.depth.phase_offset_rad[0]" in " ".join(res.output.split())
