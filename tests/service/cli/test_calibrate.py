@@ -1,0 +1,50 @@
+"""``toftwin calibrate rig``: refusals before anything moves, and a full run on the simulated lab."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from service.cli import app
+from sim_core.twin_file import load_calibration
+
+
+def run(*args):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def test_bad_options_are_exit_2_and_nothing_is_written(tmp_path):
+    reality = tmp_path / "reality.yaml"
+    reality.write_text("turntable: {zero_offset_deg: 0.3}\n")
+    res = run("calibrate", "rig", "--out", tmp_path / "a", "--reality", reality)
+    assert res.exit_code == 2 and "needs --simulated" in " ".join(res.output.split())
+    res = run("calibrate", "rig", "--out", tmp_path, "--simulated")
+    assert res.exit_code == 2 and "exists" in res.output
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("camera: {fx_px: 0}\n")
+    res = run("calibrate", "rig", "--out", tmp_path / "b", "--simulated", "--reality", bad)
+    assert res.exit_code == 2 and "reality.camera.fx_px" in " ".join(res.output.split())
+    res = run("calibrate", "rig", "--out", tmp_path / "c", "--simulated",
+              "--frames-per-view", 0)
+    assert res.exit_code == 2 and "--frames-per-view" in res.output
+    assert not any((tmp_path / n).exists() for n in ("a", "b", "c"))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_a_full_run_writes_the_calibration_and_its_report(tmp_path):
+    reality = tmp_path / "reality.yaml"
+    reality.write_text("turntable: {zero_offset_deg: 0.6}\ncamera: {cx_px: 113.0}\n")
+    out = tmp_path / "cal"
+    res = run("calibrate", "rig", "--out", out, "--simulated", "--reality", reality, "-q")
+    assert res.exit_code == 0, res.output
+    cal = load_calibration(out / "calibration.yaml")
+    assert cal.turntable.zero_offset_deg == pytest.approx(0.6, abs=0.1)
+    assert cal.camera.cx_px == pytest.approx(113.0, abs=0.5)
+    report = json.loads((out / "report.json").read_text())
+    assert report["provenance"]["rig"] == "simulated" and report["calibration_hash"]
+    html = (out / "report.html").read_text()
+    assert "intrinsics.png" in html and "Reprojection RMS" in html
+    assert (out / "intrinsics.png").stat().st_size > 1000
