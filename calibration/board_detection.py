@@ -22,6 +22,8 @@ from sim_core.boards import board_corners_m, cv2_board
 
 #: fewest corners a view must show to be used
 MIN_CORNERS = 6
+#: window of the flat-field levels [px]: more than a square at 1 m (about 20 px)
+FLAT_FIELD_PX = 31
 #: half size of the saddle-point window [px] (3 x 3)
 SADDLE_HALF_PX = 1
 
@@ -83,10 +85,27 @@ def detect_board(amplitude: np.ndarray, board, upscale: int = 3,
     win = max(2, s * 2)
     refined = cv2.cornerSubPix(big, corners.reshape(-1, 1, 2).copy(), (win, win), (-1, -1), crit)
     xy = (refined.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5
-    xy, ok = refine_saddle(np.asarray(amplitude, dtype=np.float64), xy)
+    xy, ok = refine_saddle(flat_field(np.asarray(amplitude, dtype=np.float64)), xy)
     if np.count_nonzero(ok) < min_corners:
         return None
     return BoardDetection(pts_all[ids][ok], xy[ok], ids[ok], tuple(amplitude.shape))
+
+
+def flat_field(image: np.ndarray, size_px: int = FLAT_FIELD_PX) -> np.ndarray:
+    """The image with its smooth shading divided out: (a - black) / (white - black).
+
+    The camera's source falls off towards the image's edges and with the board's angle; an
+    X-corner blurred by the optics inside such a gradient appears shifted towards the brighter
+    side. The white and black levels are the local maximum and minimum over ``size_px`` (more
+    than a square), smoothed; the ratio leaves the pattern with uniform contrast.
+    """
+    from scipy import ndimage
+
+    a = np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0)
+    white = ndimage.gaussian_filter(ndimage.maximum_filter(a, size=size_px), size_px / 4.0)
+    black = ndimage.gaussian_filter(ndimage.minimum_filter(a, size=size_px), size_px / 4.0)
+    span = white - black
+    return np.where(span > 0, (a - black) / np.where(span > 0, span, 1.0), 0.0)
 
 
 def refine_saddle(image: np.ndarray, points: np.ndarray, half: int = SADDLE_HALF_PX,

@@ -54,15 +54,33 @@ def test_round_trip_recovers_a_random_reality(seed):
     result = _calibrate(reality, seed)
     cal, rc = result.calibration.camera, reality.camera
     report = result.calibration.provenance.procedures
+    axis = result.results["turntable"]
+    true_dir = np.asarray(reality.turntable.axis_direction)
+    true_dir = true_dir / np.linalg.norm(true_dir)
+    off = axis.axis_point_m - np.asarray(reality.turntable.axis_point_m)
+    figures = {
+        "fx_rel": cal.fx_px / rc.fx_px - 1, "fy_rel": cal.fy_px / rc.fy_px - 1,
+        "cx_px": cal.cx_px - rc.cx_px, "cy_px": cal.cy_px - rc.cy_px,
+        "rms_px": result.results["intrinsics"].rms_px,
+        "axis_deg": float(np.degrees(np.arccos(np.clip(axis.axis_direction @ true_dir, -1, 1)))),
+        "axis_point_mm": float(np.linalg.norm(off - (off @ true_dir) * true_dir) * 1e3),
+        "zero_deg": axis.zero_offset_deg - reality.turntable.zero_offset_deg,
+        "depth_model_mm": _depth_model_rms_mm(result, reality),
+        "depth_after_mm": result.results["depth"].rms_after_mm,
+        "gain_rel": cal.sensor.adc_gain_e_per_dn / rc.sensor.adc_gain_e_per_dn - 1,
+        "read_rel": cal.sensor.read_noise_e / rc.sensor.read_noise_e - 1,
+        "power_rel": result.calibration.illumination.power_w / reality.illumination.power_w - 1,
+        "solar_rel": result.calibration.solar_simulator.irradiance_scale
+        / reality.solar_simulator.irradiance_scale - 1,
+        "solar_method": result.results["solar"].method,
+    }
+    print(f"round trip {seed}:", {k: round(v, 4) if isinstance(v, float) else v
+                                  for k, v in figures.items()})
     assert cal.fx_px == pytest.approx(rc.fx_px, rel=0.005), report["intrinsics"]
     assert cal.fy_px == pytest.approx(rc.fy_px, rel=0.005), report["intrinsics"]
     assert abs(cal.cx_px - rc.cx_px) <= 0.5 and abs(cal.cy_px - rc.cy_px) <= 0.5
     assert result.results["intrinsics"].rms_px <= 0.3
-    axis = result.results["turntable"]
-    true_dir = np.asarray(reality.turntable.axis_direction)
-    true_dir = true_dir / np.linalg.norm(true_dir)
     assert np.degrees(np.arccos(np.clip(axis.axis_direction @ true_dir, -1, 1))) <= 0.2
-    off = axis.axis_point_m - np.asarray(reality.turntable.axis_point_m)
     assert np.linalg.norm(off - (off @ true_dir) * true_dir) <= 0.002
     assert axis.zero_offset_deg == pytest.approx(reality.turntable.zero_offset_deg, abs=0.1)
     assert _depth_model_rms_mm(result, reality) <= 2.0

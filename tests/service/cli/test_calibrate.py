@@ -1,4 +1,4 @@
-"""``toftwin calibrate rig``: refusals before anything moves, and a full run on the simulated lab."""
+"""``toftwin calibrate rig``: refusals before anything moves; a full run on the simulated lab."""
 
 from __future__ import annotations
 
