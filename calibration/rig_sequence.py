@@ -192,7 +192,12 @@ def calibrate_rig(
     # 2. intrinsics ------------------------------------------------------------------------
     progress(done, total, "intrinsics")
     intr = _intrinsics(views, camera)
+    # The detector's own bias, measured on the twin's renders of the same views, removed.
+    progress(done, total, "corner bias by synthesis")
+    views, corner_bias_px = _debias(views, intr, spec, base, plan, camera)
+    intr = _intrinsics(views, camera)
     results["intrinsics"] = intr
+    results["views"]["corner_bias_rms_px"] = corner_bias_px
     # 3. turntable axis --------------------------------------------------------------------
     axis = _axis(views, intr, plan, spec, camera)
     results["turntable"] = axis
@@ -273,6 +278,15 @@ def _intrinsics(views, camera):
     from calibration.intrinsics import calibrate_intrinsics
 
     return calibrate_intrinsics([v for v, _, _ in views], camera.intrinsics.shape)
+
+def _debias(views, intr, spec, base, plan, camera):
+    from calibration.corner_bias import debias_views
+
+    fixed, rms = debias_views([v for v, _, _ in views], intr, spec, base, plan.board,
+                              camera.world_from_camera)
+    by_name = {v.name: v for v in fixed}
+    return [(by_name[v.name], cap, f) for v, cap, f in views if v.name in by_name], rms
+
 
 def _camera_keys(intr) -> dict[str, Any]:
     k = intr.intrinsics

@@ -5,12 +5,14 @@ the camera's ``world_from_camera``. A board in fixture ``m`` at reported angle `
 
     W_i = A(theta_i) M_m,    A(theta) = rotation by theta about the axis (direction a, point c)
 
-with ``M_m`` its pose at reported zero. The axis (2 + 2 parameters) and every ``M_m`` (6 each)
-are fitted by least squares (scipy ``least_squares``): first the distance of the board's
-corners between the model and each view's PnP pose, then, given the intrinsics, the corners'
-reprojection error in the images (a bundle adjustment of the turntable model); the zero
-offset then follows from the fixtures' known poses at the *true* zero ``F_m``:
-``M_m = A(z) F_m``, z the rotation about the axis of ``M_m F_m^-1`` (reported + z = true).
+with ``M_m`` its pose at reported zero. The fixture's orientation at the *true* zero, ``F_m``, is
+known (an index pin or jig; the simulated lab mounts it exactly), its position is not:
+``M_m = [A(z) F_m | t_m]``. The axis (2 + 2 parameters), the zero offset ``z`` and every
+``t_m`` (3 each) are fitted by least squares (scipy ``least_squares``): first the distance of
+the board's corners between the model and each view's PnP pose, then, given the intrinsics,
+the corners' reprojection error in the images (a bundle adjustment of the turntable model).
+Reported angle + z = true angle. Each fixture's own zero (from its views alone) is reported as a
+check.
 The axis point reported is the axis' point closest to the nominal axis point.
 """
 
@@ -88,6 +90,18 @@ def _rotate(points, axis, point, angle_rad):
     return (points - point) @ r.T + point
 
 
+def _fixture_zero(views_meas, fixture, a, c, poses, wfc) -> float:
+    """One fixture's zero: the mean rotation about the axis of its views' poses, turned back by
+    their reported angles, against the fixture's known orientation [deg]."""
+    angles = []
+    for v, _ in views_meas:
+        w = wfc @ _pose(*poses[v.name])
+        back = axis_angle_matrix(a, -np.radians(v.turntable_angle_deg)) @ w[:3, :3]
+        rv = Rotation.from_matrix(back @ fixture[:3, :3].T).as_rotvec()
+        angles.append(np.degrees(np.dot(rv, a)))
+    return float(np.median(angles))
+
+
 def fit_turntable_axis(
     views,
     poses: dict[str, tuple[np.ndarray, np.ndarray]],
@@ -151,22 +165,23 @@ def fit_turntable_axis(
         a = a0 + x[0] * u0 + x[1] * v0
         a /= np.linalg.norm(a)
         c = c0 + x[2] * u0 + x[3] * v0
+        zero = x[4]
+        turn = axis_angle_matrix(a, np.radians(zero))
         ms = {}
         for i, m in enumerate(mounts):
-            p = x[4 + 6 * i: 10 + 6 * i]
+            # The fixture's orientation at the true zero is known; its position is not.
             mm = np.eye(4)
-            mm[:3, :3] = Rotation.from_rotvec(p[:3]).as_matrix()
-            mm[:3, 3] = p[3:]
+            mm[:3, :3] = turn @ fixtures_world_from_board[m][:3, :3]
+            mm[:3, 3] = x[5 + 3 * i: 8 + 3 * i]
             ms[m] = mm
-        return a, c, ms
+        return a, c, ms, zero
 
-    x0 = [0.0, 0.0, 0.0, 0.0]
-    for m in mounts:  # start each M at the fixture's known pose
-        f = fixtures_world_from_board[m]
-        x0 += list(Rotation.from_matrix(f[:3, :3]).as_rotvec()) + list(f[:3, 3])
+    x0 = [0.0, 0.0, 0.0, 0.0, 0.0]
+    for m in mounts:  # start each fixture at its nominal position
+        x0 += list(fixtures_world_from_board[m][:3, 3])
 
     def world_points(x, v, pts):
-        a, c, ms = unpack(x)
+        a, c, ms, _ = unpack(x)
         mm = ms[v.mounting]
         return _rotate(pts @ mm[:3, :3].T + mm[:3, 3], a, c, np.radians(v.turntable_angle_deg))
 
@@ -186,20 +201,20 @@ def fit_turntable_axis(
     sol = least_squares(pose_residuals, np.asarray(x0), method="lm", x_scale="jac")
     if intrinsics is not None:
         sol = least_squares(image_residuals, sol.x, method="lm", x_scale="jac")
-    a, c, ms = unpack(sol.x)
+    a, c, _, zero = unpack(sol.x)
     if np.dot(a, a0) < 0:
         a = -a
     res = pose_residuals(sol.x).reshape(len(measured), -1, 3)
     per_view = {v.name: float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) * 1e3
                 for (v, _, _), r in zip(measured, res, strict=True)}
+    # Each fixture's own zero (its fitted orientation against the known one), as a check.
     zeros = []
     for m in mounts:
-        rel = ms[m][:3, :3] @ fixtures_world_from_board[m][:3, :3].T
-        rv = Rotation.from_matrix(rel).as_rotvec()
-        zeros.append(float(np.degrees(np.dot(rv, a))))
+        wm = [(v, meas) for v, _, meas in measured if v.mounting == m]
+        zeros.append(_fixture_zero(wm, fixtures_world_from_board[m], a, c, poses, wfc))
     # The axis' point closest to the nominal point.
     point = c + np.dot(c0 - c, a) * a
     return TurntableAxisResult(
-        axis_point_m=point, axis_direction=a, zero_offset_deg=float(np.mean(zeros)),
+        axis_point_m=point, axis_direction=a, zero_offset_deg=float(zero),
         rms_mm=float(np.sqrt(np.mean(np.sum(res**2, axis=2)))) * 1e3, per_view_mm=per_view,
         zero_spread_deg=float(np.ptp(zeros)) if len(zeros) > 1 else 0.0)

@@ -307,6 +307,7 @@ def write_simulated(out_dir: str | Path, frame: Any, scene_name: str = "") -> Pa
     meta = {
         "scene_name": scene_name,
         "scene_hash": frame.scene_hash,
+        "calibration_hash": getattr(frame, "calibration_hash", None),
         "package_version": package_version(),
         "ideal_sensor": frame.ideal,
         "settings": {

@@ -56,6 +56,8 @@ class SimulatedFrame:
     extra: dict[str, Any] = field(default_factory=dict)
     #: render worker threads' time per stage (Embree, kernels) [thread-seconds]
     render_thread_seconds: dict[str, float] = field(default_factory=dict)
+    #: :func:`sim_core.twin_file.twin_hash` of the calibration the scene applied, if any
+    calibration_hash: str | None = None
 
 
 def z_over_range(scene: Scene) -> np.ndarray:
@@ -193,6 +195,7 @@ def expose_light(
         ideal=ideal,
         grey_full_scale=grey_full_scale,
         adaptive=rendered.adaptive,
+        calibration_hash=scene.twin_hash,
     )
 
 

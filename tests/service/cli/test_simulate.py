@@ -183,6 +183,8 @@ def test_simulate_applies_a_calibration_file(tmp_path):
     for out, extra in ((base, ()), (shifted, ("--calibration", cal))):
         res = run("simulate", EXAMPLES / "plane.yaml", "--out", out, "--spp", 2, "-q", *extra)
         assert res.exit_code == 0, res.output
+    assert json.loads((base / "frame.json").read_text())["calibration_hash"] is None
+    assert len(json.loads((shifted / "frame.json").read_text())["calibration_hash"]) == 16
     with np.load(base / "frame.npz") as a, np.load(shifted / "frame.npz") as b:
         ok = a["valid"] & b["valid"]
         diff = np.median((b["range_m"] - a["range_m"])[ok])
