@@ -63,7 +63,6 @@ def rig_command(
 ) -> None:
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
     from calibration.report import write_report
-
     from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
     from drivers.rig import Rig
     from drivers.sim.world import SimulatedWorld
