@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
-import numpy as np
 
 from sim_core.twin_file import dump_yaml, twin_hash, write_calibration
 
@@ -110,9 +109,3 @@ def write_report(out_dir: str | Path, result) -> dict[str, Path]:
     paths["html"].write_text(html, encoding="utf-8")
     return paths
 
-
-def rms(values) -> float:
-    """Root mean square of the finite values (NaN if none)."""
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")

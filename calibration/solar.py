@@ -122,13 +122,14 @@ def fit_solar_scale(
            for s, m in zip(intensity_std, meas, strict=True)]
     # Pixels the beam reaches: the prediction at the highest level differs from the lowest.
     lo, hi = min(levels), max(levels)
-    reach = np.abs(predict(hi) - predict(lo))
+    pred_lo, pred_hi = predict(lo), predict(hi)
+    reach = np.abs(pred_hi - pred_lo)
     finite = np.all([np.isfinite(m) & np.isfinite(s) & (s > 0) & (m < saturation_dn)
                      for m, s in zip(meas, std, strict=True)], axis=0)
     noise = float(np.median(np.concatenate([s[finite] for s in std]))) if finite.any() else 0.0
     # Pixels on an edge of the prediction (a board square's border, an object's outline) are
     # left out: a fraction of a pixel of geometry error changes them more than the level does.
-    flat = _flat(predict(lo)) & _flat(predict(hi))
+    flat = _flat(pred_lo) & _flat(pred_hi)
     use = finite & flat & (reach > 3.0 * noise)
     n = int(np.count_nonzero(use))
 
