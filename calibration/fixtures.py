@@ -36,12 +36,28 @@ class BoardFixture:
         Rotation of the board about its horizontal axis; positive tilts its top away from the
         camera.
     centre_height_m : float
-        Height of the board's centre above the turntable's axis point [m].
+        Height of the board's centre above the turntable's axis point [m]. The default keeps
+        the default board (500 mm tall) clear of the table at a tilt of 0.
+    towards_camera_m : float
+        Horizontal distance of the board's centre from the axis, towards the camera, at the
+        turntable's zero [m]. A board off the axis sweeps across the image as the table turns
+        and comes closer to the camera, so its corners reach the image's edges and its lower
+        half, which a board on the axis never does (the table hides everything below it):
+        this is what determines the principal point and the distortion.
     """
 
     name: str
     tilt_deg: float
-    centre_height_m: float = 0.16
+    centre_height_m: float = 0.28
+    towards_camera_m: float = 0.0
+
+    @property
+    def instruction(self) -> str:
+        """The fixture in words, for the operator."""
+        where = (f", {self.towards_camera_m * 1e3:.0f} mm off the axis towards the camera"
+                 if self.towards_camera_m else " over the axis")
+        return (f"fixture '{self.name}': board tilted {self.tilt_deg:+g} deg, its centre "
+                f"{self.centre_height_m * 1e3:.0f} mm above the table{where}")
 
 
 def board_object(board: dict, fixture: BoardFixture, spec: SceneSpec,
@@ -54,7 +70,8 @@ def board_object(board: dict, fixture: BoardFixture, spec: SceneSpec,
     yaw = _facing_yaw_deg(spec)
     rot = (90.0 - fixture.tilt_deg, 0.0, yaw)
     c = np.asarray(spec.turntable.axis_point_m if spec.turntable else (0.0, 0.0, 0.0))
-    pos = c + np.array([0.0, 0.0, fixture.centre_height_m])
+    facing = np.array([np.sin(np.radians(yaw)), -np.cos(np.radians(yaw)), 0.0])  # to camera
+    pos = c + np.array([0.0, 0.0, fixture.centre_height_m]) + fixture.towards_camera_m * facing
     return ObjectSpec.model_validate({
         "name": name, "mesh": board, "on_turntable": True,
         "pose": {"position_m": [float(v) for v in pos], "rotation_deg": list(rot)},
