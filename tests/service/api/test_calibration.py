@@ -122,9 +122,9 @@ def test_a_bad_calibration_is_a_422_naming_the_field_and_keeps_the_active_one(
 
 def test_a_bad_number_in_the_raw_body_is_a_422_and_nothing_is_activated(client):
     for text in ("NaN", "Infinity", "1e309"):
-        res = client.put("/api/v1/calibration", headers={**AUTH, "Content-Type":
-                                                         "application/json"},
-                         content='{"illumination": {"power_w": %s}}' % text)
+        raw = '{"illumination": {"power_w": ' + text + "}}"
+        res = client.put("/api/v1/calibration",
+                         headers={**AUTH, "Content-Type": "application/json"}, content=raw)
         assert res.status_code == 422 and "illumination.power_w" in res.json()["message"]
     assert client.get("/api/v1/calibration").status_code == 404
 
