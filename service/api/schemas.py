@@ -254,6 +254,9 @@ class CalibrationJobPublic(BaseModel):
     activated: bool = Field(description="Whether its result has been made the active calibration.")
     files: dict[str, str] = Field(description="Output files once done: calibration.yaml, "
                                   "report.json, report.html (paths on the server).")
+    operator_instruction: str | None = Field(
+        None, description="Real rig: what the operator must mount now; confirm with "
+        "POST /api/v1/calibrations/{id}/continue.")
     created_at: float
     started_at: float | None
     updated_at: float

@@ -31,10 +31,10 @@ async def put_active(
     """Make a calibration the active one: the body is a calibration file's content as JSON
     (docs/calibration.md). Validated as a file is; an unknown key or an out-of-range value is a
     422 naming the field, and the active calibration stays as it was."""
-    # The body once more, strictly (``true`` is not a number): the declared model above gives
-    # the OpenAPI document its schema and the first checks.
+    # ``body`` (FastAPI's validation) gives the OpenAPI document its schema and the first
+    # checks; the raw body once more, strictly (``true`` is not a number), is what is stored.
+    del body
     cal = parse_body(await request.json())
-    assert isinstance(body, CalibrationFile)
     return await run_in_threadpool(activate, sessions, cal, "PUT /api/v1/calibration")
 
 

@@ -354,6 +354,36 @@ def test_a_job_running_when_the_service_stops_is_failed(tmp_path, lab_without_su
         assert status["state"] == "failed" and "service stopped" in status["error"]
 
 
+def test_on_a_real_rig_the_job_asks_the_operator_and_the_emergency_stop_cancels_it(client):
+    # Without the simulated lab's world the job has a human operator to ask (the real rig's
+    # case): it waits, names what to mount, and goes on when told.
+    client.app.state.lab.calibrations.world = None
+    jid = client.post("/api/v1/calibrations", headers=AUTH, json=SHORT_PLAN).json()["id"]
+    deadline = time.monotonic() + 120
+    while (status := client.get(f"/api/v1/calibrations/{jid}").json())[
+            "operator_instruction"] is None:
+        assert time.monotonic() < deadline, status
+        time.sleep(0.05)
+    assert "fixture 'tilt+30'" in status["operator_instruction"]
+    assert f"/api/v1/calibrations/{jid}/continue" in status["message"]
+    assert status["state"] == "running" and status["steps_done"] == 0
+    res = client.post(f"/api/v1/calibrations/{jid}/continue", headers=AUTH)
+    assert res.status_code == 200, res.text
+    # the first fixture's sweep is captured, then the next fixture is asked for
+    while "tilt-30" not in ((status := client.get(f"/api/v1/calibrations/{jid}").json())[
+            "operator_instruction"] or ""):
+        assert time.monotonic() < deadline and status["state"] == "running", status
+        time.sleep(0.05)
+    assert status["steps_done"] == 4 and status["message"].startswith("waiting for the operator")
+    stop = client.post("/api/v1/devices/stop", headers=AUTH).json()
+    assert stop["calibration_cancelled"] == jid
+    status = wait_job(client, jid)
+    assert status["state"] == "cancelled" and status["error"] == "emergency stop"
+    assert client.post(f"/api/v1/calibrations/{jid}/continue", headers=AUTH).status_code == 409
+    assert client.post(f"/api/v1/calibrations/{jid}/cancel", headers=AUTH).status_code == 409
+    assert client.get("/api/v1/devices").json()["calibration_id"] is None
+
+
 def test_unknown_jobs_are_404(client):
     missing = "0" * 32
     for path in (f"/api/v1/calibrations/{missing}", f"/api/v1/calibrations/{missing}/events",
