@@ -88,9 +88,9 @@ class _WaitingOperator:
     def mount(self, objects: Sequence | None, instruction: str) -> None:
         run = self.run
         run.mounted.clear()
-        run.instruction = instruction
         self.jobs._note(run.job_id, f"waiting for the operator: {instruction}; then POST "
                         f"/api/v1/calibrations/{run.job_id}/continue")
+        run.instruction = instruction  # after the message: a reader sees both or neither
         try:
             while not run.mounted.wait(0.2):
                 if run.stop.is_set():
