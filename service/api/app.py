@@ -21,7 +21,15 @@ from fastapi.responses import JSONResponse
 
 from drivers.errors import DeviceError
 from service.api.deps import StreamSlots
-from service.api.routes import campaigns, devices, frames, poses, simulate
+from service.api.routes import (
+    calibration,
+    calibrations,
+    campaigns,
+    devices,
+    frames,
+    poses,
+    simulate,
+)
 from service.api.schemas import Health
 from service.errors import ServiceError
 from service.lab.lab import open_lab
@@ -111,7 +119,7 @@ def create_app(settings: Settings) -> FastAPI:
                 "executor": lab.executor.name, "workers": lab.executor.workers,
                 "scenes": bundled_scenes(settings.examples_dir)}
 
-    for module in (devices, simulate, poses, frames, campaigns):
+    for module in (devices, simulate, poses, frames, campaigns, calibration, calibrations):
         api.include_router(module.router)
     app.include_router(api)
     return app

@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from service.api.schemas import Message
 from service.compute.executors import Executor
 from service.errors import UnavailableError
+from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.lab import Lab
 from service.lab.rig_lease import RigLease
 from service.lab.runner import CampaignRunner
@@ -66,6 +67,10 @@ def get_runner(lab: LabDep) -> CampaignRunner:
     return lab.runner
 
 
+def get_calibrations(lab: LabDep) -> CalibrationJobs:
+    return lab.calibrations
+
+
 def get_default_scene(lab: LabDep) -> SceneSource:
     return lab.default_scene
 
@@ -105,6 +110,7 @@ ExecutorDep = Annotated[Executor, Depends(get_executor)]
 LeaseDep = Annotated[RigLease, Depends(get_lease)]
 RunnerDep = Annotated[CampaignRunner, Depends(get_runner)]
 SceneDep = Annotated[SceneSource, Depends(get_default_scene)]
+CalibrationsDep = Annotated[CalibrationJobs, Depends(get_calibrations)]
 
 
 def require_token(
@@ -130,7 +136,8 @@ TokenDep = Annotated[None, Depends(require_token)]
 ERRORS = {
     401: {"description": "Missing or wrong bearer token."},
     404: {"description": "No such resource."},
-    409: {"description": "A campaign holds the rig, or the resource is in the wrong state."},
+    409: {"description": "A campaign or calibration job holds the rig, or the resource is in "
+                         "the wrong state."},
     410: {"description": "The resource is known but its files are gone from the data directory."},
     507: {"description": "Too little free space on the data directory's disk."},
     422: {"description": "Invalid input; the message names the field and the allowed range."},

@@ -26,6 +26,8 @@ class SimulationPublic(BaseModel):
     frame_id: str
     scene_name: str
     scene_hash: str
+    calibration_hash: str | None = Field(
+        None, description="The calibration the simulation applied (None: nominal).")
     effect_plan: dict[str, Any]
     timings_s: dict[str, float]
     links: dict[str, str]
@@ -48,6 +50,8 @@ class PosePublic(BaseModel):
     rig: dict[str, Any]
     timings_s: dict[str, float]
     created_at: float
+    calibration_hash: str | None = Field(
+        None, description="The calibration the simulation applied (None: nominal).")
 
 
 # -- campaigns ---------------------------------------------------------------------------------
@@ -83,6 +87,9 @@ class CampaignPublic(BaseModel):
     poses_done: int
     poses_total: int
     pose_count: int
+    calibration_hash: str | None = Field(
+        None, description="The calibration pinned when the campaign was created (None: nominal);"
+        " every pose of it applies this one.")
     current_pose: CurrentPose | None
     eta_s: float | None
     error: str | None
@@ -106,6 +113,7 @@ class ResultPublic(BaseModel):
     simulated_frame_id: str
     created_at: float
     timings_s: dict[str, float]
+    calibration_hash: str | None = None
 
 
 # -- frames ------------------------------------------------------------------------------------
@@ -118,6 +126,9 @@ class FramePublic(BaseModel):
     campaign_id: str | None
     scene_name: str
     scene_hash: str
+    calibration_hash: str | None = Field(
+        None, description="Simulated: the calibration applied; measured: the calibration whose "
+        "intrinsics reconstructed it. None: nominal.")
     rig: dict[str, Any] | None
     summary: dict[str, Any]
     metadata: dict[str, Any]
@@ -163,6 +174,8 @@ class DevicesPublic(BaseModel):
 
     simulated: bool
     campaign_id: str | None = Field(description="The campaign holding the rig, if any.")
+    calibration_id: str | None = Field(
+        None, description="The calibration job holding the rig, if any.")
     devices: list[DeviceStatus]
 
 
@@ -195,6 +208,7 @@ class StopOut(BaseModel):
     stopped: list[str]
     errors: dict[str, str]
     campaign_paused: str | None
+    calibration_cancelled: str | None = None
 
 
 class Health(BaseModel):
@@ -206,3 +220,45 @@ class Health(BaseModel):
     executor: str
     workers: int
     scenes: list[str]
+
+
+# -- calibration -------------------------------------------------------------------------------
+class CalibrationPublic(BaseModel):
+    """The active calibration: its values, hash, provenance, and when and how it was activated."""
+
+    calibration_hash: str = Field(description="sim_core.twin_file.twin_hash of the values; "
+                                  "recorded with every frame and result that applied it.")
+    calibration: dict[str, Any] = Field(description="The values (docs/calibration.md), without "
+                                        "the provenance.")
+    provenance: dict[str, Any]
+    source: str = Field(description="PUT /api/v1/calibration or the calibration job it came from.")
+    activated_at: float
+
+
+CalibrationJobState = Literal["queued", "running", "done", "failed", "cancelled"]
+
+
+class CalibrationJobPublic(BaseModel):
+    """Where a calibration job stands."""
+
+    id: str
+    state: CalibrationJobState
+    plan: dict[str, Any]
+    activate: bool
+    steps_done: int
+    steps_total: int
+    progress: float = Field(description="steps_done / steps_total, 0 to 1.")
+    message: str = Field(description="What the sequence is doing (or did last).")
+    error: str | None
+    calibration_hash: str | None = Field(description="The result's hash, once done.")
+    activated: bool = Field(description="Whether its result has been made the active calibration.")
+    files: dict[str, str] = Field(description="Output files once done: calibration.yaml, "
+                                  "report.json, report.html (paths on the server).")
+    operator_instruction: str | None = Field(
+        None, description="Real rig: what the operator must mount now; confirm with "
+        "POST /api/v1/calibrations/{id}/continue.")
+    created_at: float
+    started_at: float | None
+    updated_at: float
+    finished_at: float | None
+    links: dict[str, str]

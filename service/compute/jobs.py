@@ -55,6 +55,10 @@ class SimulationJob:
     scene_name : str
     extra : dict
         Written into the frame's ``frame.json`` (rig state, object names, ...).
+    twin : dict or None
+        The calibration to apply (``CalibrationFile.model_dump(mode="json")``), resolved by the
+        service (its active calibration, or the scene's own file); None: nominal. The worker
+        never reads a calibration file itself: the scene's ``calibration`` key is ignored here.
     """
 
     scene: dict[str, Any]
@@ -71,6 +75,7 @@ class SimulationJob:
     ideal: bool = False
     scene_name: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    twin: dict[str, Any] | None = None
 
 
 def make_job(
@@ -86,6 +91,7 @@ def make_job(
     ideal: bool = False,
     scene_name: str = "",
     extra: dict[str, Any] | None = None,
+    twin: dict[str, Any] | None = None,
 ) -> SimulationJob:
     """A job for ``spec`` posed at the given rig state, with its mesh files packed in."""
     meshes: dict[str, bytes] = {}
@@ -109,6 +115,7 @@ def make_job(
         ideal=ideal,
         scene_name=scene_name,
         extra=dict(extra or {}),
+        twin=twin,
     )
 
 
@@ -153,9 +160,12 @@ def run_job(job: SimulationJob) -> SimulationResult:
     from sim_core.render import RenderSettings
     from sim_core.scene import build_scene
     from sim_core.scene_spec import parse_scene_spec
+    from sim_core.twin_file import parse_calibration
 
+    twin = None if job.twin is None else parse_calibration(job.twin)
     with tempfile.TemporaryDirectory(prefix="toftwin-job-") as tmp:
         scene = dict(job.scene)
+        scene["calibration"] = None  # resolved by the service: ``job.twin``
         if job.meshes:
             objects = []
             for i, obj in enumerate(scene.get("objects", [])):
@@ -168,7 +178,7 @@ def run_job(job: SimulationJob) -> SimulationResult:
             scene["objects"] = objects
         spec = parse_scene_spec(scene)
         built = build_scene(
-            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns
+            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin
         )
     settings = RenderSettings(
         integrator=job.integrator,

@@ -37,7 +37,7 @@ def result_dict(r: PoseResultRow) -> dict[str, Any]:
         "solar_suns": r.solar_suns, "metrics": metrics,
         "measured_frame_id": r.measured_frame_id,
         "simulated_frame_id": r.simulated_frame_id, "created_at": r.created_at,
-        "timings_s": json.loads(r.timings_json),
+        "timings_s": json.loads(r.timings_json), "calibration_hash": r.calibration_hash,
     }
 
 
@@ -57,7 +57,7 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
 def results_csv(rows: Iterable[dict[str, Any]]) -> Iterator[str]:
     """The rows as CSV, metrics flattened to one column each: the header, then a line a row."""
     head = ["pose_index", "repeat", "turntable_deg", "solar_suns", "measured_frame_id",
-            "simulated_frame_id", "created_at"]
+            "simulated_frame_id", "created_at", "calibration_hash"]
     metric_cols = list(flat_metrics({}).keys())
     buf = io.StringIO()
     writer = csv.writer(buf)
@@ -71,5 +71,5 @@ def results_csv(rows: Iterable[dict[str, Any]]) -> Iterator[str]:
     yield line(head + metric_cols)
     for row in rows:
         flat = flat_metrics(row["metrics"])
-        yield line([row[h] for h in head] + ["" if flat[c] is None else flat[c]
-                                             for c in metric_cols])
+        yield line(["" if row[h] is None else row[h] for h in head]
+                   + ["" if flat[c] is None else flat[c] for c in metric_cols])

@@ -4,10 +4,15 @@ A campaign is validated completely before anything is stored: the scene, every p
 against the stage's software limits and its solar level, the repeats, the number of poses and
 the samples per pixel. A bad campaign is a 422 naming the field (``poses[3].turntable_deg``)
 and leaves nothing behind.
+
+A campaign pins the calibration active when it is created (its values and hash are stored with
+it): every pose it runs, on any start or resume, applies that one, whatever is activated
+later, so all its results are comparable. To use another calibration, create a new campaign.
 """
 
 from __future__ import annotations
 
+import json
 import uuid
 from typing import Any
 
@@ -15,6 +20,7 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.rig import Rig
 from service.errors import ConflictError, NotFoundError
+from service.lab.calibration import active_twin, effective_twin
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate
 from service.lab.runner import CampaignRunner
@@ -46,6 +52,8 @@ def create_campaign(
                 f"got {pose.repeats}; allowed: 1 to {settings.max_repeats} (max_repeats)")
         if rig is not None:
             check_angle(rig, pose.turntable_deg, f"poses[{i}].turntable_deg")
+    twin = effective_twin(active_twin(sessions), scene)
+    pinned = twin.to_json()
     campaign_id = uuid.uuid4().hex
     with sessions() as s:
         queries.create_campaign(
@@ -53,6 +61,8 @@ def create_campaign(
             scene_json=scene.to_json(), scene_base_dir=str(scene.base_dir),
             mask=req.mask.model_dump(mode="json"), seed=req.seed, spp=spp,
             poses=[(p.turntable_deg, p.solar_suns, p.repeats) for p in req.poses],
+            calibration_json=None if pinned is None else json.dumps(pinned, sort_keys=True),
+            calibration_hash=twin.hash,
         )
     return campaign_id
 
@@ -99,6 +109,7 @@ def campaign_status(
     return {
         "id": row.id, "name": row.name, "scene_name": row.scene_name, "state": row.state,
         "poses_done": done, "poses_total": row.poses_total, "pose_count": len(poses),
+        "calibration_hash": row.calibration_hash,
         "current_pose": current, "eta_s": eta, "error": row.error, "runs": row.runs,
         "created_at": row.created_at, "started_at": row.started_at,
         "updated_at": row.updated_at, "finished_at": row.finished_at,

@@ -13,6 +13,7 @@ from typing import Any
 from sqlalchemy.orm import sessionmaker
 
 from drivers.errors import DeviceError, DeviceTimeoutError
+from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.poses import check_angle
 from service.lab.rig_lease import RigLease
 from service.lab.runner import CampaignRunner
@@ -44,7 +45,7 @@ def status(lease: RigLease, simulated: bool) -> dict[str, Any]:
                                      "use_case": rig.camera.use_case.name}),
         ]
     return {"simulated": simulated, "campaign_id": lease.campaign_id,
-            "devices": devices}
+            "calibration_id": lease.calibration_id, "devices": devices}
 
 
 def turntable_position(lease: RigLease) -> dict[str, Any]:
@@ -129,8 +130,11 @@ def capture(
             "links": {"self": f"/api/v1/frames/{frame_id}"}}
 
 
-def emergency_stop(lease: RigLease, runner: CampaignRunner) -> dict[str, Any]:
-    """Halt the turntable and close the shutter now; pause a running campaign.
+def emergency_stop(
+    lease: RigLease, runner: CampaignRunner, calibrations: CalibrationJobs | None = None
+) -> dict[str, Any]:
+    """Halt the turntable and close the shutter now; pause a running campaign, cancel a running
+    calibration job (before its next capture).
 
     The commands go out at once, without the rig lock. A campaign (or a manual call) may be in
     the middle of a rig stage and would open the shutter again, so once that stage has ended -
@@ -139,6 +143,7 @@ def emergency_stop(lease: RigLease, runner: CampaignRunner) -> dict[str, Any]:
     """
     rig = lease.require()
     paused = runner.emergency_stop()
+    cancelled = calibrations.emergency_stop() if calibrations is not None else None
     errors: dict[str, str] = {}
 
     def halt() -> list[str]:
@@ -159,4 +164,5 @@ def emergency_stop(lease: RigLease, runner: CampaignRunner) -> dict[str, Any]:
             stopped = halt()
     except DeviceTimeoutError as exc:
         errors["rig"] = f"commands sent once; the rig stayed busy: {exc}"
-    return {"stopped": stopped, "errors": errors, "campaign_paused": paused}
+    return {"stopped": stopped, "errors": errors, "campaign_paused": paused,
+            "calibration_cancelled": cancelled}

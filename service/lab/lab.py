@@ -6,8 +6,9 @@ directory is refused before it touches anything), the database (migrated to the 
 and every campaign a crash left ``running`` becomes ``interrupted``), the
 frame store (frames no row names are swept away), the executor, the rig (simulated or real; a
 real rig that cannot be opened leaves the service up with the devices reporting 503), the
-campaign runner. Each part gets what it uses, not the lab: the runner its sessions, rig lease,
-store, executor and settings; the routes ask for the one part they need.
+campaign runner and the calibration jobs (a job a crash left running becomes ``failed``).
+Each part gets what it uses, not the lab: the runner its sessions, rig lease, store, executor
+and settings; the routes ask for the one part they need.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import logging
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -25,6 +27,7 @@ from drivers.errors import DeviceError
 from drivers.rig import Rig
 from service.compute.executors import Executor, make_executor
 from service.errors import UnavailableError
+from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.rig_lease import RigLease
 from service.lab.runner import CampaignRunner
 from service.lab.scenes import SceneSource, resolve_scene
@@ -49,6 +52,7 @@ class Lab:
     default_scene: SceneSource
     lease: RigLease
     runner: CampaignRunner
+    calibrations: CalibrationJobs
     #: what startup recovered after a crash: campaigns marked interrupted, frames swept
     recovered: dict[str, list[str]] = field(default_factory=dict)
     lock: DataDirLock | None = None
@@ -62,6 +66,7 @@ class Lab:
     def close(self) -> None:
         """Stop the runner, the executor and the rig; dispose of the engine; unlock the data."""
         try:
+            self.calibrations.shutdown()
             self.runner.shutdown()
             with contextlib.suppress(Exception):
                 self.executor.close()
@@ -72,8 +77,10 @@ class Lab:
                 self.lock.release()
 
 
-def open_rig(settings: Settings, scene: SceneSource) -> Rig:
-    """The simulated rig (rendering ``scene``) or the real one on the configured ports."""
+def open_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, Any]:
+    """The simulated rig (rendering ``scene``) or the real one on the configured ports, and the
+    simulated lab's world (:class:`drivers.sim.world.SimulatedWorld`; None for the real rig),
+    which calibration jobs ask to mount the board."""
     if settings.simulated:
         from drivers.sim.world import SimulatedWorld
         from service.compute.jobs import RENDER_LOCK
@@ -98,7 +105,7 @@ def open_rig(settings: Settings, scene: SceneSource) -> Rig:
         return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed,
                              turntable_faults=armed["turntable"],
                              solar_faults=armed["solar-simulator"],
-                             camera_faults=armed["camera"])
+                             camera_faults=armed["camera"]), source
     missing = [n for n in ("turntable_port", "lamp_port", "shutter_port")
                if getattr(settings, n) is None]
     if missing:
@@ -107,7 +114,7 @@ def open_rig(settings: Settings, scene: SceneSource) -> Rig:
         )
     return Rig.open(settings.turntable_port, settings.lamp_port, settings.shutter_port,
                     turntable_address=settings.turntable_address,
-                    camera_serial=settings.camera_serial)
+                    camera_serial=settings.camera_serial), None
 
 
 def open_lab(settings: Settings) -> Lab:
@@ -140,12 +147,19 @@ def _open_locked(settings: Settings, lock: DataDirLock) -> Lab:
     executor = make_executor(settings.executor, settings.workers, settings.threads_per_job,
                              settings.dask_address)
     executor.warm_up(wait=False)  # start the workers and load the renderer now, not at pose 1
+    world = None
     try:
-        rig, rig_error = open_rig(settings, scene), None
+        (rig, world), rig_error = open_rig(settings, scene), None
     except (DeviceError, UnavailableError, OSError) as exc:
         rig, rig_error = None, str(exc)
         _log.error("rig not available: %s", exc)
     lease = RigLease(rig, rig_error, settings.rig_wait_s)
     runner = CampaignRunner(sessions, lease, store, executor, settings)
-    return Lab(settings, engine, sessions, store, executor, scene, lease, runner,
-               recovered={"interrupted": interrupted, "swept_frames": swept}, lock=lock)
+    calibrations = CalibrationJobs(sessions, lease, scene, settings, data / "calibrations", world)
+    failed_jobs = calibrations.recover()
+    if failed_jobs:
+        _log.warning("calibration jobs interrupted by the service's end, now failed: %s",
+                     failed_jobs)
+    return Lab(settings, engine, sessions, store, executor, scene, lease, runner, calibrations,
+               recovered={"interrupted": interrupted, "swept_frames": swept,
+                          "failed_calibrations": failed_jobs}, lock=lock)

@@ -27,6 +27,7 @@ from drivers.errors import LimitError
 from drivers.rig import Rig, RigState
 from service.compute.executors import Executor, JobFuture
 from service.compute.jobs import make_job
+from service.lab.calibration import Twin, active_twin, effective_twin
 from service.lab.comparison import build_mask, compare
 from service.lab.requests import MaskSpec, PoseCreate
 from service.lab.rig_lease import RigLease
@@ -45,6 +46,7 @@ from service.store.frame_files import FrameStore, new_frame_id
 from service.store.tables import FrameRow, PoseResultRow
 from sim_core.errors import InvalidInputError
 from sim_core.tof import ToFImage
+from sim_core.twin_apply import apply_to_spec
 
 
 def unit_seed(seed: int, pose_index: int, repeat: int) -> int:
@@ -66,6 +68,8 @@ class PosePlan:
     campaign_id: str | None = None
     pose_index: int = 0
     repeat: int = 0
+    #: the calibration the simulation applies (and whose intrinsics reconstruct the measurement)
+    twin: Twin = field(default_factory=Twin)
 
     @property
     def target(self) -> RigState:
@@ -123,16 +127,20 @@ def measure(
         raw = rig.capture(1)[0]
         use_case = rig.camera.use_case
     t2 = time.perf_counter()
-    camera = camera_of(for_use_case(plan.scene.spec, use_case))
+    spec = for_use_case(plan.scene.spec, use_case)
+    if plan.twin.calibration is not None:  # the calibrated intrinsics turn range into depth
+        spec = apply_to_spec(spec, plan.twin.calibration)
+    camera = camera_of(spec)
     extra = {
         "rig": state.to_dict(), "scene_name": plan.scene.name, "campaign_id": plan.campaign_id,
         "pose_index": plan.pose_index, "repeat": plan.repeat, "use_case": use_case.name,
+        "calibration_hash": plan.twin.hash,
     }
     frame_id, image, grey_full_scale = store.save_measured(raw, camera, extra)
     t3 = time.perf_counter()
     row = queries.frame_row(
         frame_id, "measured", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
-        rig=state.to_dict(), summary=_summary(image),
+        rig=state.to_dict(), summary=_summary(image), calibration_hash=plan.twin.hash,
     )
     return Measurement(row, image, state, use_case,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
@@ -160,6 +168,7 @@ def submit(
             "turntable_object_ids": plan.scene.turntable_object_ids,
             "measured_frame_id": m.row.id,
         },
+        twin=plan.twin.to_json(),
     )
     return frame_id, executor.submit(job)
 
@@ -204,6 +213,7 @@ def _finish(
     sim_row = queries.frame_row(
         sim_id, "simulated", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
         scene_hash=result.scene_hash, rig=m.rig.to_dict(), summary=_summary(result.image),
+        calibration_hash=plan.twin.hash,
     )
     timings = {
         **m.timings_s,
@@ -220,6 +230,7 @@ def _finish(
             repeat=plan.repeat, turntable_deg=plan.turntable_deg,
             solar_suns=plan.solar_suns, measured=m.row, simulated=sim_row,
             metrics=metrics, rig=m.rig.to_dict(), timings_s=timings,
+            calibration_hash=plan.twin.hash,
         )
     return Outcome(row, timings, time.perf_counter() - t3)
 
@@ -235,7 +246,8 @@ def run_single_pose(
     check_angle(rig, req.turntable_deg, "turntable_deg")
     check_mask(req.mask, scene, image_shape(scene, rig.camera.use_case))
     require_free(store.root, settings.min_free_bytes)  # 507 before anything moves
-    plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp)
+    plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp,
+                    twin=effective_twin(active_twin(sessions), scene))
     with lease.manual() as rig:
         m = measure(rig, store, plan, settings.solar_stable_timeout_s)
     try:

@@ -13,7 +13,15 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    field_validator,
+    model_validator,
+)
 
 from sim_core.lights import SUNS_RANGE
 
@@ -168,3 +176,74 @@ class CampaignCreate(RequestBody):
     mask: MaskSpec = MaskSpec()
     seed: Seed = 0
     spp: Spp | None = None
+
+
+# -- calibration jobs ----------------------------------------------------------------------------
+#: the board fixtures of the calibration sequence (calibration.rig_sequence.DEFAULT_FIXTURES)
+FixtureName = Literal["tilt+30", "tilt-30", "tilt0"]
+FIXTURE_NAMES: tuple[str, ...] = ("tilt+30", "tilt-30", "tilt0")
+
+
+class SweepIn(RequestBody):
+    """The board sweep: reported turntable angles ``from_deg``, ``from_deg + step_deg``, ... up to
+    ``to_deg`` (each fixture); also checked against the stage's software limits."""
+
+    from_deg: Angle = -55.0
+    to_deg: Angle = 55.0
+    step_deg: Annotated[
+        float, Strict(),
+        Field(description="Step between views [deg], 0.5 to 90.",
+              json_schema_extra={"minimum": 0.5, "maximum": 90}),
+        AfterValidator(_in_range(0.5, 90.0, "deg")),
+    ] = 5.0
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SweepIn:
+        if not self.to_deg > self.from_deg:
+            raise ValueError(f"to_deg ({self.to_deg:g}) must be greater than from_deg "
+                             f"({self.from_deg:g})")
+        return self
+
+    def angles(self) -> tuple[float, ...]:
+        """The reported angles of the sweep (the end included when the step reaches it)."""
+        n = math.floor((self.to_deg - self.from_deg) / self.step_deg + 1e-9) + 1
+        return tuple(round(self.from_deg + i * self.step_deg, 9) for i in range(n))
+
+
+class CalibrationCreate(RequestBody):
+    """Run the calibration sequence (``toftwin calibrate rig``) on the rig as a background job.
+
+    Every field has the sequence's default; a reduced plan (fewer fixtures, a coarser sweep,
+    fewer frames) runs faster and measures less well.
+    """
+
+    fixtures: list[FixtureName] = Field(
+        default_factory=lambda: list(FIXTURE_NAMES), min_length=1, max_length=3,
+        description="Board fixtures to sweep (each once). Several tilts are needed for the "
+        "principal point: the upright board alone is a degenerate set and is refused.")
+    sweep: SweepIn = SweepIn()
+    frames_per_view: Annotated[int, Strict()] = Field(
+        4, ge=1, le=64, description="Frames averaged per board view.")
+    noise_frames: Annotated[int, Strict()] = Field(
+        24, ge=2, le=256, description="Frames of the noise stack (16 or more for gain within 2 %).")
+    solar_levels_suns: list[Level] = Field(
+        default_factory=lambda: [0.8, 1.0, 1.2], min_length=1, max_length=8,
+        description="Set levels of the solar simulator for its scale.")
+    solar_frames: Annotated[int, Strict()] = Field(
+        8, ge=1, le=64, description="Frames averaged per solar level.")
+    solar_reference_suns: Annotated[
+        float, Strict(),
+        Field(description="A reference cell's reading at a set level of 1 sun [sun], used when "
+              "the frames do not determine the solar simulator's scale; 0.01 to 10.",
+              json_schema_extra={"minimum": 0.01, "maximum": 10}),
+        AfterValidator(_in_range(0.01, 10.0, "sun")),
+    ] | None = None
+    activate: StrictBool = Field(
+        False, description="Make the result the active calibration when the job is done.")
+
+    @field_validator("fixtures")
+    @classmethod
+    def _distinct_fixtures(cls, v: list[str]) -> list[str]:
+        if len(set(v)) != len(v):
+            raise ValueError(f"{v} names a fixture twice; each once")
+        return v

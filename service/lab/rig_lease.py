@@ -1,9 +1,10 @@
-"""Who may use the rig now: a running campaign, or one manual call at a time.
+"""Who may use the rig now: a running campaign or calibration job, or one manual call at a time.
 
 The rig itself serialises commands (:meth:`drivers.rig.Rig.hold`); the lease adds the service's
-rule on top: while a campaign runs it owns the rig between its units too, so a manual call is
-refused with 409 instead of slipping in between two poses. The campaign runner claims the lease
-when a campaign starts and releases it when the campaign's thread ends; manual calls
+rule on top: while a campaign (or a calibration job) runs it owns the rig between its steps too,
+so a manual call is refused with 409 instead of slipping in between two poses. The campaign
+runner (the calibration jobs) claims the lease when a campaign (job) starts and releases it
+when its thread ends; one holder at a time, of either kind. Manual calls
 (:meth:`RigLease.manual`) check the claim before and after taking the rig's lock.
 """
 
@@ -35,26 +36,39 @@ class RigLease:
         self.error = error
         self.wait_s = wait_s
         self._lock = threading.Lock()
-        self._campaign_id: str | None = None
+        #: (kind, id) of the holder: ("campaign", id) or ("calibration job", id)
+        self._holder: tuple[str, str] | None = None
 
     @property
     def campaign_id(self) -> str | None:
         """The campaign that holds the rig, if any."""
-        return self._campaign_id
+        holder = self._holder
+        return holder[1] if holder is not None and holder[0] == "campaign" else None
 
-    def claim(self, campaign_id: str) -> None:
-        """A campaign takes the rig (409 if another one has it)."""
+    @property
+    def calibration_id(self) -> str | None:
+        """The calibration job that holds the rig, if any."""
+        holder = self._holder
+        return holder[1] if holder is not None and holder[0] == "calibration job" else None
+
+    def claim(self, holder_id: str, kind: str = "campaign") -> None:
+        """A campaign (or a ``"calibration job"``) takes the rig (409 if another one has it)."""
         with self._lock:
-            if self._campaign_id is not None and self._campaign_id != campaign_id:
+            if self._holder is not None and self._holder != (kind, holder_id):
+                held_kind, held_id = self._holder
+                if held_kind == kind == "campaign":
+                    raise ConflictError(
+                        f"campaign {held_id} is running; one campaign at a time")
                 raise ConflictError(
-                    f"campaign {self._campaign_id} is running; one campaign at a time")
-            self._campaign_id = campaign_id
+                    f"{held_kind} {held_id} is running and holds the rig; wait for it, or "
+                    f"cancel it (POST /api/v1/{_route(held_kind)}/{held_id}/cancel)")
+            self._holder = (kind, holder_id)
 
-    def release(self, campaign_id: str) -> None:
-        """The campaign gives the rig back (a no-op for another campaign's id)."""
+    def release(self, holder_id: str) -> None:
+        """The holder gives the rig back (a no-op for another holder's id)."""
         with self._lock:
-            if self._campaign_id == campaign_id:
-                self._campaign_id = None
+            if self._holder is not None and self._holder[1] == holder_id:
+                self._holder = None
 
     def require(self) -> Rig:
         """The rig, or 503 naming why it is not there."""
@@ -76,13 +90,19 @@ class RigLease:
             yield rig
 
     def _refuse_if_campaign(self) -> None:
-        active = self._campaign_id
-        if active is not None:
+        holder = self._holder
+        if holder is not None:
+            kind, held_id = holder
+            what = "pause it" if kind == "campaign" else "cancel it"
             raise ConflictError(
-                f"campaign {active} is running and holds the rig; pause it or wait for it"
+                f"{kind} {held_id} is running and holds the rig; {what} or wait for it"
             )
 
     def close(self) -> None:
         """Close the rig's devices."""
         if self.rig is not None:
             self.rig.close()
+
+
+def _route(kind: str) -> str:
+    return "campaigns" if kind == "campaign" else "calibrations"

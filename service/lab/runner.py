@@ -37,6 +37,7 @@ from sqlalchemy.orm import sessionmaker
 from drivers.errors import DeviceError
 from service.compute.executors import Executor
 from service.errors import ConflictError
+from service.lab.calibration import Twin, calibration_from_json
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec
 from service.lab.rig_lease import RigLease
@@ -118,16 +119,20 @@ class CampaignRunner:
                     f"campaign {self._run.campaign_id} is running; one campaign at a time"
                 )
             self.lease.require()
-            with self.sessions() as s:
-                row = queries.require_campaign(s, campaign_id)
-                if not queries.transition(s, campaign_id, allowed, "running", started=True,
-                                       count_run=True):
-                    verb = "resume" if resume else "start"
-                    raise ConflictError(
-                        f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
-                        f"allowed from: {', '.join(allowed)}"
-                    )
-            self.lease.claim(campaign_id)
+            self.lease.claim(campaign_id)  # 409 while a calibration job holds the rig
+            try:
+                with self.sessions() as s:
+                    row = queries.require_campaign(s, campaign_id)
+                    if not queries.transition(s, campaign_id, allowed, "running", started=True,
+                                              count_run=True):
+                        verb = "resume" if resume else "start"
+                        raise ConflictError(
+                            f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
+                            f"allowed from: {', '.join(allowed)}"
+                        )
+            except BaseException:
+                self.lease.release(campaign_id)
+                raise
             run = _Run(campaign_id)
             run.thread = threading.Thread(
                 target=self._work, args=(run,), name=f"campaign-{campaign_id[:8]}", daemon=True
@@ -222,6 +227,7 @@ class CampaignRunner:
             done = queries.done_units(s, run.campaign_id)
         scene = SceneSource.from_json(camp.scene_json, camp.scene_base_dir, camp.scene_name)
         mask = MaskSpec.model_validate_json(camp.mask_json)
+        twin = Twin.of(calibration_from_json(camp.calibration_json))  # pinned at creation
         todo = [(p, r) for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done]
         in_flight: collections.deque[tuple[PosePlan, Measurement, Any]] = collections.deque()
         to, error = "completed", None
@@ -237,7 +243,7 @@ class CampaignRunner:
                     _log.warning("campaign %s paused: %s", run.campaign_id, error)
                     break
                 plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,
-                                camp.spp, run.campaign_id, pose.pose_index, repeat)
+                                camp.spp, run.campaign_id, pose.pose_index, repeat, twin)
                 run.current = {"pose_index": pose.pose_index, "repeat": repeat,
                                "turntable_deg": pose.turntable_deg,
                                "solar_suns": pose.solar_suns}

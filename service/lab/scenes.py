@@ -94,6 +94,12 @@ def resolve_scene(
         spec = parse_scene_spec(ref)
     except InvalidInputError as exc:
         raise InvalidInputError(f"{field}.{exc.field}", str(exc).split(": ", 1)[-1]) from None
+    if spec.calibration is not None:
+        raise InvalidInputError(
+            f"{field}.calibration",
+            "an inline scene may not name a calibration file (it would be read on the server); "
+            "the service applies its active calibration (PUT /api/v1/calibration)",
+        )
     if len(spec.objects) > max_objects:
         raise InvalidInputError(
             f"{field}.objects",

@@ -8,6 +8,7 @@ from sqlalchemy.orm import sessionmaker
 
 from service.compute.executors import Executor
 from service.compute.jobs import make_job
+from service.lab.calibration import active_twin, effective_twin
 from service.lab.poses import check_spp
 from service.lab.requests import SimulationCreate
 from service.lab.scenes import scene_from_request
@@ -21,9 +22,13 @@ def simulate_frame(
     req: SimulationCreate, *, sessions: sessionmaker, store: FrameStore, executor: Executor,
     settings: Settings,
 ) -> dict[str, Any]:
-    """Run ``req`` on the executor, store the frame, return its id."""
+    """Run ``req`` on the executor, store the frame, return its id.
+
+    The simulation applies the active calibration (:mod:`service.lab.calibration`); the frame
+    records its hash."""
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
+    twin = effective_twin(active_twin(sessions), scene)
     frame_id = new_frame_id()
     job = make_job(
         scene.spec, scene.base_dir, turntable_deg=req.turntable_deg, solar_suns=req.solar_suns,
@@ -31,6 +36,7 @@ def simulate_frame(
         ideal=req.ideal, scene_name=scene.name,
         extra={"frame_id": frame_id, "object_names": [o.name for o in scene.spec.objects],
                "turntable_object_ids": scene.turntable_object_ids},
+        twin=twin.to_json(),
     )
     result = executor.submit(job).result(timeout=settings.job_timeout_s)
     store.save_files(frame_id, result.files)
@@ -39,9 +45,11 @@ def simulate_frame(
         queries.add_frame(s, queries.frame_row(
             frame_id, "simulated", scene_name=scene.name, scene_hash=result.scene_hash, rig=rig,
             summary={"valid_pixels": int(result.image.valid.sum())},
+            calibration_hash=twin.hash,
         ))
     return json_safe({
         "frame_id": frame_id, "scene_name": scene.name, "scene_hash": result.scene_hash,
+        "calibration_hash": twin.hash,
         "effect_plan": result.effect_plan,
         "timings_s": result.timings_s,
         "links": {"self": f"/api/v1/frames/{frame_id}",

@@ -15,12 +15,21 @@ from sqlalchemy import delete, func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.errors import NotFoundError
-from service.store.tables import CampaignRow, FrameRow, PlannedPoseRow, PoseResultRow
+from service.store.tables import (
+    CalibrationActivationRow,
+    CalibrationJobRow,
+    CampaignRow,
+    FrameRow,
+    PlannedPoseRow,
+    PoseResultRow,
+)
 from sim_core.json_safe import dumps_strict
 
 #: states from which a campaign can be (re)started by its runner
 RESUMABLE = ("paused", "interrupted", "failed")
 TERMINAL = ("completed", "cancelled", "failed")
+#: final states of a calibration job
+CALIBRATION_TERMINAL = ("done", "failed", "cancelled")
 
 
 def now() -> float:
@@ -43,12 +52,13 @@ def frame_row(
     scene_hash: str = "",
     rig: dict | None = None,
     summary: dict | None = None,
+    calibration_hash: str | None = None,
 ) -> FrameRow:
     """A new (not yet added) frame row."""
     return FrameRow(
         id=frame_id, kind=kind, campaign_id=campaign_id, scene_name=scene_name,
         scene_hash=scene_hash, rig_json=dumps(rig), summary_json=dumps(summary or {}),
-        created_at=now(),
+        created_at=now(), calibration_hash=calibration_hash,
     )
 
 
@@ -85,6 +95,8 @@ def create_campaign(
     seed: int,
     spp: int,
     poses: Iterable[tuple[float, float, int]],
+    calibration_json: str | None = None,
+    calibration_hash: str | None = None,
 ) -> CampaignRow:
     """Store a new campaign (state ``created``) with its poses; one transaction."""
     poses = list(poses)
@@ -94,6 +106,7 @@ def create_campaign(
         scene_base_dir=scene_base_dir, mask_json=dumps(mask), seed=seed, spp=spp,
         state="created", error=None, poses_total=sum(p[2] for p in poses), runs=0,
         created_at=t, started_at=None, updated_at=t, finished_at=None,
+        calibration_json=calibration_json, calibration_hash=calibration_hash,
     )
     session.add(row)
     session.flush()
@@ -242,6 +255,7 @@ def add_result(
     metrics: dict,
     rig: dict,
     timings_s: dict,
+    calibration_hash: str | None = None,
 ) -> PoseResultRow:
     """Commit a result and its two frame rows in one transaction."""
     row = PoseResultRow(
@@ -249,7 +263,7 @@ def add_result(
         turntable_deg=turntable_deg, solar_suns=solar_suns,
         measured_frame_id=measured.id, simulated_frame_id=simulated.id,
         metrics_json=dumps(metrics), rig_json=dumps(rig), timings_json=dumps(timings_s),
-        created_at=now(),
+        created_at=now(), calibration_hash=calibration_hash,
     )
     session.add_all([measured, simulated])
     session.flush()
@@ -286,3 +300,81 @@ def delete_frame(session: Session, frame_id: str) -> None:
     """Delete a frame row no result names (the caller checks) and commit."""
     session.execute(delete(FrameRow).where(FrameRow.id == frame_id))
     session.commit()
+
+
+# -- the active calibration ------------------------------------------------------------------
+def active_calibration(session: Session) -> CalibrationActivationRow | None:
+    """The newest activation (its ``calibration_json`` None: nominal), or None if never set."""
+    q = select(CalibrationActivationRow).order_by(CalibrationActivationRow.id.desc()).limit(1)
+    return session.scalars(q).first()
+
+
+def add_activation(
+    session: Session, *, calibration_json: str | None, calibration_hash: str | None, source: str
+) -> CalibrationActivationRow:
+    """Make a calibration (None: nominal) the active one; commits."""
+    row = CalibrationActivationRow(calibration_json=calibration_json,
+                                   calibration_hash=calibration_hash, source=source,
+                                   activated_at=now())
+    session.add(row)
+    session.commit()
+    return row
+
+
+# -- calibration jobs ------------------------------------------------------------------------
+def create_calibration_job(
+    session: Session, *, job_id: str, plan: dict, activate: bool, out_dir: str, steps_total: int
+) -> CalibrationJobRow:
+    """Store a new calibration job (state ``queued``)."""
+    t = now()
+    row = CalibrationJobRow(
+        id=job_id, state="queued", plan_json=dumps(plan), activate=activate, steps_done=0,
+        steps_total=steps_total, message="queued", error=None, out_dir=out_dir,
+        calibration_hash=None, activated=False, created_at=t, started_at=None, updated_at=t,
+        finished_at=None,
+    )
+    session.add(row)
+    session.commit()
+    return row
+
+
+def get_calibration_job(session: Session, job_id: str) -> CalibrationJobRow | None:
+    return session.get(CalibrationJobRow, job_id)
+
+
+def require_calibration_job(session: Session, job_id: str) -> CalibrationJobRow:
+    """The job's row, or :class:`NotFoundError` (404) naming it."""
+    row = session.get(CalibrationJobRow, job_id)
+    if row is None:
+        raise NotFoundError(f"no calibration job {job_id}")
+    return row
+
+
+def list_calibration_jobs(session: Session, limit: int, offset: int) -> list[CalibrationJobRow]:
+    q = (select(CalibrationJobRow).order_by(CalibrationJobRow.created_at.desc())
+         .limit(limit).offset(offset))
+    return list(session.scalars(q))
+
+
+def update_calibration_job(
+    session: Session, job_id: str, *, allowed_from: Iterable[str] | None = None, **values: Any
+) -> bool:
+    """Set columns of a job (only from the states ``allowed_from``, if given); True if changed."""
+    values["updated_at"] = now()
+    stmt = update(CalibrationJobRow).where(CalibrationJobRow.id == job_id)
+    if allowed_from is not None:
+        stmt = stmt.where(CalibrationJobRow.state.in_(list(allowed_from)))
+    changed = session.execute(stmt.values(**values)).rowcount == 1
+    session.commit()
+    return changed
+
+
+def fail_unfinished_calibration_jobs(session: Session, message: str) -> list[str]:
+    """At startup: every job a stopped service left ``queued`` or ``running`` becomes
+    ``failed`` with ``message``."""
+    ids = list(session.scalars(select(CalibrationJobRow.id).where(
+        CalibrationJobRow.state.in_(("queued", "running")))))
+    for job_id in ids:
+        update_calibration_job(session, job_id, allowed_from=("queued", "running"),
+                               state="failed", error=message, finished_at=now())
+    return ids

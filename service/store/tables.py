@@ -7,13 +7,19 @@ written in the same transaction as the result that uses it, so a frame without a
 orphan of a crash.
 
 ``UNIQUE(campaign_id, pose_index, repeat)`` makes a repeated result impossible, not just unlikely.
+
+Calibration (revision 0002): ``calibration_activations`` is the history of the service's active
+calibration (the newest row is the active one; a row without content means "nominal"), and
+``calibration_jobs`` are the calibration sequences run on the rig. Frames, results and campaigns
+record the calibration hash (:func:`sim_core.twin_file.twin_hash`) they used; a campaign keeps
+the calibration it pinned when it was created, so a resume applies the same one.
 Times are seconds since the epoch (floats), as in Bluesky documents. Every change to these
 classes comes with a migration (:mod:`service.store.migrations`).
 """
 
 from __future__ import annotations
 
-from sqlalchemy import Float, ForeignKey, Integer, String, Text, UniqueConstraint
+from sqlalchemy import Boolean, Float, ForeignKey, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -42,6 +48,9 @@ class CampaignRow(Base):
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     updated_at: Mapped[float] = mapped_column(Float)
     finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    #: the calibration pinned at creation (its JSON and hash; None: nominal)
+    calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    calibration_json: Mapped[str | None] = mapped_column(Text, nullable=True)
 
 
 class PlannedPoseRow(Base):
@@ -71,6 +80,9 @@ class FrameRow(Base):
     rig_json: Mapped[str] = mapped_column(Text, default="null")
     summary_json: Mapped[str] = mapped_column(Text, default="{}")
     created_at: Mapped[float] = mapped_column(Float)
+    #: the calibration the simulation applied (a measured frame: whose intrinsics reconstructed
+    #: it); None: nominal
+    calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class PoseResultRow(Base):
@@ -93,3 +105,41 @@ class PoseResultRow(Base):
     rig_json: Mapped[str] = mapped_column(Text)
     timings_json: Mapped[str] = mapped_column(Text)
     created_at: Mapped[float] = mapped_column(Float)
+    #: the calibration the simulation applied; None: nominal
+    calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+
+
+class CalibrationActivationRow(Base):
+    """One change of the active calibration; the newest row (highest id) is in force."""
+
+    __tablename__ = "calibration_activations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    #: the calibration file's content as JSON; None: back to nominal
+    calibration_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    #: where it came from: ``PUT /calibration``, ``calibration job <id>``, ``DELETE /calibration``
+    source: Mapped[str] = mapped_column(String(200))
+    activated_at: Mapped[float] = mapped_column(Float)
+
+
+class CalibrationJobRow(Base):
+    """A calibration sequence run on the rig as a background job."""
+
+    __tablename__ = "calibration_jobs"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    state: Mapped[str] = mapped_column(String(16), index=True)
+    plan_json: Mapped[str] = mapped_column(Text)
+    activate: Mapped[bool] = mapped_column(Boolean, default=False)
+    steps_done: Mapped[int] = mapped_column(Integer, default=0)
+    steps_total: Mapped[int] = mapped_column(Integer, default=0)
+    message: Mapped[str] = mapped_column(Text, default="")
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    out_dir: Mapped[str] = mapped_column(Text)
+    calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    activated: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[float] = mapped_column(Float)
+    started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    updated_at: Mapped[float] = mapped_column(Float)
+    finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from service.api.deps import (
+    CalibrationsDep,
     LeaseDep,
     RunnerDep,
     SceneDep,
@@ -100,6 +101,9 @@ def camera_capture(
 
 
 @router.post("/stop", response_model=StopOut, responses=errors(401, 503))
-def emergency_stop(lease: LeaseDep, runner: RunnerDep, _: TokenDep) -> dict:
-    """Emergency stop: halt the turntable, close the shutter, pause a running campaign."""
-    return devices.emergency_stop(lease, runner)
+def emergency_stop(
+    lease: LeaseDep, runner: RunnerDep, calibrations: CalibrationsDep, _: TokenDep
+) -> dict:
+    """Emergency stop: halt the turntable, close the shutter, pause a running campaign, cancel
+    a running calibration job."""
+    return devices.emergency_stop(lease, runner, calibrations)

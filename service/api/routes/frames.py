@@ -96,7 +96,8 @@ def frame_public(store, row, with_metadata: bool = True) -> dict:
     return json_safe({
         "id": row.id, "kind": row.kind, "created_at": row.created_at,
         "campaign_id": row.campaign_id, "scene_name": row.scene_name,
-        "scene_hash": row.scene_hash, "rig": json.loads(row.rig_json),
+        "scene_hash": row.scene_hash, "calibration_hash": row.calibration_hash,
+        "rig": json.loads(row.rig_json),
         "summary": json.loads(row.summary_json), "metadata": meta,
         "links": {"self": base, "arrays": f"{base}/arrays", "raw": f"{base}/raw",
                   "grey": f"{base}/preview/grey.png", "depth": f"{base}/preview/depth.png"},

@@ -58,4 +58,5 @@ def pose_public(row: PoseResultRow) -> dict:
         "metrics": {k: v for k, v in metrics.items() if k != "table"},
         "table": metrics.get("table", []), "rig": json.loads(row.rig_json),
         "timings_s": json.loads(row.timings_json), "created_at": row.created_at,
+        "calibration_hash": row.calibration_hash,
     }

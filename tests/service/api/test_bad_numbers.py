@@ -29,6 +29,21 @@ BASE_BODIES: dict[tuple[str, str], dict[str, Any]] = {
         "poses": [{"turntable_deg": 0.0, "solar_suns": 1.0, "repeats": 1}],
         "mask": {"kind": "region", "rows": [0, 10], "cols": [0, 10]},
     },
+    ("PUT", "/api/v1/calibration"): {
+        "camera": {"fx_px": 210.0, "cy_px": 85.0, "distortion": {"k1": -0.1},
+                   "depth": {"phase_offset_rad": [0.01],
+                             "wiggling": [{"harmonic": 4, "amplitude_rad": 0.01}]},
+                   "sensor": {"adc_gain_e_per_dn": 9.0}},
+        "illumination": {"power_w": 1.2},
+        "turntable": {"axis_point_m": [0.0, 0.0, 0.0], "zero_offset_deg": 0.5},
+        "solar_simulator": {"irradiance_scale": 1.0},
+    },
+    ("POST", "/api/v1/calibrations"): {
+        "fixtures": ["tilt+30", "tilt-30"], "frames_per_view": 1, "noise_frames": 2,
+        "sweep": {"from_deg": -30.0, "to_deg": 30.0, "step_deg": 15.0},
+        "solar_levels_suns": [1.0], "solar_frames": 1, "solar_reference_suns": 1.0,
+        "activate": False,
+    },
 }
 BAD_NUMBERS = ("NaN", "Infinity", "-Infinity", "1e309")
 SENTINEL = "__BAD_NUMBER__"
@@ -134,6 +149,8 @@ def test_every_numeric_field_of_every_body_refuses_what_json_cannot_carry(client
     assert math.isclose(client.get("/api/v1/devices/turntable/position").json()["angle_deg"],
                         angle_before, abs_tol=1e-9)
     assert client.get("/api/v1/campaigns").json() == []
+    assert client.get("/api/v1/calibrations").json() == []
+    assert client.get("/api/v1/calibration").status_code == 404
 
 
 def test_a_lone_surrogate_is_a_422_not_a_failure_to_encode_it(client):

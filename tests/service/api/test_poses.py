@@ -136,7 +136,8 @@ def test_manual_devices_report_and_obey(client):
     cap = client.post("/api/v1/devices/camera/capture", headers=AUTH)
     assert cap.status_code == 201 and cap.json()["rig"]["shutter_open"]
     stop = client.post("/api/v1/devices/stop", headers=AUTH).json()
-    assert stop == {"stopped": ["turntable", "shutter"], "errors": {}, "campaign_paused": None}
+    assert stop == {"stopped": ["turntable", "shutter"], "errors": {}, "campaign_paused": None,
+                    "calibration_cancelled": None}
     devices = {d["name"]: d for d in client.get("/api/v1/devices").json()["devices"]}
     assert all(d["ok"] for d in devices.values())
     assert devices["solar_simulator"]["details"]["shutter_open"] is False

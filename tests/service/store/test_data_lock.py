@@ -98,6 +98,7 @@ def test_a_second_lab_on_the_same_directory_touches_nothing(tmp_path):
     assert read_holder(tmp_path) is None
     lab = open_lab(make_settings(tmp_path))  # released by close: the next start recovers
     try:
-        assert lab.recovered == {"interrupted": ["c" * 32], "swept_frames": ["d" * 32]}
+        assert lab.recovered == {"interrupted": ["c" * 32], "swept_frames": ["d" * 32],
+                                 "failed_calibrations": []}
     finally:
         lab.close()

@@ -22,10 +22,30 @@ TABLES = ("campaigns", "campaign_poses", "frames", "pose_results")
 
 
 def rows(path: Path) -> dict[str, list[tuple]]:
-    """Every row of the service's tables, in primary-key order (read without touching WAL)."""
+    """Every row of the service's tables, in primary-key order (read without touching WAL),
+    with the columns of the first revision (later revisions add columns)."""
     con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
     try:
-        return {t: con.execute(f"SELECT * FROM {t} ORDER BY id").fetchall() for t in TABLES}
+        return {t: con.execute(f"SELECT {', '.join(sorted(migrations.BASELINE_SCHEMA[t][0]))} "
+                               f"FROM {t} ORDER BY id").fetchall() for t in TABLES}
+    finally:
+        con.close()
+
+
+def added_columns(path: Path) -> dict[str, list[tuple]]:
+    """The calibration columns revision 0002 added, per table, in primary-key order."""
+    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    try:
+        return {
+            "campaigns": con.execute("SELECT calibration_hash, calibration_json FROM campaigns "
+                                     "ORDER BY id").fetchall(),
+            "frames": con.execute("SELECT calibration_hash FROM frames ORDER BY id").fetchall(),
+            "pose_results": con.execute(
+                "SELECT calibration_hash FROM pose_results ORDER BY id").fetchall(),
+            "new_tables": con.execute(
+                "SELECT (SELECT count(*) FROM calibration_activations),"
+                " (SELECT count(*) FROM calibration_jobs)").fetchall(),
+        }
     finally:
         con.close()
 
@@ -82,6 +102,28 @@ def test_a_pre_migration_database_is_stamped_and_every_row_survives(old_db):
     finally:
         lab.close()
     assert rows(old_db) == before
+    # revision 0002's columns: NULL (nominal) on every old row; its tables empty
+    assert added_columns(old_db) == {"campaigns": [(None, None)] * 2, "frames": [(None,)] * 11,
+                                     "pose_results": [(None,)] * 5, "new_tables": [(0, 0)]}
+
+
+def test_upgrading_0001_to_0002_keeps_every_row_and_downgrading_drops_only_the_new(old_db):
+    before = rows(old_db)
+    engine = make_engine(f"sqlite:///{old_db}")
+    try:
+        migrations.upgrade(engine, migrations.BASELINE)  # stamped at 0001, unchanged
+        assert migrations.current_revision(engine) == "0001"
+        migrations.upgrade(engine, "0002")
+        assert rows(old_db) == before
+        assert added_columns(old_db)["frames"] == [(None,)] * 11
+        with engine.begin() as conn:  # a calibrated result can be stored at 0002
+            conn.exec_driver_sql("UPDATE frames SET calibration_hash = 'abc' WHERE rowid = 1")
+        migrations.downgrade(engine, "0001")
+        assert rows(old_db) == before
+        assert "calibration_jobs" not in {n for _, n, _ in schema(old_db)}
+    finally:
+        engine.dispose()
+    assert schema(old_db) == schema(FIXTURE)
 
 
 def test_the_first_revision_is_exactly_the_pre_migration_schema(tmp_path):

@@ -1,0 +1,407 @@
+"""Calibration jobs: ``toftwin calibrate rig`` as a background job of the service.
+
+``POST /api/v1/calibrations`` validates the plan (:class:`~service.lab.requests.
+CalibrationCreate`: fixtures, sweep, frames; the angles against the stage's limits), claims the
+rig (:class:`~service.lab.rig_lease.RigLease`: 409 while a campaign or another job holds it; a
+campaign, a manual move or ``POST /poses`` is refused with 409 while the job runs), stores the
+job (``queued``) and runs :func:`calibration.rig_sequence.calibrate_rig` in one thread::
+
+    queued --> running --> done | failed | cancelled
+
+Progress (steps done of total, what the sequence is doing) is written to the job's row at
+every step, so ``GET /calibrations/{id}`` and its event stream follow it. The result is written
+as ``DATA_DIR/calibrations/.partial-<id>/`` (``calibration.yaml``, ``report.json``,
+``report.html`` and its plots, :func:`calibration.report.write_report`) and renamed to
+``DATA_DIR/calibrations/<id>/`` when complete: a job is ``done`` only with all its files. With
+``activate`` the result becomes the active calibration at once; else
+``POST /calibrations/{id}/activate`` does it later.
+
+A job cannot be resumed: a service stopped or killed while one runs marks it ``failed`` (at
+shutdown, or at the next start) with what to do, and removes its partial output. Cancel
+(``POST /calibrations/{id}/cancel``) and the emergency stop take effect before the next capture.
+
+Who swaps what is on the turntable: on the simulated lab the lab itself
+(:class:`calibration.rig_sequence.SimulatedOperator`); on the real rig the operator, whom the
+job asks through its status (``operator_instruction``) and who confirms with
+``POST /calibrations/{id}/continue`` once the board (or the test object) is mounted.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import threading
+import time
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy.orm import sessionmaker
+
+from drivers.errors import DeviceError
+from service.errors import ConflictError, GoneError, NotFoundError
+from service.lab.calibration import activate
+from service.lab.poses import check_angle
+from service.lab.requests import CalibrationCreate
+from service.lab.rig_lease import RigLease
+from service.lab.scenes import SceneSource
+from service.settings import Settings
+from service.store import queries
+from service.store.disk_space import require_free
+from sim_core.errors import InvalidInputError
+from sim_core.twin_file import load_calibration, twin_hash
+
+_log = logging.getLogger(__name__)
+
+KIND = "calibration job"
+_PARTIAL = ".partial-"
+#: what a job interrupted by the service's end says
+INTERRUPTED = ("the service stopped while the calibration ran; a calibration cannot be resumed: "
+               "start a new one (POST /api/v1/calibrations)")
+
+
+class _CancelledError(Exception):
+    """Raised inside the sequence (from its progress callback) to stop it."""
+
+
+@dataclass
+class _Run:
+    job_id: str
+    thread: threading.Thread | None = None
+    stop: threading.Event = field(default_factory=threading.Event)
+    stop_to: str = "cancelled"
+    stop_error: str | None = None
+    #: set while the job waits for the operator (real rig)
+    instruction: str | None = None
+    mounted: threading.Event = field(default_factory=threading.Event)
+
+
+class _WaitingOperator:
+    """The operator at the real rig, asked through the job's status; ``continue`` confirms."""
+
+    def __init__(self, jobs: CalibrationJobs, run: _Run) -> None:
+        self.jobs, self.run = jobs, run
+
+    def mount(self, objects: Sequence | None, instruction: str) -> None:
+        run = self.run
+        run.mounted.clear()
+        self.jobs._note(run.job_id, f"waiting for the operator: {instruction}; then POST "
+                        f"/api/v1/calibrations/{run.job_id}/continue")
+        run.instruction = instruction  # after the message: a reader sees both or neither
+        try:
+            while not run.mounted.wait(0.2):
+                if run.stop.is_set():
+                    raise _CancelledError()
+        finally:
+            run.instruction = None
+
+
+class CalibrationJobs:
+    """Creates, runs, cancels and activates calibration jobs; one at a time.
+
+    Parameters
+    ----------
+    sessions : sessionmaker
+    lease : RigLease
+        The rig; a job claims it as ``"calibration job"``.
+    scene : SceneSource
+        The service's scene: camera pose, turntable and solar simulator of the rig.
+    settings : Settings
+    root : Path
+        Where job outputs go (``DATA_DIR/calibrations``).
+    world : SimulatedWorld or None
+        The simulated lab (mounts the board itself); None on the real rig.
+    """
+
+    def __init__(self, sessions: sessionmaker, lease: RigLease, scene: SceneSource,
+                 settings: Settings, root: str | Path, world: Any = None) -> None:
+        self.sessions = sessions
+        self.lease = lease
+        self.scene = scene
+        self.settings = settings
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.world = world
+        self._lock = threading.Lock()
+        self._run: _Run | None = None
+
+    # -- start-up ------------------------------------------------------------------------------
+    def recover(self) -> list[str]:
+        """At start-up: jobs a stopped service left unfinished become ``failed``; partial outputs
+        go. Returns the failed jobs' ids."""
+        with self.sessions() as s:
+            failed = queries.fail_unfinished_calibration_jobs(s, INTERRUPTED)
+        for p in self.root.iterdir():
+            if p.name.startswith(_PARTIAL):
+                shutil.rmtree(p, ignore_errors=True)
+        return failed
+
+    # -- queries -------------------------------------------------------------------------------
+    def out_dir(self, job_id: str) -> Path:
+        return self.root / job_id
+
+    def live(self, job_id: str) -> dict[str, Any] | None:
+        run = self._run
+        if run is None or run.job_id != job_id:
+            return None
+        return {"operator_instruction": run.instruction}
+
+    def wait(self, timeout_s: float | None = None) -> None:
+        """Block until the running job's thread ends (tests)."""
+        run = self._run
+        if run is not None and run.thread is not None:
+            run.thread.join(timeout_s)
+
+    # -- commands ------------------------------------------------------------------------------
+    def create(self, req: CalibrationCreate) -> str:
+        """Validate ``req``, claim the rig, store the job and start it; returns its id."""
+        from calibration.fixtures import BoardFixture
+        from calibration.rig_sequence import DEFAULT_FIXTURES, RigCalibrationPlan
+
+        rig = self.lease.require()
+        angles = req.sweep.angles()
+        if len(angles) < 3:
+            raise InvalidInputError(
+                "sweep", f"{len(angles)} angle(s) from {req.sweep.from_deg:g} to "
+                f"{req.sweep.to_deg:g} deg every {req.sweep.step_deg:g} deg; at least 3 are "
+                "needed to determine the turntable's axis")
+        if len(angles) > 721:
+            raise InvalidInputError("sweep.step_deg", f"{len(angles)} angles; allowed: at most "
+                                    "721 (a coarser step)")
+        check_angle(rig, angles[0], "sweep.from_deg")
+        check_angle(rig, angles[-1], "sweep.to_deg")
+        by_name: dict[str, BoardFixture] = {f.name: f for f in DEFAULT_FIXTURES}
+        try:
+            plan = RigCalibrationPlan(
+                fixtures=tuple(by_name[n] for n in req.fixtures), sweep_deg=angles,
+                frames_per_view=req.frames_per_view, noise_frames=req.noise_frames,
+                solar_levels_suns=tuple(req.solar_levels_suns), solar_frames=req.solar_frames,
+                solar_reference_suns=req.solar_reference_suns)
+        except InvalidInputError as exc:  # the plan's own checks, named as in the body
+            raise InvalidInputError(exc.field.replace("sweep_deg", "sweep"), exc.message) from None
+        require_free(self.root, self.settings.min_free_bytes)  # 507 before anything moves
+        job_id = uuid.uuid4().hex
+        with self._lock:
+            if self._run is not None:
+                raise ConflictError(f"calibration job {self._run.job_id} is running; one at a time")
+            self.lease.claim(job_id, KIND)  # 409 while a campaign holds the rig
+            try:
+                with self.sessions() as s:
+                    queries.create_calibration_job(
+                        s, job_id=job_id, plan=req.model_dump(mode="json"),
+                        activate=req.activate, out_dir=str(self.out_dir(job_id)),
+                        steps_total=plan.n_captures)
+            except BaseException:
+                self.lease.release(job_id)
+                raise
+            run = _Run(job_id)
+            run.thread = threading.Thread(target=self._work, args=(run, plan, req.activate),
+                                          name=f"calibration-{job_id[:8]}", daemon=True)
+            self._run = run
+            run.thread.start()
+        return job_id
+
+    def cancel(self, job_id: str) -> None:
+        """Stop a queued or running job before its next capture (409 for a finished one)."""
+        with self._lock:
+            run = self._run
+            if run is not None and run.job_id == job_id:
+                if not run.stop.is_set():
+                    run.stop_to, run.stop_error = "cancelled", None
+                    run.stop.set()
+                thread = run.thread
+            else:
+                thread = None
+        if thread is not None:
+            if thread is not threading.current_thread():
+                thread.join(timeout=self.settings.stop_wait_s)
+            return
+        with self.sessions() as s:
+            row = queries.require_calibration_job(s, job_id)
+        raise ConflictError(f"cannot cancel calibration job {job_id} in state '{row.state}'; "
+                            "allowed while queued or running")
+
+    def confirm_mounted(self, job_id: str) -> None:
+        """The operator has mounted what the job asked for (409 if it asks for nothing)."""
+        run = self._run
+        if run is None or run.job_id != job_id or run.instruction is None:
+            with self.sessions() as s:
+                queries.require_calibration_job(s, job_id)
+            raise ConflictError(f"calibration job {job_id} is not waiting for the operator")
+        run.mounted.set()
+
+    def emergency_stop(self) -> str | None:
+        """Cancel the running job (if any) without waiting; returns its id."""
+        run = self._run
+        if run is None:
+            return None
+        with self._lock:
+            if not run.stop.is_set():
+                run.stop_to, run.stop_error = "cancelled", "emergency stop"
+                run.stop.set()
+        return run.job_id
+
+    def shutdown(self) -> None:
+        """Service shutdown: the running job stops and is ``failed`` (it cannot be resumed)."""
+        run = self._run
+        if run is None:
+            return
+        with self._lock:
+            run.stop_to, run.stop_error = "failed", INTERRUPTED
+            run.stop.set()
+        if run.thread is not None:
+            run.thread.join(timeout=self.settings.stop_wait_s)
+        # still computing (the procedures do not look at the stop): recorded now, the thread
+        # is a daemon and its late writes are refused by the state check
+        with self.sessions() as s:
+            queries.update_calibration_job(s, run.job_id, allowed_from=("queued", "running"),
+                                           state="failed", error=INTERRUPTED,
+                                           finished_at=time.time())
+
+    def activate(self, job_id: str) -> dict[str, Any]:
+        """Make a ``done`` job's result the active calibration; returns its public form."""
+        with self.sessions() as s:
+            row = queries.require_calibration_job(s, job_id)
+        if row.state != "done":
+            raise ConflictError(f"calibration job {job_id} is '{row.state}'; only a 'done' job "
+                                "has a calibration to activate")
+        path = Path(row.out_dir) / "calibration.yaml"
+        if not path.is_file():
+            raise GoneError(f"calibration job {job_id}: {path} is gone from the data directory")
+        cal = load_calibration(path)
+        out = activate(self.sessions, cal, f"calibration job {job_id}")
+        with self.sessions() as s:
+            queries.update_calibration_job(s, job_id, activated=True)
+        return out
+
+    # -- the worker thread ---------------------------------------------------------------------
+    def _note(self, job_id: str, message: str, done: int | None = None,
+              total: int | None = None) -> None:
+        values: dict[str, Any] = {"message": message}
+        if done is not None:
+            values["steps_done"] = done
+        if total is not None:
+            values["steps_total"] = total
+        with self.sessions() as s:
+            queries.update_calibration_job(s, job_id, allowed_from=("running",), **values)
+
+    def _work(self, run: _Run, plan: Any, activate_result: bool) -> None:
+        from calibration.report import write_report
+        from calibration.rig_sequence import SimulatedOperator, calibrate_rig
+
+        job_id = run.job_id
+        partial = self.root / f"{_PARTIAL}{job_id}"
+        to, error, cal_hash, activated = "done", None, None, False
+        operator: Any = None
+        try:
+            with self.sessions() as s:
+                queries.update_calibration_job(s, job_id, allowed_from=("queued",),
+                                               state="running", started_at=time.time(),
+                                               message="starting")
+            rig = self.lease.require()
+            if self.world is not None:
+                operator, rig_name = SimulatedOperator(self.world), "simulated"
+            else:
+                operator, rig_name = _WaitingOperator(self, run), "lab"
+
+            def progress(done: int, total: int, message: str) -> None:
+                if run.stop.is_set():
+                    raise _CancelledError()
+                self._note(job_id, message, done, total)
+
+            result = calibrate_rig(rig, operator, self.scene.spec, self.scene.base_dir, plan,
+                                   progress, rig_name=rig_name)
+            if run.stop.is_set():
+                raise _CancelledError()
+            self._note(job_id, "writing the report")
+            write_report(partial, result)
+            os.replace(partial, self.out_dir(job_id))
+            cal_hash = twin_hash(result.calibration)
+            if activate_result:
+                activate(self.sessions, result.calibration, f"calibration job {job_id}")
+                activated = True
+        except _CancelledError:
+            to, error = run.stop_to, run.stop_error
+        except InvalidInputError as exc:  # the sequence refused what it measured
+            to, error = "failed", (f"{exc}. The rig's data could not give a trustworthy "
+                                   "calibration: check the board, the fixtures and the plan "
+                                   "(docs/calibration.md), then start a new job")
+        except DeviceError as exc:
+            to, error = "failed", (f"device fault ({type(exc).__name__}): {exc}. Fix the rig "
+                                   "(GET /api/v1/devices), then start a new job")
+        except Exception as exc:  # a bug: recorded, never a lost thread
+            _log.exception("calibration job %s failed", job_id)
+            to, error = "failed", (f"{type(exc).__name__}: {exc} (an unexpected error; the "
+                                   "service's log has the traceback)")
+        finally:
+            if to != "done":
+                shutil.rmtree(partial, ignore_errors=True)
+            if self.world is not None and to != "done":  # the test object back on the table
+                try:
+                    self.world.mount(None)
+                except Exception:  # pragma: no cover - never mask the job's own outcome
+                    _log.exception("could not mount the test object again")
+            with self._lock:
+                self._run = None
+                self.lease.release(job_id)
+                with self.sessions() as s:
+                    queries.update_calibration_job(
+                        s, job_id, allowed_from=("queued", "running"), state=to, error=error,
+                        calibration_hash=cal_hash, activated=activated,
+                        finished_at=time.time(),
+                        message="done" if to == "done" else to)
+
+
+def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
+    """The public form of a job row."""
+    import json
+
+    base = f"/api/v1/calibrations/{row.id}"
+    out = Path(row.out_dir)
+    files = {}
+    if row.state == "done":
+        files = {n: str(out / n) for n in ("calibration.yaml", "report.json", "report.html")}
+    links = {"self": base, "events": f"{base}/events"}
+    if row.state == "done":
+        links |= {"activate": f"{base}/activate", "report": f"{base}/files/report.html",
+                  "calibration": f"{base}/files/calibration.yaml"}
+    total = max(int(row.steps_total), 1)
+    return {
+        "id": row.id, "state": row.state, "plan": json.loads(row.plan_json),
+        "activate": bool(row.activate), "steps_done": row.steps_done,
+        "steps_total": row.steps_total,
+        "progress": 1.0 if row.state == "done" else min(row.steps_done / total, 1.0),
+        "message": row.message, "error": row.error, "calibration_hash": row.calibration_hash,
+        "activated": bool(row.activated), "files": files,
+        "operator_instruction": None if live is None else live.get("operator_instruction"),
+        "created_at": row.created_at, "started_at": row.started_at,
+        "updated_at": row.updated_at, "finished_at": row.finished_at, "links": links,
+    }
+
+
+def job_status(sessions: sessionmaker, jobs: CalibrationJobs, job_id: str) -> dict[str, Any]:
+    """``GET /calibrations/{id}`` (404 for an unknown job)."""
+    with sessions() as s:
+        row = queries.require_calibration_job(s, job_id)
+    return job_public(row, jobs.live(job_id))
+
+
+def job_file(sessions: sessionmaker, job_id: str, name: str) -> Path:
+    """One output file of a done job (404 for another name, 410 when it is gone)."""
+    with sessions() as s:
+        row = queries.require_calibration_job(s, job_id)
+    if row.state != "done":
+        raise ConflictError(f"calibration job {job_id} is '{row.state}'; its files exist once "
+                            "it is 'done'")
+    out = Path(row.out_dir)
+    if not out.is_dir():
+        raise GoneError(f"calibration job {job_id}: its folder {out} is gone from the data "
+                        "directory")
+    path = out / name
+    if not path.is_file():
+        raise NotFoundError(f"calibration job {job_id} has no file {name}")
+    return path
+
