@@ -10,8 +10,8 @@ from drivers.sim.world import SimulatedWorld, default_reality
 from sim_core.camera import Intrinsics, z_over_range
 from sim_core.raw import reconstruct_raw
 from sim_core.render import RenderSettings
-from sim_core.sensor import SensorParams
 from sim_core.scene_spec import ObjectSpec, load_scene_spec
+from sim_core.sensor import SensorParams
 from sim_core.twin_file import parse_reality
 from tests.sim_core.scenes import EXAMPLES
 
