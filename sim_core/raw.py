@@ -78,11 +78,12 @@ class ValidityThresholds:
     min_amplitude_dn : float
         Pixels whose amplitude (seed eq. 5) is below this are invalid (too little signal for a
         phase). With no signal the amplitude of read noise alone is Rayleigh-distributed with a
-        scale of about 1 DN for the default sensor (25 e- read noise, 25 e-/DN), so 6 DN lets
-        a dark pixel through with probability exp(-18) ~ 1.5e-8.
+        scale of read noise / gain = 2.5 DN for the default sensor (25 e- read noise,
+        10 e-/DN), so 15 DN (6 scales) lets a dark pixel through with probability
+        exp(-18) ~ 1.5e-8.
     """
 
-    min_amplitude_dn: float = 6.0
+    min_amplitude_dn: float = 15.0
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -97,7 +97,7 @@ class SensorParams:
     read_noise_e: float = 25.0
     dark_current_e_s: float = 2_000.0
     adc_bits: int = 12
-    adc_gain_e_per_dn: float = 25.0
+    adc_gain_e_per_dn: float = 10.0
     sbi_start_e: float = 36_500.0
     sbi_limit_e: float = 500_000.0
     sbi_enabled: bool = True

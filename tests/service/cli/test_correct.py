@@ -7,7 +7,7 @@ from typer.testing import CliRunner
 
 from service.cli import app
 from sim_core import frame_io
-from sim_core.pipeline import simulate
+from sim_core.pipeline import expose_light, render_light, simulate
 from sim_core.render import RenderSettings
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
@@ -24,7 +24,10 @@ def test_correct_removes_the_depth_errors(tmp_path):
     spec = load_scene_spec(EXAMPLES / "plane.yaml")
     cal = parse_calibration(CAL)
     settings = RenderSettings(integrator="direct", spp=4, seed=1)
-    measured = simulate(build_scene(spec, EXAMPLES, twin=cal), settings)
+    # The sensor's mean response (no shot or read noise): what is left after the correction
+    # is then the correction's own error, not noise of dim pixels that decides an RMS.
+    scene = build_scene(spec, EXAMPLES, twin=cal)
+    measured = expose_light(scene, render_light(scene, settings), noise=False)
     truth = simulate(build_scene(spec, EXAMPLES), settings, ideal=True)
     frame_io.write_measured(tmp_path / "m", measured.raw, build_scene(spec, EXAMPLES).camera, {})
     write_calibration(tmp_path / "cal.yaml", cal)
@@ -35,8 +38,9 @@ def test_correct_removes_the_depth_errors(tmp_path):
     ok = fixed.image.valid & truth.image.valid & measured.image.valid
     before = (measured.image.range_m - truth.image.range_m)[ok]
     after = (fixed.image.range_m - truth.image.range_m)[ok]
-    assert np.sqrt(np.mean(before**2)) > 0.015
-    assert abs(np.median(after)) < 0.001 and np.sqrt(np.mean(after**2)) < 0.5 * np.std(before)
+    assert np.sqrt(np.mean(before**2)) > 0.01  # offset, wiggling and fixed pattern: ~12 mm
+    rms = lambda e: np.sqrt(np.mean(e**2))  # noqa: E731
+    assert abs(np.median(after)) < 0.001 and rms(after) < 0.1 * rms(before)
     assert fixed.meta["corrected"]["calibration_hash"]
     # The input is never overwritten, an existing output needs --force.
     again = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
