@@ -49,6 +49,12 @@ class IntrinsicsResult:
         ``{"name", "reason"}`` of the views not used.
     normal_spread : float
         The spread measure of the board normals (see module docstring).
+    n_corners : int
+    refined_with_turntable : bool
+        True when ``intrinsics``, ``rms_px`` and ``poses`` come from the bundle adjustment of
+        camera and turntable together (:func:`calibration.turntable_axis.fit_turntable_axis`),
+        False when from OpenCV's free-pose calibration (``std`` and the per-view RMS always
+        are).
     """
 
     intrinsics: Intrinsics
@@ -59,6 +65,7 @@ class IntrinsicsResult:
     rejected: list[dict[str, str]]
     normal_spread: float
     n_corners: int
+    refined_with_turntable: bool = False
 
     def summary(self) -> dict:
         k = self.intrinsics
@@ -66,7 +73,8 @@ class IntrinsicsResult:
                 "distortion": list(k.distortion), "std": self.std, "rms_px": self.rms_px,
                 "views": len(self.per_view_rms_px), "corners": self.n_corners,
                 "worst_view_rms_px": max(self.per_view_rms_px.values()),
-                "normal_spread": self.normal_spread, "rejected": self.rejected}
+                "normal_spread": self.normal_spread, "rejected": self.rejected,
+                "refined_with_turntable": self.refined_with_turntable}
 
     def plot(self, ax) -> str:
         names = list(self.per_view_rms_px)

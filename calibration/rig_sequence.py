@@ -4,8 +4,12 @@
    (:class:`Operator`; the simulated lab mounts it itself); the turntable sweeps the board
    past the camera with the solar simulator off; each view averages several frames
    (:mod:`calibration.captures`) and OpenCV finds the board's corners in its amplitude.
-2. **Intrinsics and distortion** from all views (:mod:`calibration.intrinsics`).
-3. **Turntable axis and zero** from the board poses (:mod:`calibration.turntable_axis`).
+2. **Intrinsics and distortion** from all views (:mod:`calibration.intrinsics`), as the start
+   of 3.
+3. **Turntable axis and zero**, and the intrinsics again, by one bundle adjustment of the camera
+   and the turntable model together (:mod:`calibration.turntable_axis`); then the detector's
+   corner bias is measured on the twin's renders of the views (:mod:`calibration.corner_bias`),
+   removed, and 2 and 3 run again.
 4. **Depth errors**: measured phase on the board against the range its pose predicts
    (:mod:`calibration.board_range`, :mod:`calibration.depth`).
 5. **Noise and gain**: a stack of frames of one static view, photon transfer
@@ -60,13 +64,13 @@ DEFAULT_BOARD: dict[str, Any] = {
 #: CALIBRATION-NOTES.md), each at two distances off the axis towards the camera, so that the
 #: board sweeps across the image and reaches its edges and lower part (docs/calibration.md)
 DEFAULT_FIXTURES = tuple(
-    BoardFixture(f"tilt{tilt:+d}@{off_mm}mm", float(tilt), centre_height_m=0.26,
+    BoardFixture(f"{tilt_name}@{off_mm}mm", tilt, centre_height_m=0.26,
                  towards_camera_m=off_mm * 1e-3)
-    for off_mm in (200, 400) for tilt in (30, -30, 0))
-#: rounds of the corner-bias synthesis: the second renders the views at the poses the first
-#: round's calibration found, which are closer to the truth (the bias depends on where a corner
-#: falls within its pixel)
-DEBIAS_ROUNDS = 2
+    for off_mm in (200, 400) for tilt_name, tilt in (("tilt+30", 30.0), ("tilt-30", -30.0),
+                                                      ("tilt0", 0.0)))
+#: rounds of the corner-bias synthesis (each renders every view at the poses the turntable
+#: model places it, with the calibrated camera)
+DEBIAS_ROUNDS = 1
 
 @dataclass(frozen=True)
 class RigCalibrationPlan:
@@ -198,19 +202,17 @@ def calibrate_rig(
                           cap, fixture))
     results: dict[str, Any] = {"views": {"used": len(views), "not_detected": missed}}
 
-    # 2. intrinsics ------------------------------------------------------------------------
-    progress(done, total, "intrinsics")
-    intr = _intrinsics(views, camera)
+    # 2. intrinsics, 3. turntable axis (camera and turntable adjusted together) -------------
+    progress(done, total, "intrinsics and turntable")
+    intr, axis = _camera_and_turntable(views, plan, spec, camera)
     # The detector's own bias, measured on the twin's renders of the same views, removed.
     measured_views = views
     for round_ in range(DEBIAS_ROUNDS):
         progress(done, total, f"corner bias by synthesis, round {round_ + 1}")
         views, corner_bias_px = _debias(measured_views, intr, spec, base, plan, camera)
-        intr = _intrinsics(views, camera)
+        intr, axis = _camera_and_turntable(views, plan, spec, camera)
     results["intrinsics"] = intr
     results["views"]["corner_bias_rms_px"] = corner_bias_px
-    # 3. turntable axis --------------------------------------------------------------------
-    axis = _axis(views, intr, plan, spec, camera)
     results["turntable"] = axis
     # 4. depth errors ----------------------------------------------------------------------
     progress(done, total, "depth errors")
@@ -305,15 +307,24 @@ def _camera_keys(intr) -> dict[str, Any]:
     return {"fx_px": k.fx_px, "fy_px": k.fy_px, "cx_px": k.cx_px, "cy_px": k.cy_px,
             "distortion": {"k1": d[0], "k2": d[1], "p1": d[2], "p2": d[3], "k3": d[4]}}
 
-def _axis(views, intr, plan, spec, camera):
+def _camera_and_turntable(views, plan, spec, camera):
+    """OpenCV's free-pose calibration as the start, then one bundle adjustment of the camera
+    and the turntable model together (:func:`calibration.turntable_axis.fit_turntable_axis`):
+    the intrinsics result carries the adjusted intrinsics and the model's poses."""
+    import dataclasses
+
     from calibration.turntable_axis import fit_turntable_axis
 
+    free = _intrinsics(views, camera)
     known = {f.name: world_from_board(plan.board, f, spec) for f in plan.fixtures}
     tt = spec.turntable
-    return fit_turntable_axis([v for v, _, _ in views], intr.poses, camera.world_from_camera,
+    axis = fit_turntable_axis([v for v, _, _ in views], free.poses, camera.world_from_camera,
                               known, tt.axis_point_m if tt else (0.0, 0.0, 0.0),
                               tt.axis_direction if tt else (0.0, 0.0, 1.0),
-                              intrinsics=intr.intrinsics)
+                              intrinsics=free.intrinsics, refine_intrinsics=True)
+    intr = dataclasses.replace(free, intrinsics=axis.intrinsics, poses=axis.poses,
+                               rms_px=axis.reprojection_rms_px, refined_with_turntable=True)
+    return intr, axis
 
 
 def _turntable_keys(axis) -> TurntableParameters:

@@ -13,18 +13,26 @@ the board's corners between the model and each view's PnP pose, then, given the 
 the corners' reprojection error in the images (a bundle adjustment of the turntable model).
 Reported angle + z = true angle. Each fixture's own zero (from its views alone) is reported as a
 check.
+
+With ``refine_intrinsics`` the last stage also frees the intrinsics and distortion (fx, fy, cx,
+cy, k1, k2, p1, p2): one bundle adjustment of camera and turntable together. The views are then
+tied by the turntable model (a few dozen parameters) instead of a free pose each (six per view),
+which determines what a free-pose calibration leaves weak: the focal length against the boards'
+distance (which places the axis along the line of sight) and the principal point against the
+camera's rotation (which places it sideways).
 The axis point reported is the axis' point closest to the nominal axis point.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from sim_core.camera import Intrinsics
 from sim_core.errors import InvalidInputError
 from sim_core.geometry import axis_angle_matrix
 
@@ -46,6 +54,13 @@ class TurntableAxisResult:
     per_view_mm : dict
     zero_spread_deg : float
         Spread of the zero offset between fixtures (0 with one fixture).
+    intrinsics : Intrinsics or None
+        The intrinsics refined together with the turntable (``refine_intrinsics``), else None.
+    reprojection_rms_px : float or None
+        RMS of the corners' reprojection through the turntable model (with intrinsics given).
+    poses : dict
+        View name -> (rvec, tvec): the board in the camera frame as the turntable model places
+        it (the same form as :class:`calibration.intrinsics.IntrinsicsResult`'s poses).
     """
 
     axis_point_m: np.ndarray
@@ -54,13 +69,21 @@ class TurntableAxisResult:
     rms_mm: float
     per_view_mm: dict[str, float]
     zero_spread_deg: float
+    intrinsics: Intrinsics | None = None
+    reprojection_rms_px: float | None = None
+    poses: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
 
     def summary(self) -> dict:
         return {"axis_point_m": self.axis_point_m.tolist(),
                 "axis_direction": self.axis_direction.tolist(),
                 "zero_offset_deg": self.zero_offset_deg, "rms_mm": self.rms_mm,
                 "worst_view_mm": max(self.per_view_mm.values()),
-                "zero_spread_deg": self.zero_spread_deg}
+                "zero_spread_deg": self.zero_spread_deg,
+                "reprojection_rms_px": self.reprojection_rms_px,
+                "refined_intrinsics": None if self.intrinsics is None else {
+                    "fx_px": self.intrinsics.fx_px, "fy_px": self.intrinsics.fy_px,
+                    "cx_px": self.intrinsics.cx_px, "cy_px": self.intrinsics.cy_px,
+                    "distortion": list(self.intrinsics.distortion)}}
 
     def plot(self, ax) -> str:
         names = list(self.per_view_mm)
@@ -110,6 +133,7 @@ def fit_turntable_axis(
     nominal_point_m=(0.0, 0.0, 0.0),
     nominal_direction=(0.0, 0.0, 1.0),
     intrinsics=None,
+    refine_intrinsics: bool = False,
 ) -> TurntableAxisResult:
     """Fit the axis and zero (module docstring).
 
@@ -127,7 +151,13 @@ def fit_turntable_axis(
         adjustment of the turntable model: every view's corners together, so the poses' weak
         depth direction is weighted as the images determine it); without it, the distance of
         the boards' corners between the model and the views' own poses.
+    refine_intrinsics : bool
+        Fit the intrinsics and distortion together with the turntable (module docstring); needs
+        ``intrinsics`` as the start.
     """
+    if refine_intrinsics and intrinsics is None:
+        raise InvalidInputError("turntable.intrinsics", "refining the intrinsics together with "
+                                "the turntable needs the calibrated intrinsics as a start")
     used = [v for v in views if v.name in poses]
     mounts = sorted({v.mounting for v in used})
     unknown = [m for m in mounts if m not in fixtures_world_from_board]
@@ -189,22 +219,52 @@ def fit_turntable_axis(
         return np.concatenate([(world_points(x, v, ref) - meas).ravel()
                                for v, ref, meas in measured])
 
+    n_turntable = len(x0)
+
+    def camera_of(x):
+        if len(x) == n_turntable:
+            return k, dist
+        fx, fy, cx, cy, k1, k2, p1, p2 = x[n_turntable:]
+        return (np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]),
+                np.array([k1, k2, p1, p2, 0.0]))
+
     def image_residuals(x):
+        kk, dd = camera_of(x)
         out = []
         for v in used:
             pw = world_points(x, v, v.object_points_m)
             pc = pw @ cfw[:3, :3].T + cfw[:3, 3]
-            img, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), k, dist)
+            img, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), kk, dd)
             out.append((img.reshape(-1, 2) - v.image_points_px).ravel())
         return np.concatenate(out)
 
     sol = least_squares(pose_residuals, np.asarray(x0), method="lm", x_scale="jac")
+    refined = None
+    reprojection_rms = None
     if intrinsics is not None:
         sol = least_squares(image_residuals, sol.x, method="lm", x_scale="jac")
-    a, c, _, zero = unpack(sol.x)
+        if refine_intrinsics:
+            start = np.concatenate([sol.x, [intrinsics.fx_px, intrinsics.fy_px,
+                                            intrinsics.cx_px, intrinsics.cy_px],
+                                    np.asarray(intrinsics.distortion, dtype=np.float64)[:4]])
+            sol = least_squares(image_residuals, start, method="lm", x_scale="jac")
+            kk, dd = camera_of(sol.x)
+            refined = Intrinsics(intrinsics.width_px, intrinsics.height_px, float(kk[0, 0]),
+                                 float(kk[1, 1]), float(kk[0, 2]), float(kk[1, 2]),
+                                 tuple(float(v) for v in dd))
+        reprojection_rms = float(np.sqrt(np.mean(image_residuals(sol.x) ** 2) * 2.0))
+    a, c, _, zero = unpack(sol.x[:n_turntable])
+    model_poses = {}
+    for v in used:
+        mm = unpack(sol.x[:n_turntable])[2][v.mounting]
+        w = np.eye(4)
+        w[:3, :3] = axis_angle_matrix(a, np.radians(v.turntable_angle_deg)) @ mm[:3, :3]
+        w[:3, 3] = _rotate(mm[:3, 3][None, :], a, c, np.radians(v.turntable_angle_deg))[0]
+        cfb = cfw @ w
+        model_poses[v.name] = (cv2.Rodrigues(cfb[:3, :3])[0].ravel(), cfb[:3, 3].copy())
     if np.dot(a, a0) < 0:
         a = -a
-    res = pose_residuals(sol.x).reshape(len(measured), -1, 3)
+    res = pose_residuals(sol.x[:n_turntable]).reshape(len(measured), -1, 3)
     per_view = {v.name: float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) * 1e3
                 for (v, _, _), r in zip(measured, res, strict=True)}
     # Each fixture's own zero (its fitted orientation against the known one), as a check.
@@ -217,4 +277,5 @@ def fit_turntable_axis(
     return TurntableAxisResult(
         axis_point_m=point, axis_direction=a, zero_offset_deg=float(zero),
         rms_mm=float(np.sqrt(np.mean(np.sum(res**2, axis=2)))) * 1e3, per_view_mm=per_view,
-        zero_spread_deg=float(np.ptp(zeros)) if len(zeros) > 1 else 0.0)
+        zero_spread_deg=float(np.ptp(zeros)) if len(zeros) > 1 else 0.0,
+        intrinsics=refined, reprojection_rms_px=reprojection_rms, poses=model_poses)

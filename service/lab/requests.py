@@ -23,6 +23,7 @@ from pydantic import (
     model_validator,
 )
 
+from calibration.rig_sequence import DEFAULT_FIXTURES
 from sim_core.lights import SUNS_RANGE
 
 SUNS_LOW, SUNS_HIGH = SUNS_RANGE
@@ -179,9 +180,9 @@ class CampaignCreate(RequestBody):
 
 
 # -- calibration jobs ----------------------------------------------------------------------------
-#: the board fixtures of the calibration sequence (calibration.rig_sequence.DEFAULT_FIXTURES)
-FixtureName = Literal["tilt+30", "tilt-30", "tilt0"]
-FIXTURE_NAMES: tuple[str, ...] = ("tilt+30", "tilt-30", "tilt0")
+#: the board fixtures of the calibration sequence, by name
+FIXTURE_NAMES: tuple[str, ...] = tuple(f.name for f in DEFAULT_FIXTURES)
+FixtureName = Literal[FIXTURE_NAMES]  # type: ignore[valid-type]
 
 
 class SweepIn(RequestBody):
@@ -218,7 +219,8 @@ class CalibrationCreate(RequestBody):
     """
 
     fixtures: list[FixtureName] = Field(
-        default_factory=lambda: list(FIXTURE_NAMES), min_length=1, max_length=3,
+        default_factory=lambda: list(FIXTURE_NAMES), min_length=1,
+        max_length=len(FIXTURE_NAMES),
         description="Board fixtures to sweep (each once). Several tilts are needed for the "
         "principal point: the upright board alone is a degenerate set and is refused.")
     sweep: SweepIn = SweepIn()

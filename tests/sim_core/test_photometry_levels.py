@@ -19,4 +19,5 @@ def test_board_whites_stay_far_from_saturation():
     for r in board_whites(spp=4):
         assert r["saturated_white_px"] == 0, r
         assert r["fuller_tap_dn"] < 0.5 * r["adc_top_dn"], r
-        assert 200.0 < r["white_amplitude_dn"] < 1000.0, r
+        # The nearest fixture (400 mm off the axis, 0.6 m from the camera) reads ~1300 DN.
+        assert 200.0 < r["white_amplitude_dn"] < 2000.0, r

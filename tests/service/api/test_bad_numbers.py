@@ -39,7 +39,7 @@ BASE_BODIES: dict[tuple[str, str], dict[str, Any]] = {
         "solar_simulator": {"irradiance_scale": 1.0},
     },
     ("POST", "/api/v1/calibrations"): {
-        "fixtures": ["tilt+30", "tilt-30"], "frames_per_view": 1, "noise_frames": 2,
+        "fixtures": ["tilt+30@200mm", "tilt-30@200mm"], "frames_per_view": 1, "noise_frames": 2,
         "sweep": {"from_deg": -30.0, "to_deg": 30.0, "step_deg": 15.0},
         "solar_levels_suns": [1.0], "solar_frames": 1, "solar_reference_suns": 1.0,
         "activate": False,

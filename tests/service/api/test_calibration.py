@@ -42,7 +42,7 @@ CALIBRATION = {
 }
 #: a reduced plan: two tilts, four angles each, single frames (a job of about 18 s on the lab
 #: without the solar simulator, ``lab_without_sun``)
-SHORT_PLAN = {"fixtures": ["tilt+30", "tilt-30"],
+SHORT_PLAN = {"fixtures": ["tilt+30@200mm", "tilt-30@200mm"],
               "sweep": {"from_deg": -30.0, "to_deg": 30.0, "step_deg": 20.0},
               "frames_per_view": 1, "noise_frames": 4, "solar_levels_suns": [1.0],
               "solar_frames": 1}
@@ -147,10 +147,11 @@ def test_simulations_apply_the_active_calibration_and_record_its_hash(client):
     assert frame["calibration_hash"] == cal_hash
     assert frame["metadata"]["calibration_hash"] == cal_hash  # frame.json says it too
     assert calibrated["scene_hash"] != nominal["scene_hash"]
-    # The intrinsics (a 12 % longer focal length) change the image: the object grows.
+    # The intrinsics (a 12 % longer focal length) change the image: the object grows (by less
+    # than 1.12^2 in valid pixels: the image's edges crop the floor in front of it).
     a, b = arrays(client, nominal["frame_id"]), arrays(client, calibrated["frame_id"])
     near = [(x["range_m"] < 1.2) & x["valid"] for x in (a, b)]
-    assert near[1].sum() > 1.1 * near[0].sum(), (near[0].sum(), near[1].sum())
+    assert near[1].sum() > 1.05 * near[0].sum(), (near[0].sum(), near[1].sum())
 
     # a pose comparison: the result and both frames name the calibration
     pose = client.post("/api/v1/poses", headers=AUTH,
@@ -307,7 +308,7 @@ def test_a_job_whose_data_cannot_calibrate_fails_with_what_to_do(client, tmp_pat
 
 @pytest.mark.parametrize(("plan", "field"), [
     ({"fixtures": []}, "fixtures"),
-    ({"fixtures": ["tilt0", "tilt0"]}, "fixtures"),
+    ({"fixtures": ["tilt0@200mm", "tilt0@200mm"]}, "fixtures"),
     ({"fixtures": ["upside-down"]}, "fixtures[0]"),
     ({"sweep": {"from_deg": -10, "to_deg": 10, "step_deg": 15}}, "sweep"),
     ({"sweep": {"from_deg": 10, "to_deg": -10}}, "sweep"),
@@ -366,7 +367,7 @@ def test_on_a_real_rig_the_job_asks_the_operator_and_the_emergency_stop_cancels_
             "operator_instruction"] is None:
         assert time.monotonic() < deadline, status
         time.sleep(0.05)
-    assert "fixture 'tilt+30'" in status["operator_instruction"]
+    assert "fixture 'tilt+30@200mm'" in status["operator_instruction"]
     assert f"/api/v1/calibrations/{jid}/continue" in status["message"]
     assert status["state"] == "running" and status["steps_done"] == 0
     res = client.post(f"/api/v1/calibrations/{jid}/continue", headers=AUTH)
