@@ -9,6 +9,7 @@ board and the test object when asked) or on the simulated lab (``--simulated``, 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -49,6 +50,10 @@ def rig_command(
     frames_per_view: Annotated[
         int, typer.Option("--frames-per-view", help="Frames averaged per board view (1-64).")
     ] = 4,
+    sweep_step_deg: Annotated[
+        float, typer.Option("--sweep-step", help="Step of the board sweep over -55..55 deg "
+                            "[deg, 1-30]; coarser is quicker and measures less well.")
+    ] = 5.0,
     solar_reference_suns: Annotated[
         float | None,
         typer.Option("--solar-reference-suns",
@@ -79,11 +84,15 @@ def rig_command(
             raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
         bounded("--frames-per-view", frames_per_view, 1, 64)
         bounded("--camera-spp", camera_spp, 1, 4096)
+        bounded("--sweep-step", sweep_step_deg, 1.0, 30.0)
         if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
             source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
         else:
             source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        n_angles = math.floor(110.0 / sweep_step_deg + 1e-9) + 1
         plan = RigCalibrationPlan(frames_per_view=frames_per_view,
+                                  sweep_deg=tuple(-55.0 + i * sweep_step_deg
+                                                  for i in range(n_angles)),
                                   solar_reference_suns=solar_reference_suns)
         world = None
         if simulated:

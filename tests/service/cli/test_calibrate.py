@@ -30,7 +30,9 @@ def test_bad_options_are_exit_2_and_nothing_is_written(tmp_path):
     res = run("calibrate", "rig", "--out", tmp_path / "c", "--simulated",
               "--frames-per-view", 0)
     assert res.exit_code == 2 and "--frames-per-view" in res.output
-    assert not any((tmp_path / n).exists() for n in ("a", "b", "c"))
+    res = run("calibrate", "rig", "--out", tmp_path / "d", "--simulated", "--sweep-step", 45)
+    assert res.exit_code == 2 and "--sweep-step" in res.output
+    assert not any((tmp_path / n).exists() for n in ("a", "b", "c", "d"))
 
 
 @pytest.mark.slow
@@ -39,7 +41,9 @@ def test_a_full_run_writes_the_calibration_and_its_report(tmp_path):
     reality = tmp_path / "reality.yaml"
     reality.write_text("turntable: {zero_offset_deg: 0.6}\ncamera: {cx_px: 113.0}\n")
     out = tmp_path / "cal"
-    res = run("calibrate", "rig", "--out", out, "--simulated", "--reality", reality, "-q")
+    # The whole sequence at a coarser sweep (every 10 deg): the round trips run the default.
+    res = run("calibrate", "rig", "--out", out, "--simulated", "--reality", reality, "-q",
+              "--sweep-step", 10)
     assert res.exit_code == 0, res.output
     cal = load_calibration(out / "calibration.yaml")
     # The round trip's current bounds (tests/calibration/test_rig_roundtrip.py).
