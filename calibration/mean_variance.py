@@ -32,7 +32,8 @@ x is ``var_FT(mu) = Var[FT(X)]`` with X normal of that mean and variance (comput
 Gauss-Hermite quadrature, not by the first-order delta method, which is ~10 % off where the
 read noise dominates); for large mu it tends to K (per tap): the variance-stabilised curve's
 plateau is the system gain, its rise toward small means the read noise. The fit is a robust
-weighted least-squares fit of (K, sigma_y.dark^2) to the binned FT variances.
+weighted least-squares fit of (K, sigma_y.dark^2) to the binned FT variances, plus, given an
+unclipped dark stack (a black level), its variance as the curve's value at zero (EMVA 1288).
 
 Only samples in the linear range are used: below ``linear_share`` of the largest mean (the
 pixel's SBI starts above, adding the compensation charge's own noise) and above the mean where
@@ -119,7 +120,9 @@ class MeanVarianceFit:
     system_gain_dn_per_e : float
         EMVA 1288's K [DN/e-].
     read_noise_e : float
-        Read noise per tap sigma_r [e-] (EMVA 1288's sigma_d without dark-current shot noise).
+        Read noise per tap sigma_r [e-]. Without a dark stack the dark current's electrons are
+        part of the signal and this is the read noise alone (the sensor parameter); with one
+        (subtracted) it is EMVA 1288's sigma_d, dark-current shot noise included.
     gain_std_error, read_noise_std_error : float
         Standard errors of the two from the fit's covariance.
     dark_noise_dn2 : float
@@ -254,10 +257,16 @@ def fit_mean_variance(
         raise InvalidInputError(field, "no stacks: at least one stack of 2 or more frames")
     dark_mean = None
     dark_sd = None
+    dark_point = None
     if dark is not None:
         d = _checked(dark, "dark")
         dark_mean = d.mean(axis=0)
-        dark_sd = float(np.sqrt(d.var(axis=0, ddof=1).mean()))
+        dark_var = d.var(axis=0, ddof=1)
+        dark_sd = float(np.sqrt(dark_var.mean()))
+        # Unclipped (a black level), the dark stack's variance is sigma_y.dark^2 itself: the
+        # curve's value at zero (EMVA 1288's dark measurement), fitted with the FT points.
+        if np.all(d > 0.0):
+            dark_point = (float(dark_var.mean()), (d.shape[0] - 1.0) * dark_var.size)
     m_all, v_all, fm_all, fv_all, dof_all = [], [], [], [], []
     n_frames = 0
     for i, s in enumerate(stacks):
@@ -324,7 +333,12 @@ def fit_mean_variance(
         return ft_variance(bm, model.shot * k * bm + model.read * s2 + q)
 
     def resid(p):
-        return (predict(p) - bfv) / (bfv * rel)
+        pred = predict(p)
+        r = (pred - bfv) / (pred * rel)
+        if dark_point is None:
+            return r
+        v0 = model.read * p[1] + q
+        return np.append(r, (v0 - dark_point[0]) / (v0 * np.sqrt(2.0 / dark_point[1])))
 
     k0 = max(slope0 / model.shot, 1e-9)
     s0 = max((icpt0 - q) / model.read, 0.0)
@@ -364,7 +378,8 @@ def calibrate_mean_variance(
     The charge values are the taps of every phase step and frequency where all frames carry
     them (the simulator's frames), else the intensity (a camera's wire: rounded to whole DN);
     pixels saturated or in the SBI limit in any frame, and pixels whose brightest tap (or
-    intensity) is above :data:`LINEAR_SHARE` of the brightest, are left out.
+    intensity) is above :data:`LINEAR_SHARE` of the brightest, are left out, and for the
+    intensity pixels whose darkest tap may clip at zero (:func:`_taps_unclipped`).
     """
     if len(stacks) == 0:
         raise InvalidInputError("stacks", "no stacks: at least one stack of 2 or more frames")
@@ -382,9 +397,11 @@ def calibrate_mean_variance(
         bad = np.any([f.saturated | f.sbi_limit for f in stack], axis=0)
         # SBI acts on both taps of a pixel once the fuller one passes n_SBI,start.
         brightest = x.mean(axis=0).max(axis=0)
+        ok = ~bad & (brightest < _sbi_cut(brightest, bad))
+        if not with_taps:
+            ok &= _taps_unclipped(stack, x[:, 0], ok, f"stacks[{i}]")
         values.append(x)
-        usable.append(np.broadcast_to(~bad, x.shape[1:]))
-        usable[-1] = usable[-1] & (brightest < _sbi_cut(brightest, bad))[None]
+        usable.append(np.broadcast_to(ok, x.shape[1:]))
     if with_taps:
         model = TAP
     else:
@@ -399,6 +416,26 @@ def calibrate_mean_variance(
     # The linear range is already cut per pixel (its brightest tap).
     return fit_mean_variance(values, model=model, dark=dark_values, usable=usable,
                              degree=degree, linear_share=1.0)
+
+
+def _taps_unclipped(stack: Sequence[RawFrame], grey: np.ndarray, ok: np.ndarray,
+                    field: str) -> np.ndarray:
+    """Pixels whose darkest tap stays clear of zero, from frames without taps.
+
+    The intensity's noise is truncated where a tap clips at 0, which its own spread does not
+    show: the darkest tap's mean, min_i (I - |C_i|) / 2, must be :data:`CLIP_SIGMAS` of its
+    standard deviation from zero. A tap's variance is at most twice the intensity's (module
+    docstring), taken from a linear fit of the intensity's variance over the bright range (not
+    from each pixel's own variance, which would select pixels by their noise).
+    """
+    mean_i = grey.mean(axis=0)
+    c = np.mean([np.abs(np.asarray(f.phase_images, dtype=np.float64)) for f in stack], axis=0)
+    darkest = 0.5 * (mean_i - c.reshape(-1, *mean_i.shape).max(axis=0))
+    m, v = mean_i[ok], grey.var(axis=0, ddof=1)[ok]
+    top = float(np.percentile(m, 99.9)) if m.size else 0.0
+    upper = (m >= 0.25 * top) & (m <= top)
+    slope, icpt = _linear_ptc(m[upper], v[upper], field)
+    return darkest >= CLIP_SIGMAS * np.sqrt(2.0 * np.maximum(slope * mean_i + icpt, 0.0))
 
 
 def _sbi_cut(brightest: np.ndarray, bad: np.ndarray) -> float:
