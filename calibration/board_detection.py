@@ -59,28 +59,84 @@ def to_8bit(amplitude: np.ndarray) -> np.ndarray:
 
 def detect_board(amplitude: np.ndarray, board, upscale: int = 3,
                  min_corners: int = MIN_CORNERS) -> BoardDetection | None:
-    """The board's corners in ``amplitude`` (H, W), or None if fewer than ``min_corners``."""
+    """The board's corners in ``amplitude`` (H, W), or None if fewer than ``min_corners``.
+
+    Checkerboards go to :func:`detect_checkerboard`.
+    """
+    if board.kind != "charuco_board":
+        return detect_checkerboard(amplitude, board, upscale, min_corners)
     img = to_8bit(amplitude)
     s = int(upscale)
     big = cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_CUBIC) if s > 1 else img
     pts_all, _ = board_corners_m(board)
-    if board.kind == "charuco_board":
-        params = cv2.aruco.CharucoParameters()
-        det_params = cv2.aruco.DetectorParameters()
-        det_params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        detector = cv2.aruco.CharucoDetector(cv2_board(board), params, det_params)
-        corners, ids, _, _ = detector.detectBoard(big)
-        if ids is None or len(ids) < min_corners:
-            return None
-        ids = ids.ravel().astype(int)
-        corners = corners.reshape(-1, 2).astype(np.float32)
-    else:
-        size = (board.squares_x - 1, board.squares_y - 1)
-        ok, corners = cv2.findChessboardCornersSB(big, size, flags=cv2.CALIB_CB_ACCURACY)
-        if not ok:
-            return None
-        corners = corners.reshape(-1, 2).astype(np.float32)
-        ids = np.arange(len(corners))
+    params = cv2.aruco.CharucoParameters()
+    det_params = cv2.aruco.DetectorParameters()
+    det_params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    detector = cv2.aruco.CharucoDetector(cv2_board(board), params, det_params)
+    corners, ids, _, _ = detector.detectBoard(big)
+    if ids is None or len(ids) < min_corners:
+        return None
+    ids = ids.ravel().astype(int)
+    corners = corners.reshape(-1, 2).astype(np.float32)
+    return _refined(amplitude, big, s, corners, ids, pts_all, min_corners)
+
+
+def detect_checkerboard(amplitude: np.ndarray, board, upscale: int = 3,
+                        min_corners: int = MIN_CORNERS) -> BoardDetection | None:
+    """A plain checkerboard's inner corners in ``amplitude`` (H, W), or None.
+
+    OpenCV's ``findChessboardCornersSB`` on the upscaled 8-bit amplitude (the ChArUco path's
+    preparation), and if that fails on the upscaled flat-fielded image with
+    ``CALIB_CB_NORMALIZE_IMAGE | CALIB_CB_EXHAUSTIVE``. The whole pattern must be in view (the
+    detector finds all inner corners or none). OpenCV's order may start at either end of the
+    board (on rendered boards at 1 m it reported them reversed in every view): the order is
+    fixed so that the cell bounded by the first two rows and columns of corners is black, as
+    in :func:`sim_core.boards.pattern_cells` (row 1, column 1). A board whose squares_x +
+    squares_y is even looks the same turned by 180 deg; its order is taken with the first
+    corner above the last in the image (the board stands upright). Corners are then refined
+    as the ChArUco corners are.
+    """
+    img = to_8bit(amplitude)
+    s = int(upscale)
+    nx, ny = board.squares_x - 1, board.squares_y - 1
+    flat = flat_field(np.asarray(amplitude, dtype=np.float64))
+    corners = None
+    for prep, flags in ((img, cv2.CALIB_CB_ACCURACY),
+                        (np.clip(flat * 255.0, 0, 255).astype(np.uint8),
+                         cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE
+                         | cv2.CALIB_CB_EXHAUSTIVE)):
+        big = cv2.resize(prep, None, fx=s, fy=s, interpolation=cv2.INTER_CUBIC) if s > 1 \
+            else prep
+        ok, found = cv2.findChessboardCornersSB(big, (nx, ny), flags=flags)
+        if ok and found is not None and len(found) == nx * ny:
+            corners = found.reshape(-1, 2).astype(np.float32)
+            break
+    if corners is None:
+        return None
+    xy = (corners.astype(np.float64) + 0.5) / s - 0.5
+    if _first_cell_is_white(flat, xy.reshape(ny, nx, 2), (board.squares_x + board.squares_y)):
+        corners = corners[::-1].copy()
+    pts_all, ids = board_corners_m(board)
+    big = cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_CUBIC) if s > 1 else img
+    return _refined(amplitude, big, s, corners, ids, pts_all, min_corners)
+
+
+def _first_cell_is_white(flat: np.ndarray, grid: np.ndarray, squares_sum: int) -> bool:
+    """Whether the detected order must be reversed (see :func:`detect_checkerboard`)."""
+    if squares_sum % 2:
+        def centre_level(r, c):
+            x, y = grid[r : r + 2, c : c + 2].reshape(-1, 2).mean(axis=0)
+            return float(cv2.getRectSubPix(flat.astype(np.float32), (1, 1),
+                                           (float(x), float(y)))[0, 0])
+        # The first cell against its neighbour (colours alternate): robust to shading.
+        nb = (0, 1) if grid.shape[1] > 2 else (1, 0)
+        return centre_level(0, 0) > centre_level(*nb)
+    return bool(grid[0, 0, 1] > grid[-1, -1, 1])
+
+
+def _refined(amplitude: np.ndarray, big: np.ndarray, s: int, corners: np.ndarray,
+             ids: np.ndarray, pts_all: np.ndarray, min_corners: int) -> BoardDetection | None:
+    """Sub-pixel corners of the upscaled image, back to the image, saddle-refined."""
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
     win = max(2, s * 2)
     refined = cv2.cornerSubPix(big, corners.reshape(-1, 1, 2).copy(), (win, win), (-1, -1), crit)

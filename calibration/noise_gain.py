@@ -14,7 +14,9 @@ and black squares, the source's fall-off, the dark background), so one stack det
 fit is robust (soft-L1) and uses intensities below half the largest seen, where SBI (which adds
 the compensation charge's own noise above n_SBI,start) has not started; the linearity over the
 range used is reported. With taps in the frames (the simulator's own files) the same holds per
-tap (var(A) = N_A / g^2 + sigma_r^2 / g^2 + 1/12) and is reported beside it.
+tap (var(A) = N_A / g^2 + sigma_r^2 / g^2 + 1/12): :func:`calibration.mean_variance.
+calibrate_mean_variance` fits that (the peer paper's section 3.4 mean-variance fit in
+Freeman-Tukey space, EMVA 1288 per tap) on the same stacks, an independent second estimate.
 """
 
 from __future__ import annotations
