@@ -231,6 +231,8 @@ def calibrate_rig(
     stack = stacks[0]
     noise = _noise(stacks)
     results["noise"] = noise
+    # The peer paper's mean-variance fit on the same stacks, reported as a cross-check.
+    results["noise_mean_variance"] = _noise_mean_variance(stacks)
 
     partial = TwinParameters(
         camera=CameraParameters(**_camera_keys(intr), sensor=noise.to_sensor_overrides()),
@@ -344,6 +346,16 @@ def _noise(stacks: list[AveragedCapture]):
     from calibration.noise_gain import calibrate_noise
 
     return calibrate_noise([list(s.frames) for s in stacks])
+
+def _noise_mean_variance(stacks: list[AveragedCapture]) -> dict[str, Any]:
+    """The mean-variance fit's summary, or why the stacks do not determine it."""
+    from calibration.mean_variance import calibrate_mean_variance
+
+    try:
+        return calibrate_mean_variance([list(s.frames) for s in stacks]).summary()
+    except InvalidInputError as exc:
+        return {"determined": False, "reason": str(exc)}
+
 
 def procedure_summaries(results: dict[str, Any]) -> dict[str, dict]:
     """Each procedure's result as plain JSON (the calibration file's provenance)."""

@@ -1,7 +1,8 @@
 """The whole sequence on the simulated lab recovers a hidden, randomly drawn reality.
 
 Issue 13's round trip: realities drawn at random in plausible ranges; the calibration sees only
-the frames. Each takes about 1.5 minutes (66 board views, noise stacks, solar levels).
+the frames. Each takes about 5 minutes (138 board views and their synthesis, noise stacks, solar
+levels).
 """
 
 from __future__ import annotations
@@ -22,15 +23,11 @@ from tests.sim_core.scenes import EXAMPLES
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
 
-#: Where this session's procedure falls short of issue 13's targets (0.5 px, 2 mm, 0.1 deg,
-#: 2 mm), the bounds below are what it reaches on these realities, so that a regression still
-#: fails; the issue stays open until they are the issue's. The principal point carries the
-#: detector's remaining corner bias (~0.09 px RMS, systematic per corner next to the ArUco
-#: markers), and the axis point and zero follow it (0.5 px at 1 m is 2.5 mm sideways).
-PRINCIPAL_POINT_PX = 1.5  # issue: 0.5
-AXIS_POINT_M = 0.007  # issue: 0.002
-ZERO_OFFSET_DEG = 0.4  # issue: 0.1
-DEPTH_MODEL_MM = 3.0  # issue: 2.0
+#: issue 13's targets
+PRINCIPAL_POINT_PX = 0.5
+AXIS_POINT_M = 0.002
+ZERO_OFFSET_DEG = 0.1
+DEPTH_MODEL_MM = 2.0
 SPEC = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
 
 

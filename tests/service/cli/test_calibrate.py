@@ -9,7 +9,6 @@ from typer.testing import CliRunner
 
 from service.cli import app
 from sim_core.twin_file import load_calibration
-from tests.calibration.test_rig_roundtrip import PRINCIPAL_POINT_PX, ZERO_OFFSET_DEG
 
 
 def run(*args):
@@ -46,9 +45,9 @@ def test_a_full_run_writes_the_calibration_and_its_report(tmp_path):
               "--sweep-step", 10)
     assert res.exit_code == 0, res.output
     cal = load_calibration(out / "calibration.yaml")
-    # The round trip's current bounds (tests/calibration/test_rig_roundtrip.py).
-    assert cal.turntable.zero_offset_deg == pytest.approx(0.6, abs=ZERO_OFFSET_DEG)
-    assert cal.camera.cx_px == pytest.approx(113.0, abs=PRINCIPAL_POINT_PX)
+    # Twice the round trip's bounds (tests/calibration/test_rig_roundtrip.py): half the views.
+    assert cal.turntable.zero_offset_deg == pytest.approx(0.6, abs=0.2)
+    assert cal.camera.cx_px == pytest.approx(113.0, abs=1.0)
     report = json.loads((out / "report.json").read_text())
     assert report["provenance"]["rig"] == "simulated" and report["calibration_hash"]
     html = (out / "report.html").read_text()
