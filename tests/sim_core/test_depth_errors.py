@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from sim_core.depth_errors import (
@@ -51,6 +51,9 @@ def test_applied_errors_follow_the_convention():
     phi=st.floats(0.0, 2 * np.pi, exclude_max=True),
 )
 def test_correction_inverts_the_errors(offset, amps, phi):
+    # A wiggling whose sum of amplitude x harmonic reaches 0.5 folds the phase: the file
+    # refuses it (test_wiggling_that_folds_the_phase_is_refused), so it is not a case to invert.
+    assume(sum(a * h for h, a, _ in amps) < 0.5)
     m = _model(offset=offset, terms=tuple(amps), sigma=0.01, shape=(4, 5))
     z = np.full((1, 4, 5), np.exp(-1j * phi))
     measured = phase_from_phasor(m.apply_to_phasor(z))
