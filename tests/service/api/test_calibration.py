@@ -403,14 +403,13 @@ def test_unknown_jobs_are_404(client):
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_a_full_calibration_job_on_the_simulated_lab_activates_its_result(make_client, tmp_path):
-    """The whole sequence (every fixture, the noise stacks, the solar simulator; the sweep
-    every 10 deg: the round trips run the default plan), with ``activate``."""
+    """The default plan (six fixtures, -55..55 deg every 5 deg, 4 frames a view, the solar
+    simulator), as ``toftwin calibrate rig --simulated`` runs it, with ``activate``."""
     reality = tmp_path / "reality.yaml"
     reality.write_text("turntable: {zero_offset_deg: 0.6}\ncamera: {cx_px: 113.0}\n")
     client = make_client(tmp_path / "data", reality=reality, camera_spp=32,
                          camera_integrator="direct")
-    res = client.post("/api/v1/calibrations", headers=AUTH,
-                      json={"activate": True, "sweep": {"step_deg": 10.0}})
+    res = client.post("/api/v1/calibrations", headers=AUTH, json={"activate": True})
     assert res.status_code == 201, res.text
     status = wait_job(client, res.json()["id"], timeout_s=840)
     assert status["state"] == "done", status

@@ -84,6 +84,11 @@ def test_no_sequence_of_linked_requests_is_a_server_error(api):
     operations (a campaign's id from ``POST /campaigns`` into start, pause, results, ...)."""
     client, schema = api
     calls: list[tuple[str, str, int]] = []
+    # Calibration jobs run in real time in the background and hold the rig while they do: the
+    # same steps would meet a different service from one example to the next (hypothesis
+    # refuses such a machine as flaky). Their operations have the stateless run above and
+    # tests/service/api/test_calibration.py.
+    schema = schema.exclude(path_regex=r"/calibrations")
 
     class Machine(schema.as_state_machine()):
         def call(self, case, **kwargs):
