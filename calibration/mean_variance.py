@@ -50,6 +50,7 @@ import numpy as np
 from numpy.polynomial import Polynomial
 from scipy.optimize import least_squares
 
+from calibration.noise_gain import check_stack
 from sim_core.errors import InvalidInputError
 from sim_core.raw import RawFrame
 
@@ -387,12 +388,7 @@ def calibrate_mean_variance(
     with_taps = all(f.taps is not None for f in all_frames)
     values, usable = [], []
     for i, stack in enumerate(stacks):
-        if len(stack) < 2:
-            raise InvalidInputError(f"stacks[{i}]", f"{len(stack)} frame(s) are too short for "
-                                    "a variance: at least 2 (better 16 or more) are needed")
-        shape = stack[0].phase_images.shape
-        if any(f.phase_images.shape != shape for f in stack):
-            raise InvalidInputError(f"stacks[{i}]", "frames of different shapes (use cases)")
+        check_stack(stack, i)
         x = _charges(stack, with_taps)
         bad = np.any([f.saturated | f.sbi_limit for f in stack], axis=0)
         # SBI acts on both taps of a pixel once the fuller one passes n_SBI,start.

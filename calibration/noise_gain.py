@@ -77,17 +77,23 @@ class NoiseCalibration:
         return f"Photon transfer: gain {g:.2f} e-/DN, read noise {s:.1f} e-"
 
 
+def check_stack(stack: list[RawFrame], i: int) -> None:
+    """Refuse stack ``i`` if it cannot give a variance: fewer than 2 frames, or frames of
+    different use cases (shapes)."""
+    if len(stack) < 2:
+        raise InvalidInputError(f"stacks[{i}]", f"{len(stack)} frame(s) are too short for a "
+                                "variance: at least 2 (better 16 or more) are needed")
+    shape = stack[0].phase_images.shape
+    if any(f.phase_images.shape != shape for f in stack):
+        raise InvalidInputError(f"stacks[{i}]", "frames of different shapes (use cases)")
+
+
 def calibrate_noise(stacks: list[list[RawFrame]]) -> NoiseCalibration:
     """Fit gain and read noise from one or more stacks (module docstring)."""
     means, variances = [], []
     n_frames = 0
     for i, stack in enumerate(stacks):
-        if len(stack) < 2:
-            raise InvalidInputError(f"stacks[{i}]", f"{len(stack)} frame(s) are too short for a "
-                                    "variance: at least 2 (better 16 or more) are needed")
-        shape = stack[0].phase_images.shape
-        if any(f.phase_images.shape != shape for f in stack):
-            raise InvalidInputError(f"stacks[{i}]", "frames of different shapes (use cases)")
+        check_stack(stack, i)
         c = np.stack([f.phase_images[0].astype(np.float64) for f in stack])  # (n, 4, H, W)
         inten = np.stack([f.intensity.astype(np.float64) for f in stack])
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(inten))):
