@@ -123,12 +123,18 @@ def get_campaign(session: Session, campaign_id: str) -> CampaignRow | None:
     return session.get(CampaignRow, campaign_id)
 
 
+def _require(session: Session, table, key: str, what: str):
+    """The row of ``table`` with primary key ``key``, or :class:`NotFoundError` (404) naming
+    ``what`` and the key."""
+    row = session.get(table, key)
+    if row is None:
+        raise NotFoundError(f"no {what} {key}")
+    return row
+
+
 def require_campaign(session: Session, campaign_id: str) -> CampaignRow:
     """The campaign's row, or :class:`NotFoundError` (404) naming it."""
-    row = session.get(CampaignRow, campaign_id)
-    if row is None:
-        raise NotFoundError(f"no campaign {campaign_id}")
-    return row
+    return _require(session, CampaignRow, campaign_id, "campaign")
 
 
 def list_campaigns(session: Session, limit: int, offset: int) -> list[CampaignRow]:
@@ -344,10 +350,7 @@ def get_calibration_job(session: Session, job_id: str) -> CalibrationJobRow | No
 
 def require_calibration_job(session: Session, job_id: str) -> CalibrationJobRow:
     """The job's row, or :class:`NotFoundError` (404) naming it."""
-    row = session.get(CalibrationJobRow, job_id)
-    if row is None:
-        raise NotFoundError(f"no calibration job {job_id}")
-    return row
+    return _require(session, CalibrationJobRow, job_id, "calibration job")
 
 
 def list_calibration_jobs(session: Session, limit: int, offset: int) -> list[CalibrationJobRow]:
