@@ -61,8 +61,8 @@ def e_fit(measured_per_sr: np.ndarray, model_per_sr: np.ndarray,
         e_{fit} = \frac{\sum [f_{model}\cos\theta_r - f_{measured}\cos\theta_r]^2}
                        {\sum [f_{measured}\cos\theta_r]^2}
 
-    >>> e_fit(np.array([1.0, 2.0]), np.array([1.1, 2.0]), np.array([0.0, 60.0]))
-    0.01
+    >>> round(e_fit(np.array([1.0, 2.0]), np.array([1.1, 2.0]), np.array([0.0, 60.0])), 12)
+    0.005
     """
     c = np.cos(np.radians(np.asarray(reflection_zenith_deg, dtype=np.float64)))
     meas = np.asarray(measured_per_sr, dtype=np.float64) * c
