@@ -37,6 +37,10 @@ from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.errors import InvalidInputError
 from sim_core.materials.goniometer import GoniometerTable, angles_from_directions
 
+#: relative error of the twin's reference (the calibrated power and solar scale, the plate's
+#: pose): the floor of every row's uncertainty in the table the fit sees, however many pixels
+#: and frames the row averages
+MODEL_ERROR_REL = 0.01
 #: largest zenith angle (to the light or the camera) a pixel may have [deg]
 MAX_ZENITH_DEG = 80.0
 #: spread of a bin's pixels about their trend, over their noise, beyond which the plate is not
@@ -114,15 +118,44 @@ class Slices:
     solar: SliceRows | None
     check: SliceCheck
 
-    def table(self, source: str = "rig slices", wavelength_nm: float | None = None
-              ) -> GoniometerTable:
-        """Both slices as one :class:`GoniometerTable` (retro rows first)."""
-        parts = [self.retro] + ([self.solar] if self.solar is not None and len(self.solar)
-                                else [])
-        cat = {k: np.concatenate([getattr(p, k) for p in parts])
+    @property
+    def parts(self) -> list[SliceRows]:
+        """The slices that have rows, retro first."""
+        return [self.retro] + ([self.solar] if self.solar is not None and len(self.solar)
+                               else [])
+
+    def table(self, source: str = "rig slices", wavelength_nm: float | None = None,
+              model_error_rel: float = MODEL_ERROR_REL) -> GoniometerTable:
+        """Both slices as one :class:`GoniometerTable` (retro rows first).
+
+        Each row's ``brdf_std_per_sr`` is its standard error from the frames combined with
+        ``model_error_rel`` of its value (the twin's own error, :data:`MODEL_ERROR_REL`).
+        """
+        cat = {k: np.concatenate([getattr(p, k) for p in self.parts])
                for k in ("incidence_zenith_deg", "reflection_zenith_deg",
                          "azimuth_difference_deg", "brdf_per_sr", "brdf_std_per_sr")}
+        cat["brdf_std_per_sr"] = np.hypot(cat["brdf_std_per_sr"],
+                                          model_error_rel * np.abs(cat["brdf_per_sr"]))
         return GoniometerTable(**cat, wavelength_nm=wavelength_nm, source=source)
+
+    def write_csv(self, path) -> None:
+        """The rows as CSV: the goniometer table's columns plus ``slice``,
+        ``turntable_angle_deg`` and ``n_pixels`` (``brdf_std_per_sr`` from the frames alone);
+        :func:`sim_core.materials.goniometer.read_goniometer_csv` reads it back."""
+        import csv
+        from pathlib import Path
+
+        out = Path(path)
+        tmp = out.with_name(out.name + ".tmp")
+        cols = ("incidence_zenith_deg", "reflection_zenith_deg", "azimuth_difference_deg",
+                "brdf_per_sr", "brdf_std_per_sr", "turntable_angle_deg", "n_pixels")
+        with tmp.open("w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(("slice", *cols))
+            for part in self.parts:
+                for i in range(len(part)):
+                    w.writerow((part.slice_name, *(f"{getattr(part, c)[i]:.8g}" for c in cols)))
+        tmp.replace(out)
 
 
 def extract_slices(captures: list[SampleCaptures], references: list[ReferenceView],
