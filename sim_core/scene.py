@@ -20,6 +20,7 @@ from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError, SceneError
 from sim_core.lights import CollimatedLight, PointLight, beam_cross_section_basis
 from sim_core.materials import PRESETS, Material, make_material
+from sim_core.materials.material_file import read_material_file
 from sim_core.radiometry import (
     earth_albedo_irradiance_w_m2,
     moon_albedo_irradiance_w_m2,
@@ -217,13 +218,18 @@ def build_ambient(
     return tuple(out)
 
 
-def build_material(m: MaterialSpec | str, field_name: str) -> Material:
-    """Material from a preset name or a kind with parameters; errors name the field."""
+def build_material(m: MaterialSpec | str, field_name: str,
+                   base_dir: str | Path = ".") -> Material:
+    """Material from a preset name, a kind with parameters or a material file (a relative path
+    resolved against ``base_dir``, the scene file's folder); errors name the field."""
     try:
         if isinstance(m, str):
             kind, params = _preset(m)
         elif m.preset is not None:
             kind, base = _preset(m.preset)
+            params = {**base, **m.params}
+        elif m.file is not None:
+            kind, base = _material_file(material_file_path(m, base_dir))
             params = {**base, **m.params}
         else:
             kind, params = m.kind, dict(m.params)
@@ -232,6 +238,49 @@ def build_material(m: MaterialSpec | str, field_name: str) -> Material:
         raise SceneError(f"{field_name}.{exc.field}", str(exc).split(": ", 1)[-1]) from None
     except TypeError as exc:
         raise SceneError(field_name, f"invalid material parameters: {exc}") from None
+
+
+def material_file_path(m: MaterialSpec, base_dir: str | Path) -> Path:
+    """The material file ``m.file`` refers to, relative paths resolved against ``base_dir``."""
+    path = Path(m.file or "")
+    return path if path.is_absolute() else Path(base_dir) / path
+
+
+def _material_file(path: Path) -> tuple[str, dict]:
+    """``(kind, params)`` of a material file; any error in it is reported under ``file``."""
+    kind, params = read_material_file(path)
+    try:
+        make_material(kind, **params)
+    except InvalidInputError as exc:
+        raise InvalidInputError("file", f"material file '{path}': {exc}") from None
+    return kind, params
+
+
+def inline_material_files(spec: SceneSpec, base_dir: str | Path) -> SceneSpec:
+    """``spec`` with every ``{file: ...}`` material replaced by the file's ``{kind, params}``
+    (adjusted by its ``params``), for a worker that has not the scene's folder.
+
+    Raises
+    ------
+    SceneError
+        A material file is missing or invalid (the field names it).
+    """
+    data = spec.model_dump(mode="json")
+    for i, obj in enumerate(spec.objects):
+        for key, m in (("material", obj.material), ("black", getattr(obj.mesh, "black", None)),
+                       ("white", getattr(obj.mesh, "white", None))):
+            if not isinstance(m, MaterialSpec) or m.file is None:
+                continue
+            field_name = f"objects[{i}].{'material' if key == 'material' else 'mesh.' + key}"
+            try:
+                kind, params = _material_file(material_file_path(m, base_dir))
+            except InvalidInputError as exc:
+                raise SceneError(f"{field_name}.{exc.field}", exc.message) from None
+            inlined = {"preset": None, "kind": kind, "file": None,
+                       "params": {**params, **m.params}}
+            target = data["objects"][i] if key == "material" else data["objects"][i]["mesh"]
+            target[key] = inlined
+    return SceneSpec.model_validate(data)
 
 
 def _preset(name: str) -> tuple[str, dict]:
@@ -272,6 +321,9 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
             p = Path(obj.mesh.path)
             p = p if p.is_absolute() else base_dir / p
             h.update(p.read_bytes())
+        for m in (obj.material, getattr(obj.mesh, "black", None), getattr(obj.mesh, "white", None)):
+            if isinstance(m, MaterialSpec) and m.file is not None:
+                h.update(material_file_path(m, base_dir).read_bytes())
     h.update(repr(sorted(rig.items())).encode())
     return h.hexdigest()
 
@@ -355,11 +407,11 @@ def build_scene(
             tris = geometry.transform_triangles(tris, m)
         if obj.mesh.kind in BOARD_KINDS:
             # Two materials: black cells (0) and white cells (1) of the pattern.
-            own = [build_material(obj.mesh.black, f"{fname}.mesh.black"),
-                   build_material(obj.mesh.white, f"{fname}.mesh.white")]
+            own = [build_material(obj.mesh.black, f"{fname}.mesh.black", base),
+                   build_material(obj.mesh.white, f"{fname}.mesh.white", base)]
             local = board_triangles(obj.mesh)[1]
         else:
-            own = [build_material(obj.material, f"{fname}.material")]
+            own = [build_material(obj.material, f"{fname}.material", base)]
             local = np.zeros(tris.shape[0], dtype=np.int32)
         if obj.name in scales:
             own = [scale_reflectance(m, scales[obj.name].reflectance_scale) for m in own]

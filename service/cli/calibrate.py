@@ -138,3 +138,73 @@ def _real_rig():
         raise typer.Exit(code=2)
     return Rig.open(env["TOFTWIN_TURNTABLE_PORT"], env["TOFTWIN_LAMP_PORT"],
                     env["TOFTWIN_SHUTTER_PORT"], camera_serial=env.get("TOFTWIN_CAMERA_SERIAL"))
+
+
+BRDF_MODELS = ("seed-microfacet", "cook-torrance", "lambertian", "hapke")
+
+
+def _parse_fixed(items: Sequence[str]) -> dict[str, float]:
+    """``["m=0.1", "n2=1.5"]`` -> ``{"m": 0.1, "n2": 1.5}``; an input error naming ``--fix``."""
+    fixed: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not sep or not name.strip() or not math.isfinite(value):
+            raise InvalidInputError("--fix", f"{item!r} is not NAME=VALUE with a finite number")
+        fixed[name.strip()] = value
+    return fixed
+
+
+@calibrate_app.command("brdf")
+def brdf_command(
+    data: Annotated[Path, typer.Argument(help="Goniometer CSV: incidence_zenith_deg, "
+                                         "reflection_zenith_deg, azimuth_difference_deg, "
+                                         "brdf_per_sr (optional wavelength_nm, brdf_std_per_sr).")],
+    model: Annotated[str, typer.Option("--model", help=f"One of {', '.join(BRDF_MODELS)}.")],
+    out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML).")],
+    wavelength_nm: Annotated[
+        float | None,
+        typer.Option("--wavelength-nm", help="Band to fit when the file holds several [nm]."),
+    ] = None,
+    fix: Annotated[
+        list[str] | None,
+        typer.Option("--fix", help="Pin a parameter: NAME=VALUE (repeatable)."),
+    ] = None,
+    outlier_threshold: Annotated[
+        float, typer.Option("--outlier-threshold",
+                            help="Relative error beyond which a sample is an outlier (0-10).")
+    ] = 0.25,
+    seed: Annotated[int, typer.Option(help="Seed of RANSAC and differential evolution.")] = 0,
+) -> None:
+    """Fit a material model to goniometer data and write a material file (issue 14)."""
+    from calibration.brdf import FitSettings, fit_brdf
+    from calibration.brdf.material_file import write_material_file
+    from service.cli.common import choice
+    from sim_core.materials.goniometer import read_goniometer_csv
+
+    try:
+        choice("--model", model, BRDF_MODELS)
+        settings = FitSettings(outlier_relative_error=outlier_threshold)
+        fixed = _parse_fixed(fix or [])
+        table = read_goniometer_csv(data, wavelength_nm=wavelength_nm)
+        fit = fit_brdf(table, model, fixed=fixed, seed=seed, settings=settings)
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    path = write_material_file(out, fit)
+    console.print(f"{fit.kind} fitted to {len(table)} samples of {data}"
+                  + (f" at {table.wavelength_nm:g} nm" if table.wavelength_nm else ""))
+    for name, value in fit.params.items():
+        if name in fit.fixed:
+            note = "fixed"
+        else:
+            note = f"± {fit.uncertainty[name]:.2g}" + ("" if fit.determined[name]
+                                                      else "  NOT DETERMINED by these data")
+        console.print(f"  {name:>16} = {value:.4g}  {note}")
+    console.print(f"  e_fit (seed eq. 11) = {100 * fit.e_fit:.3g} % over the inliers, "
+                  f"{100 * fit.e_fit_all:.3g} % over all samples")
+    console.print(f"  outliers flagged: {fit.n_outliers} of {len(table)} (relative error beyond "
+                  f"{100 * outlier_threshold:g} %)")
+    console.print(f"material file written to {path}")
