@@ -10,11 +10,13 @@ lives). The procedure:
    +-:data:`DETERMINED_RELATIVE_UNCERTAINTY` of the value).
 2. While a free parameter is not determined, hold the least determined one (the largest
    uncertainty relative to its scale) at the prior and fit again.
-3. Report each parameter as ``determined`` (determined in the final fit, and not trading
-   against a held parameter: with every parameter free its correlation with each of them stays
-   below :data:`TRADE_CORRELATION`), ``conditional`` (determined only once the others were held:
-   it trades against them, and its value follows the prior of those) or ``prior`` (not
-   determined by these slices; held at the prior), with the reason.
+3. Move each held parameter's prior by :data:`PRIOR_SHIFT` and fit again: a fitted parameter
+   that moves by more than :data:`DETERMINED_RELATIVE_UNCERTAINTY` of its value follows that
+   prior.
+4. Report each parameter as ``determined`` (determined in the final fit, and independent of the
+   held ones' priors), ``conditional`` (determined only once the others were held: its value
+   follows their prior) or ``prior`` (not determined by these slices; held at the prior), with
+   the reason.
 
 If nothing is determined the slices cannot calibrate the model and :func:`fit_slices` raises.
 """
@@ -36,9 +38,8 @@ from sim_core.materials.goniometer import GoniometerTable
 #: a parameter is determined when its 1-sigma uncertainty is at most this share of its value
 #: (2 %: a determined parameter lands within 5 % of the truth at 2.5 sigma)
 DETERMINED_RELATIVE_UNCERTAINTY = 0.02
-#: |correlation| with a held parameter (every parameter free) from which a parameter trades
-#: against it: its fitted value then follows the held one's prior
-TRADE_CORRELATION = 0.9
+#: relative shift of a held parameter's prior that tells whether a fitted one follows it
+PRIOR_SHIFT = 0.25
 #: default model of the rig's fit
 DEFAULT_MODEL = "cook-torrance"
 
@@ -181,6 +182,7 @@ def fit_slices(table: GoniometerTable, model: str = DEFAULT_MODEL,
                 "slices", f"the slices determine none of the {model} parameters "
                           f"({', '.join(fm.names)}): {_weakness(free_fit, fm.names)}")
         fit = fit_brdf(table, model, fixed=held, seed=seed, settings=settings)
+    follows = _prior_dependence(table, model, fit, held, seed, settings)
     statuses = {}
     for n in fm.names:
         free_sigma = free_fit.uncertainty[n]
@@ -189,7 +191,7 @@ def fit_slices(table: GoniometerTable, model: str = DEFAULT_MODEL,
                 n, "prior", prior_params[n], 0.0, free_sigma,
                 f"not determined by these slices: {_why(free_fit, n)}; held at the prior "
                 f"{prior_params[n]:.4g}")
-        elif fit.determined[n] and not _trades_with(free_fit, n, held):
+        elif not follows.get(n):
             statuses[n] = ParameterStatus(
                 n, "determined", fit.params[n], fit.uncertainty[n], free_sigma,
                 f"determined: 1-sigma {_percent(fit, n)} of its value")
@@ -197,17 +199,37 @@ def fit_slices(table: GoniometerTable, model: str = DEFAULT_MODEL,
             statuses[n] = ParameterStatus(
                 n, "conditional", fit.params[n], fit.uncertainty[n], free_sigma,
                 f"not determined by these slices on its own ({_why(free_fit, n)}); fitted with "
-                f"{', '.join(held)} held at the prior, so its value follows that prior "
-                f"(1-sigma {_percent(fit, n)} given it)")
+                f"{', '.join(held)} held at the prior, and its value follows that prior: "
+                f"{follows[n]} (1-sigma {_percent(fit, n)} given the prior)")
     return SliceFit(fit, free_fit, prior_params, statuses)
 
 
-def _trades_with(fit: BrdfFit, name: str, held: Mapping[str, float]) -> bool:
-    """Whether ``name`` trades against a held parameter in the all-free ``fit`` (a NaN
-    correlation: both lie along a direction the slices do not see)."""
-    row = fit.correlation.get(name, {})
-    return any(not math.isfinite(row.get(h, 0.0)) or abs(row.get(h, 0.0)) >= TRADE_CORRELATION
-               for h in held)
+def _prior_dependence(table: GoniometerTable, model: str, fit: BrdfFit,
+                      held: Mapping[str, float], seed: int, settings: FitSettings
+                      ) -> dict[str, str]:
+    """The fitted parameters that follow a held one's prior, each with how far it moved when
+    that prior moved by :data:`PRIOR_SHIFT` (empty when nothing is held)."""
+    out: dict[str, str] = {}
+    for h, value in held.items():
+        moved = None
+        for factor in (1.0 + PRIOR_SHIFT, 1.0 - PRIOR_SHIFT):
+            try:
+                moved = fit_brdf(table, model, fixed={**held, h: value * factor}, seed=seed,
+                                 settings=settings)
+            except InvalidInputError:
+                continue  # outside the bounds or the sum constraint: the other side
+            break
+        if moved is None:
+            continue
+        for n, p in fit.params.items():
+            if n in held:
+                continue
+            shift = abs(moved.params[n] - p) / _scale(fit, n)
+            if shift > DETERMINED_RELATIVE_UNCERTAINTY:
+                note = (f"it moves by {100 * shift:.2g} % when the prior of {h} moves by "
+                        f"{100 * PRIOR_SHIFT:g} %")
+                out[n] = f"{out[n]}; {note}" if n in out else note
+    return out
 
 
 def _numeric(material: Material, names) -> dict[str, float]:

@@ -19,7 +19,7 @@ plate (``bin_deg`` wide): one table row per bin, with the mean BRDF, the pixels'
 the standard error from the frames' noise.
 
 **Flat, uniform plate.** Within a bin the pixels should agree to within their noise once a
-linear trend is removed; the spread over the noise is reported (:attr:`SliceCheck.
+quadratic trend is removed; the spread over the noise is reported (:attr:`SliceCheck.
 spread_over_noise`), and so is the measured range's offset from the twin's plate. Either beyond
 its limit means the sample is not flat or not uniform, or not where the twin puts it, and the
 result says so (:attr:`SliceCheck.warnings`).
@@ -90,7 +90,7 @@ class SliceCheck:
     Attributes
     ----------
     spread_over_noise : dict of str to float
-        Per slice, the median over bins of the pixels' RMS deviation from the bin's linear
+        Per slice, the median over bins of the pixels' RMS deviation from the bin's quadratic
         trend over their noise (1 for a flat uniform plate; NaN without bins).
     range_offset_m : float
         Median over the views of the measured range minus the twin's on the plate [m].
@@ -298,13 +298,19 @@ def _bin(angle: float, to_light: np.ndarray, to_camera: np.ndarray, f: np.ndarra
 
 
 def _spread_over_noise(key: np.ndarray, f: np.ndarray, s: np.ndarray) -> float:
-    """RMS of the normalised residuals about a linear trend in ``key`` (NaN if too few)."""
-    a = np.column_stack([np.ones(len(f)), key - key.mean(axis=0)])
+    """RMS of the residuals about a quadratic trend in ``key`` over the bin's pooled noise
+    (NaN if too few pixels). The noise is pooled over the bin's pixels: a pixel's own standard
+    error from a few frames is too uncertain to divide by."""
+    k = key - key.mean(axis=0)
+    cols = [np.ones(len(f))] + [k[:, i] for i in range(k.shape[1])]
+    cols += [k[:, i] * k[:, j] for i in range(k.shape[1]) for j in range(i, k.shape[1])]
+    a = np.column_stack(cols)
     if len(f) <= a.shape[1] + 1:
         return float("nan")
-    coef, *_ = np.linalg.lstsq(a / s[:, None], f / s, rcond=None)
-    r = (f - a @ coef) / s
-    return float(np.sqrt(np.sum(r**2) / (len(f) - a.shape[1])))
+    coef, *_ = np.linalg.lstsq(a, f, rcond=None)
+    r = f - a @ coef
+    noise = float(np.sqrt(np.mean(s**2)))
+    return float(np.sqrt(np.sum(r**2) / (len(f) - a.shape[1])) / noise)
 
 
 def _range_offsets(cap: SampleCaptures, ref: ReferenceView) -> np.ndarray:

@@ -37,6 +37,7 @@ from sim_core.errors import InvalidInputError
 from sim_core.materials import CookTorrance
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import load_scene_spec
+from sim_core.twin_file import dump_yaml, write_calibration
 from tests.calibration.realities import perfect_calibration, random_reality
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
@@ -90,6 +91,7 @@ def _check_recovery(result, true: dict[str, float]) -> dict[str, float]:
     return errors
 
 
+@pytest.mark.slow
 def test_a_cook_torrance_sample_with_few_angles():
     true = {"kd": 0.45, "ks": 0.3, "m": 0.09, "n2": 1.9}
     plan = MaterialSweepPlan(angles_deg=parse_angles("-40:40:10"), frames_per_state=2)
@@ -214,7 +216,12 @@ def test_the_cli_refuses_bad_input(tmp_path):
 @pytest.mark.slow
 def test_the_cli_writes_the_material_file_the_slices_and_the_report(tmp_path):
     out = tmp_path / "sample.yaml"
-    res = runner.invoke(app, ["calibrate", "material", "--simulated", "--sample-material",
+    reality = random_reality(7)
+    (tmp_path / "reality.yaml").write_text(dump_yaml(reality), encoding="utf-8")
+    write_calibration(tmp_path / "calibration.yaml", perfect_calibration(reality))
+    res = runner.invoke(app, ["calibrate", "material", "--simulated", "--reality",
+                              str(tmp_path / "reality.yaml"), "--calibration",
+                              str(tmp_path / "calibration.yaml"), "--sample-material",
                               "black-glossy-tile", "--prior", PRIOR, "--angles", "-30:30:10",
                               "--frames-per-state", "2", "--out", str(out), "-q"])
     assert res.exit_code == 0, res.output
