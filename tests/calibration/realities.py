@@ -9,7 +9,7 @@ import numpy as np
 
 from sim_core.camera import CAMERA_PRESETS
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.twin_file import RealityFile, parse_reality
+from sim_core.twin_file import CalibrationFile, RealityFile, TwinParameters, parse_reality
 
 PRESET = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
 #: range of a radian of phase at 60.24 MHz [m]
@@ -53,3 +53,10 @@ def random_reality(seed: int, nominal_power_w: float = 1.0, wiggling_mm: float =
         data["mount"] = {"pose_offset": {"position_m": [float(u(-3e-3, 3e-3)) for _ in range(3)],
                                          "rotation_deg": [0.0, 0.0, float(u(-1.0, 1.0))]}}
     return parse_reality(data)
+
+
+def perfect_calibration(reality: RealityFile) -> CalibrationFile:
+    """The calibration a perfect rig calibration would give: the reality's camera and rig keys
+    (camera, illumination, turntable, solar simulator) only, never its object keys (mount pose,
+    reflectance), which the object fit must estimate from the frames."""
+    return CalibrationFile(**{k: getattr(reality, k) for k in TwinParameters.model_fields})
