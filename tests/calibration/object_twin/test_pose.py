@@ -62,7 +62,7 @@ def test_icp_recovers_a_known_offset_from_exact_points():
 def test_a_cloud_that_does_not_overlap_the_mesh_is_refused_without_a_pose():
     points, _, _ = sample_model(_real_model(), CAMERAS, spacing_m=0.003, seed=3)
     with pytest.raises(InvalidInputError) as exc:
-        register_mount(points + [0.4, 0.0, 0.0], mount_model(SPEC, EXAMPLES), CAMERAS)
+        register_mount(np.add(points, (0.4, 0.0, 0.0)), mount_model(SPEC, EXAMPLES), CAMERAS)
     assert exc.value.field == "mesh"
     assert "does not overlap" in str(exc.value)
 
