@@ -29,7 +29,14 @@ from sim_core.radiometry import (
 from sim_core.scene_spec import BOARD_KINDS, MaterialSpec, ObjectSpec, OpticsSpec, SceneSpec
 from sim_core.sensor import SensorParams
 from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
-from sim_core.twin_file import RealityFile, TwinParameters, load_calibration, twin_hash
+from sim_core.twin_file import (
+    TwinParameters,
+    has_object_keys,
+    load_calibration,
+    load_object_twin,
+    twin_hash,
+    with_object_twin,
+)
 
 #: largest solar level a rig state may report; beyond it the lamp supply is out of its range
 MAX_MEASURED_SUNS = 2.0
@@ -329,11 +336,18 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
 
 
 def scene_twin(spec: SceneSpec, base_dir: str | Path = ".") -> TwinParameters | None:
-    """The calibration the scene references (``calibration: FILE``, relative to ``base_dir``)."""
-    if spec.calibration is None:
-        return None
-    path = Path(spec.calibration)
-    return load_calibration(path if path.is_absolute() else Path(base_dir) / path)
+    """The twin the scene references: its ``calibration: FILE`` combined with its
+    ``object_twin: FILE`` (:func:`sim_core.twin_file.with_object_twin`), both relative to
+    ``base_dir``; None when it names neither."""
+    base = Path(base_dir)
+    cal = obj = None
+    if spec.calibration is not None:
+        path = Path(spec.calibration)
+        cal = load_calibration(path if path.is_absolute() else base / path)
+    if spec.object_twin is not None:
+        path = Path(spec.object_twin)
+        obj = load_object_twin(path if path.is_absolute() else base / path)
+    return with_object_twin(cal, obj)
 
 
 def build_scene(
@@ -345,9 +359,10 @@ def build_scene(
 ) -> Scene:
     """Pose a scene: load meshes, apply object poses and the turntable, build lights.
 
-    ``twin`` (a calibration, or the simulated lab's reality) says how the rig really is
-    (:mod:`sim_core.twin_file`); without it the scene's own ``calibration`` file applies, if it
-    names one. Reported turntable angles and set solar levels are converted to true ones.
+    ``twin`` (a calibration, the simulated lab's reality, or a calibration combined with an
+    object file) says how the rig really is (:mod:`sim_core.twin_file`); without it the scene's
+    own ``calibration`` and ``object_twin`` files apply, if it names them (:func:`scene_twin`).
+    Reported turntable angles and set solar levels are converted to true ones.
 
     Parameters
     ----------
@@ -388,10 +403,10 @@ def build_scene(
             )
         angle = float(turntable_deg)
     angle = true_turntable_deg(angle, twin)
-    scales = twin.objects if isinstance(twin, RealityFile) else {}
+    scales = twin.objects if has_object_keys(twin) else {}
     unknown = sorted(set(scales) - {o.name for o in spec.objects})
     if unknown:
-        raise SceneError("reality.objects", f"names no object of the scene: {unknown}")
+        raise SceneError("twin.objects", f"names no object of the scene: {unknown}")
     for i, obj in enumerate(spec.objects):
         fname = f"objects[{i}]"
         tris = _object_triangles(obj, base, fname)

@@ -352,6 +352,7 @@ class SceneSpec(_Strict):
     optics: OpticsSpec = OpticsSpec()
     render: RenderSpec = RenderSpec()
     calibration: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
+    object_twin: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
 
     @model_validator(mode="after")
     def _unique_names(self):
