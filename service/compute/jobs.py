@@ -56,9 +56,11 @@ class SimulationJob:
     extra : dict
         Written into the frame's ``frame.json`` (rig state, object names, ...).
     twin : dict or None
-        The calibration to apply (``CalibrationFile.model_dump(mode="json")``), resolved by the
-        service (its active calibration, or the scene's own file); None: nominal. The worker
-        never reads a calibration file itself: the scene's ``calibration`` key is ignored here.
+        The calibration to apply (``CalibrationFile.model_dump(mode="json")``, or a calibration
+        combined with an object twin: :func:`sim_core.twin_file.parse_twin`), resolved by the
+        service (its active calibration, the scene's own files, a campaign's fitted object);
+        None: nominal. The worker never reads a twin file itself: the scene's ``calibration``
+        and ``object_twin`` keys are ignored here.
     """
 
     scene: dict[str, Any]
@@ -163,12 +165,13 @@ def run_job(job: SimulationJob) -> SimulationResult:
     from sim_core.render import RenderSettings
     from sim_core.scene import build_scene
     from sim_core.scene_spec import parse_scene_spec
-    from sim_core.twin_file import parse_calibration
+    from sim_core.twin_file import parse_twin
 
-    twin = None if job.twin is None else parse_calibration(job.twin)
+    twin = None if job.twin is None else parse_twin(job.twin)
     with tempfile.TemporaryDirectory(prefix="toftwin-job-") as tmp:
         scene = dict(job.scene)
-        scene["calibration"] = None  # resolved by the service: ``job.twin``
+        # resolved by the service: ``job.twin`` (the calibration and the object twin)
+        scene["calibration"] = scene["object_twin"] = None
         if job.meshes:
             objects = []
             for i, obj in enumerate(scene.get("objects", [])):

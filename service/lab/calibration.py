@@ -37,8 +37,7 @@ from sim_core.scene_spec import scene_error_from_validation
 from sim_core.twin_file import (
     CalibrationFile,
     TwinParameters,
-    parse_calibration,
-    parse_reality,
+    parse_twin,
     twin_hash,
 )
 
@@ -84,12 +83,7 @@ def calibration_from_json(text: str | None) -> TwinParameters | None:
     :func:`sim_core.twin_file.with_object_twin`) is stored with the object keys: it comes back
     as that combination.
     """
-    if text is None:
-        return None
-    data = json.loads(text)
-    if isinstance(data, dict) and ({"mount", "objects"} & data.keys()):
-        return parse_reality(data)
-    return parse_calibration(data)
+    return None if text is None else parse_twin(json.loads(text))
 
 
 def active_twin(sessions: sessionmaker) -> Twin:
