@@ -217,8 +217,14 @@ def build_ambient(
     return tuple(out)
 
 
-def build_material(m: MaterialSpec | str, field_name: str) -> Material:
-    """Material from a preset name or a kind with parameters; errors name the field."""
+def build_material(
+    m: MaterialSpec | str, field_name: str, base_dir: str | Path | None = None
+) -> Material:
+    """Material from a preset name or a kind with parameters; errors name the field.
+
+    A tabulated material's ``table`` (a goniometer CSV) is resolved against ``base_dir`` (the
+    scene file's folder) when relative.
+    """
     try:
         if isinstance(m, str):
             kind, params = _preset(m)
@@ -227,11 +233,37 @@ def build_material(m: MaterialSpec | str, field_name: str) -> Material:
             params = {**base, **m.params}
         else:
             kind, params = m.kind, dict(m.params)
+        params = _resolve_table_path(kind, params, base_dir)
         return make_material(kind, **params)
     except InvalidInputError as exc:
         raise SceneError(f"{field_name}.{exc.field}", str(exc).split(": ", 1)[-1]) from None
     except TypeError as exc:
         raise SceneError(field_name, f"invalid material parameters: {exc}") from None
+
+
+def _resolve_table_path(kind: str | None, params: dict, base_dir: str | Path | None) -> dict:
+    """``params`` with a tabulated material's relative ``table`` path made relative to
+    ``base_dir`` (unchanged for other kinds, absolute paths or no ``base_dir``)."""
+    table = params.get("table")
+    if kind != "tabulated" or not isinstance(table, str) or base_dir is None:
+        return params
+    path = Path(table)
+    return {**params, "table": str(path if path.is_absolute() else Path(base_dir) / path)}
+
+
+def _tabulated_files(spec: SceneSpec, base_dir: Path) -> list[Path]:
+    """The goniometer CSVs the scene's tabulated materials read (for the scene hash)."""
+    specs = []
+    for obj in spec.objects:
+        specs.extend([obj.material, getattr(obj.mesh, "black", None),
+                      getattr(obj.mesh, "white", None)])
+    paths = []
+    for m in specs:
+        if isinstance(m, MaterialSpec) and m.kind == "tabulated":
+            table = _resolve_table_path(m.kind, dict(m.params), base_dir).get("table")
+            if isinstance(table, str) and Path(table).is_file():
+                paths.append(Path(table))
+    return paths
 
 
 def _preset(name: str) -> tuple[str, dict]:
@@ -272,6 +304,8 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
             p = Path(obj.mesh.path)
             p = p if p.is_absolute() else base_dir / p
             h.update(p.read_bytes())
+    for p in _tabulated_files(spec, base_dir):
+        h.update(p.read_bytes())
     h.update(repr(sorted(rig.items())).encode())
     return h.hexdigest()
 
@@ -355,11 +389,11 @@ def build_scene(
             tris = geometry.transform_triangles(tris, m)
         if obj.mesh.kind in BOARD_KINDS:
             # Two materials: black cells (0) and white cells (1) of the pattern.
-            own = [build_material(obj.mesh.black, f"{fname}.mesh.black"),
-                   build_material(obj.mesh.white, f"{fname}.mesh.white")]
+            own = [build_material(obj.mesh.black, f"{fname}.mesh.black", base),
+                   build_material(obj.mesh.white, f"{fname}.mesh.white", base)]
             local = board_triangles(obj.mesh)[1]
         else:
-            own = [build_material(obj.material, f"{fname}.material")]
+            own = [build_material(obj.material, f"{fname}.material", base)]
             local = np.zeros(tris.shape[0], dtype=np.int32)
         if obj.name in scales:
             own = [scale_reflectance(m, scales[obj.name].reflectance_scale) for m in own]

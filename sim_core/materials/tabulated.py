@@ -36,6 +36,8 @@ _MODEL = "tabulated"
 #: measured data whose directional albedo exceeds 1 by at most this are accepted (measurement
 #: noise) and scaled down to albedo 1; beyond, they are refused
 ALBEDO_TOLERANCE = 0.02
+#: relative rounding of the albedo quadrature: an albedo of 1 computed as 1 + 2e-16 is 1
+_ALBEDO_ROUNDING = 1e-9
 #: probability of cosine-hemisphere sampling in the sampling mixture
 DEFAULT_COSINE_PROBABILITY = 0.1
 
@@ -107,7 +109,11 @@ class Tabulated(Material):
     def __post_init__(self) -> None:
         table = self.table
         if isinstance(table, (str, Path)):
-            table = read_goniometer_csv(table, self.wavelength_nm)
+            try:
+                table = read_goniometer_csv(table, self.wavelength_nm)
+            except InvalidInputError as exc:  # named as the material's parameter
+                field = "table" if exc.field == "path" else f"table.{exc.field}"
+                raise InvalidInputError(field, exc.message) from None
         elif not isinstance(table, GoniometerTable):
             raise InvalidInputError(
                 "table", f"table = {table!r} is neither a goniometer table nor a CSV path "
@@ -135,14 +141,15 @@ class Tabulated(Material):
                 f"{table.source}: the directional albedo reaches {a_max:.4f} at θr = "
                 f"{grid.theta_r_deg[worst]:g} deg, above 1 + {ALBEDO_TOLERANCE:g}: the table "
                 f"reflects more than it receives (check its normalisation) ({_MODEL})")
-        scale = 1.0 / a_max if a_max > 1.0 else 1.0
+        scale = 1.0 / a_max if a_max > 1.0 + _ALBEDO_ROUNDING else 1.0
         if scale != 1.0:
             grid = grid.scaled(scale)
             albedo = albedo * scale
         object.__setattr__(self, "_grid", grid)
         object.__setattr__(self, "_albedo_scale", scale)
         # the interpolant's albedo is exact up to rounding of the quadrature
-        object.__setattr__(self, "_albedo_bound", min(1.0, float(albedo.max()) * (1 + 1e-9)))
+        object.__setattr__(self, "_albedo_bound",
+                           min(1.0, float(albedo.max()) * (1 + _ALBEDO_ROUNDING)))
         tabs = sampling_tables(grid)
         params = tabulated_params(
             np.radians(grid.theta_i_deg), np.radians(grid.theta_r_deg), np.radians(grid.phi_deg),

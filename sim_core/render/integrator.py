@@ -395,6 +395,7 @@ class _Context:
             np.ascontiguousarray(scene.material_index, dtype=np.int64),
             mat_kind,
             mat_params,
+            mat_params if mat_params.shape[1] > N_PARAMS else None,
         )
         light = scene.light
         if light.profile_angle_rad is None:
