@@ -72,7 +72,6 @@ def plot(output: Path = DEFAULT_OUTPUT) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from matplotlib.ticker import MaxNLocator
 
     fig, axes = plt.subplots(1, 2, subplot_kw={"projection": "polar"}, figsize=(11.0, 4.6))
