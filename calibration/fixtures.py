@@ -16,6 +16,7 @@ side of the axis, its local +y up, tilted back by ``tilt_deg``) and puts its cen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from sim_core.scene_spec import ObjectSpec, SceneSpec
 
 @dataclass(frozen=True)
 class BoardFixture:
-    """One way of mounting the board on the turntable.
+    """One way of mounting the board (or any flat plate, a material sample) on the turntable.
 
     Attributes
     ----------
@@ -67,15 +68,44 @@ def board_object(board: dict, fixture: BoardFixture, spec: SceneSpec,
     The board faces the camera of ``spec`` at the turntable's zero: its normal points from the
     axis towards the camera, projected on the horizontal plane.
     """
+    return fixture_object(board, fixture, spec, name)
+
+
+def fixture_object(mesh: dict, fixture: BoardFixture, spec: SceneSpec, name: str,
+                   material: Any = None) -> ObjectSpec:
+    """Any flat plate (a board, a material sample) as a scene object in ``fixture``.
+
+    Parameters
+    ----------
+    mesh : dict
+        A mesh spec lying in its local xy plane and facing its local +z: a board
+        (``charuco_board``, ``checkerboard``: they bring their own materials) or a
+        ``rectangle``.
+    fixture : BoardFixture
+    spec : SceneSpec
+        The nominal scene (the camera's pose, the turntable's axis).
+    name : str
+    material : MaterialSpec, str or None
+        The plate's material (a preset name or a material spec); None for a board.
+
+    Returns
+    -------
+    ObjectSpec
+        On the turntable, at its pose at the turntable's zero (world frame), facing the camera
+        as :func:`board_object` describes.
+    """
     yaw = _facing_yaw_deg(spec)
     rot = (90.0 - fixture.tilt_deg, 0.0, yaw)
     c = np.asarray(spec.turntable.axis_point_m if spec.turntable else (0.0, 0.0, 0.0))
     facing = np.array([np.sin(np.radians(yaw)), -np.cos(np.radians(yaw)), 0.0])  # to camera
     pos = c + np.array([0.0, 0.0, fixture.centre_height_m]) + fixture.towards_camera_m * facing
-    return ObjectSpec.model_validate({
-        "name": name, "mesh": board, "on_turntable": True,
+    data: dict[str, Any] = {
+        "name": name, "mesh": mesh, "on_turntable": True,
         "pose": {"position_m": [float(v) for v in pos], "rotation_deg": list(rot)},
-    })
+    }
+    if material is not None:
+        data["material"] = material
+    return ObjectSpec.model_validate(data)
 
 
 def _facing_yaw_deg(spec: SceneSpec) -> float:

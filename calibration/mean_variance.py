@@ -39,6 +39,12 @@ Only samples in the linear range are used: below ``linear_share`` of the largest
 pixel's SBI starts above, adding the compensation charge's own noise) and above the mean where
 the charge is five of its standard deviations from zero (the sensor clips tap charges at 0,
 which truncates the noise), found from a first linear photon-transfer fit of the upper range.
+On frames (:func:`calibrate_mean_variance`) the upper end is found per pixel instead, from
+where the variance leaves the linear photon transfer (the SBI's onset, :func:`_linear_limit`),
+not from a share of the view's brightest pixel: a view far below the SBI (a board at 1 m in
+the lab) would otherwise lose its bright pixels, and through the wire (one intensity per pixel,
+not 16 taps) the fit would rest on the few hundred mixed pixels at the board's edges, a gain
+that moved by +-17 % with the render's pixel jitter.
 """
 
 from __future__ import annotations
@@ -57,10 +63,18 @@ from sim_core.raw import RawFrame
 #: bins of the FT-space curve the physical model is fitted to, spaced geometrically in the mean
 #: (narrow where the curve bends, so that a bin's mean stands for its samples)
 BINS = 60
-#: share of the largest mean the fit uses (the pixel's SBI starts above)
+#: share of the largest mean below which the linear range starts (:func:`_linear_limit`)
 LINEAR_SHARE = 0.5
 #: the lowest mean used is where the charge is this many standard deviations from zero
 CLIP_SIGMAS = 5.0
+#: the wire's darkest tap (seen through the intensity) this many standard deviations from zero:
+#: a normal clipped 3 sigma below its mean keeps 99.75 % of its variance, and the darkest tap
+#: is one of the 8 taps whose sum is the intensity (its share of the variance at most 1/4)
+WIRE_CLIP_SIGMAS = 3.0
+#: the linear range's upper end is searched in steps of this factor in the fuller tap ...
+LIMIT_STEP = 2.0 ** 0.25
+#: ... and ends at the first step whose variance is this much above the linear photon transfer
+LIMIT_EXCESS = 0.05
 #: the fewest samples (pixel x charge) the fit accepts
 MIN_SAMPLES = 100
 #: the paper's polynomial degree (section 3.4) and the range this fit allows
@@ -377,10 +391,11 @@ def calibrate_mean_variance(
     """The mean-variance fit on stacks of frames (the rig sequence's noise stacks).
 
     The charge values are the taps of every phase step and frequency where all frames carry
-    them (the simulator's frames), else the intensity (a camera's wire: rounded to whole DN);
-    pixels saturated or in the SBI limit in any frame, and pixels whose brightest tap (or
-    intensity) is above :data:`LINEAR_SHARE` of the brightest, are left out, and for the
-    intensity pixels whose darkest tap may clip at zero (:func:`_taps_unclipped`).
+    them (the simulator's frames), else the intensity (a camera's wire: rounded to whole DN).
+    Left out are pixels saturated or in the SBI limit in any frame, pixels whose fuller tap is
+    above the linear range (:func:`_linear_limit`: where the variance leaves the linear
+    photon transfer, the SBI's onset), and for the intensity pixels whose darkest tap may clip
+    at zero (:func:`_taps_unclipped`).
     """
     if len(stacks) == 0:
         raise InvalidInputError("stacks", "no stacks: at least one stack of 2 or more frames")
@@ -392,10 +407,12 @@ def calibrate_mean_variance(
         x = _charges(stack, with_taps)
         bad = np.any([f.saturated | f.sbi_limit for f in stack], axis=0)
         # SBI acts on both taps of a pixel once the fuller one passes n_SBI,start.
-        brightest = x.mean(axis=0).max(axis=0)
-        ok = ~bad & (brightest < _sbi_cut(brightest, bad))
-        if not with_taps:
-            ok &= _taps_unclipped(stack, x[:, 0], ok, f"stacks[{i}]")
+        if with_taps:
+            fuller = x.mean(axis=0).max(axis=0)
+        else:
+            fuller = 0.5 * (x[:, 0].mean(axis=0) + _abs_differences(stack).max(axis=0))
+            bad = bad | ~_taps_unclipped(stack, x[:, 0], ~bad, f"stacks[{i}]")
+        ok = ~bad & (fuller < _linear_limit(x, fuller, ~bad, f"stacks[{i}]"))
         values.append(x)
         usable.append(np.broadcast_to(ok, x.shape[1:]))
     if with_taps:
@@ -409,9 +426,15 @@ def calibrate_mean_variance(
             raise InvalidInputError("dark", f"{len(dark)} frame(s) are too short for a "
                                     "variance: at least 2 are needed")
         dark_values = _charges(list(dark), with_taps)
-    # The linear range is already cut per pixel (its brightest tap).
+    # The linear range is already cut per pixel (its fuller tap).
     return fit_mean_variance(values, model=model, dark=dark_values, usable=usable,
                              degree=degree, linear_share=1.0)
+
+
+def _abs_differences(stack: Sequence[RawFrame]) -> np.ndarray:
+    """(n_f * 4, H, W): each tap difference's magnitude |C_i| averaged over the frames."""
+    c = np.mean([np.abs(np.asarray(f.phase_images, dtype=np.float64)) for f in stack], axis=0)
+    return c.reshape(-1, *c.shape[-2:])
 
 
 def _taps_unclipped(stack: Sequence[RawFrame], grey: np.ndarray, ok: np.ndarray,
@@ -419,24 +442,69 @@ def _taps_unclipped(stack: Sequence[RawFrame], grey: np.ndarray, ok: np.ndarray,
     """Pixels whose darkest tap stays clear of zero, from frames without taps.
 
     The intensity's noise is truncated where a tap clips at 0, which its own spread does not
-    show: the darkest tap's mean, min_i (I - |C_i|) / 2, must be :data:`CLIP_SIGMAS` of its
-    standard deviation from zero. A tap's variance is at most twice the intensity's (module
+    show: the darkest tap's mean, min_i (I - |C_i|) / 2, must be :data:`WIRE_CLIP_SIGMAS` of
+    its standard deviation from zero. A tap's variance is at most twice the intensity's (module
     docstring), taken from a linear fit of the intensity's variance over the bright range (not
     from each pixel's own variance, which would select pixels by their noise).
     """
     mean_i = grey.mean(axis=0)
-    c = np.mean([np.abs(np.asarray(f.phase_images, dtype=np.float64)) for f in stack], axis=0)
-    darkest = 0.5 * (mean_i - c.reshape(-1, *mean_i.shape).max(axis=0))
+    darkest = 0.5 * (mean_i - _abs_differences(stack).max(axis=0))
     m, v = mean_i[ok], grey.var(axis=0, ddof=1)[ok]
     top = float(np.percentile(m, 99.9)) if m.size else 0.0
     upper = (m >= 0.25 * top) & (m <= top)
     slope, icpt = _linear_ptc(m[upper], v[upper], field)
-    return darkest >= CLIP_SIGMAS * np.sqrt(2.0 * np.maximum(slope * mean_i + icpt, 0.0))
+    return darkest >= WIRE_CLIP_SIGMAS * np.sqrt(2.0 * np.maximum(slope * mean_i + icpt, 0.0))
 
 
-def _sbi_cut(brightest: np.ndarray, bad: np.ndarray) -> float:
-    ok = brightest[~bad]
-    return LINEAR_SHARE * float(np.percentile(ok, 99.9)) if ok.size else np.inf
+def _linear_limit(x: np.ndarray, fuller: np.ndarray, ok: np.ndarray, field: str) -> float:
+    """The fuller tap's level [DN] where the charge values leave the linear photon transfer.
+
+    The SBI (sim_core.sensor) removes a compensation charge n_delta = A - n_SBI,start, a
+    Poisson draw of its own, from both taps once the fuller tap A passes n_SBI,start: a phase
+    step's tap sum then has the mean B - A + 2 n_SBI,start and the variance
+    3 A + B - 2 n_SBI,start [e-^2], 4 n_delta above the linear photon transfer, which is what
+    marks the end of the linear range (EMVA 1288's linear range ends at saturation likewise).
+    Where n_SBI,start is in DN is not known before the gain, nor where a view's brightest
+    pixel is against it, so the range is found from the data: the linear photon transfer of
+    the pixels below :data:`LINEAR_SHARE` of the brightest, then steps of :data:`LIMIT_STEP`
+    in the fuller tap upward, each accepted (and the line fitted again with it) while its
+    summed variance is within :data:`LIMIT_EXCESS` (or 4 standard errors) of the line's, the
+    first excess ending the range at the last step tested before it (steps of fewer than a
+    tenth of :data:`MIN_SAMPLES` values are not tested). ``inf`` if the whole unsaturated
+    range is linear.
+    """
+    if not np.any(ok):
+        return np.inf
+    clear = ok & np.all(x.min(axis=0) > 0.0, axis=0)
+    m_all, v_all = x.mean(axis=0), x.var(axis=0, ddof=1)
+    dof = x.shape[0] - 1.0
+    top = float(np.percentile(fuller[ok], 99.9))
+    limit = LINEAR_SHARE * top
+    accepted = clear & (fuller < limit)
+    safe = limit  # the end of the last step tested and found linear
+    while limit <= float(fuller[ok].max()):
+        nxt = limit * LIMIT_STEP
+        step = clear & (fuller >= limit) & (fuller < nxt)
+        n_values = int(step.sum()) * x.shape[1]
+        if np.count_nonzero(accepted) * x.shape[1] < MIN_SAMPLES:
+            return limit
+        if n_values >= MIN_SAMPLES // 10:
+            m, v = m_all[:, accepted].ravel(), v_all[:, accepted].ravel()
+            upper = m >= 0.25 * float(np.percentile(m, 99.9))
+            slope, icpt, cov = _linear_ptc(m[upper], v[upper], field, with_cov=True)
+            ms, vs = m_all[:, step].ravel(), v_all[:, step].ravel()
+            pred = np.maximum(slope * ms + icpt, 1e-12)
+            excess = vs.sum() / pred.sum() - 1.0
+            # The line's own uncertainty at the step's mean level, and the step's sampling.
+            g = np.array([ms.mean(), 1.0])
+            se = np.hypot(np.sqrt(max(g @ cov @ g, 0.0)) / pred.mean(),
+                          np.sqrt(2.0 / (dof * ms.size)))
+            if excess > max(LIMIT_EXCESS, 4.0 * se):
+                return safe
+            safe = nxt
+        accepted = accepted | step
+        limit = nxt
+    return np.inf
 
 
 def _charges(frames: Sequence[RawFrame], with_taps: bool) -> np.ndarray:
@@ -459,8 +527,9 @@ def _checked(stack: np.ndarray, field: str) -> np.ndarray:
     return x
 
 
-def _linear_ptc(m: np.ndarray, v: np.ndarray, field: str) -> tuple[float, float]:
-    """Slope and intercept of the variance against the mean (binned, least squares)."""
+def _linear_ptc(m: np.ndarray, v: np.ndarray, field: str, with_cov: bool = False):
+    """Slope and intercept of the variance against the mean (binned, least squares); with
+    ``with_cov`` also their covariance (scaled by the residuals)."""
     if m.size < MIN_SAMPLES:
         raise InvalidInputError(
             field, f"only {m.size} samples in the upper linear range; at least {MIN_SAMPLES} "
@@ -474,9 +543,16 @@ def _linear_ptc(m: np.ndarray, v: np.ndarray, field: str) -> tuple[float, float]
                                 "for a curve (at least 3 levels are needed)")
     bm = np.bincount(idx, weights=m, minlength=20)[keep] / cnt[keep]
     bv = np.bincount(idx, weights=v, minlength=20)[keep] / cnt[keep]
-    slope, icpt = np.polyfit(bm, bv, 1, w=np.sqrt(cnt[keep]) / np.maximum(bv, 1e-12))
+    w = np.sqrt(cnt[keep]) / np.maximum(bv, 1e-12)
+    if with_cov and bm.size > 3:
+        (slope, icpt), cov = np.polyfit(bm, bv, 1, w=w, cov=True)
+    else:
+        slope, icpt = np.polyfit(bm, bv, 1, w=w)
+        cov = np.zeros((2, 2))
     if not slope > 0.0:
         raise InvalidInputError(
             field, f"the variance does not grow with the mean (slope {slope:.3g} DN; it must "
             "be > 0): no shot noise seen (frames identical, or all dark)")
+    if with_cov:
+        return float(slope), float(icpt), cov
     return float(slope), float(icpt)

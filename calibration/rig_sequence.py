@@ -26,7 +26,7 @@ Each step uses only what the frames (and the previous steps) say; the result is 
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -131,12 +131,23 @@ class Operator(Protocol):
         object again; ``instruction`` says it in words."""
 
 class SimulatedOperator:
-    """The simulated lab's swap: :meth:`drivers.sim.world.SimulatedWorld.mount`."""
+    """The simulated lab's swap: :meth:`drivers.sim.world.SimulatedWorld.mount`.
 
-    def __init__(self, world) -> None:
+    ``materials`` (object name -> material spec or preset name) are the true materials of what
+    this operator has in hand: an object of that name is mounted with it, whatever material the
+    procedure's object names (a material sample's prior). That is how the simulated lab holds a
+    sample of a material the procedure is to measure without ever telling the procedure.
+    """
+
+    def __init__(self, world, materials: Mapping[str, Any] | None = None) -> None:
         self.world = world
+        self.materials = dict(materials or {})
 
     def mount(self, objects: Sequence[ObjectSpec] | None, instruction: str) -> None:
+        if objects is not None:
+            objects = [o.model_copy(update={"material": ObjectSpec.model_validate(
+                {**o.model_dump(), "material": self.materials[o.name]}).material})
+                if o.name in self.materials else o for o in objects]
         self.world.mount(objects)
 
 @dataclass

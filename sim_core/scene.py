@@ -20,6 +20,7 @@ from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError, SceneError
 from sim_core.lights import CollimatedLight, PointLight, beam_cross_section_basis
 from sim_core.materials import PRESETS, Material, make_material
+from sim_core.materials.material_file import read_material_file
 from sim_core.radiometry import (
     earth_albedo_irradiance_w_m2,
     moon_albedo_irradiance_w_m2,
@@ -28,7 +29,14 @@ from sim_core.radiometry import (
 from sim_core.scene_spec import BOARD_KINDS, MaterialSpec, ObjectSpec, OpticsSpec, SceneSpec
 from sim_core.sensor import SensorParams
 from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
-from sim_core.twin_file import RealityFile, TwinParameters, load_calibration, twin_hash
+from sim_core.twin_file import (
+    TwinParameters,
+    has_object_keys,
+    load_calibration,
+    load_object_twin,
+    twin_hash,
+    with_object_twin,
+)
 
 #: largest solar level a rig state may report; beyond it the lamp supply is out of its range
 MAX_MEASURED_SUNS = 2.0
@@ -217,19 +225,21 @@ def build_ambient(
     return tuple(out)
 
 
-def build_material(
-    m: MaterialSpec | str, field_name: str, base_dir: str | Path | None = None
-) -> Material:
-    """Material from a preset name or a kind with parameters; errors name the field.
+def build_material(m: MaterialSpec | str, field_name: str,
+                   base_dir: str | Path = ".") -> Material:
+    """Material from a preset name, a kind with parameters or a material file (a relative path
+    resolved against ``base_dir``, the scene file's folder); errors name the field.
 
-    A tabulated material's ``table`` (a goniometer CSV) is resolved against ``base_dir`` (the
-    scene file's folder) when relative.
+    A tabulated material's ``table`` (a goniometer CSV) is resolved against ``base_dir`` too.
     """
     try:
         if isinstance(m, str):
             kind, params = _preset(m)
         elif m.preset is not None:
             kind, base = _preset(m.preset)
+            params = {**base, **m.params}
+        elif m.file is not None:
+            kind, base = _material_file(material_file_path(m, base_dir))
             params = {**base, **m.params}
         else:
             kind, params = m.kind, dict(m.params)
@@ -264,6 +274,49 @@ def _tabulated_files(spec: SceneSpec, base_dir: Path) -> list[Path]:
             if isinstance(table, str) and Path(table).is_file():
                 paths.append(Path(table))
     return paths
+
+
+def material_file_path(m: MaterialSpec, base_dir: str | Path) -> Path:
+    """The material file ``m.file`` refers to, relative paths resolved against ``base_dir``."""
+    path = Path(m.file or "")
+    return path if path.is_absolute() else Path(base_dir) / path
+
+
+def _material_file(path: Path) -> tuple[str, dict]:
+    """``(kind, params)`` of a material file; any error in it is reported under ``file``."""
+    kind, params = read_material_file(path)
+    try:
+        make_material(kind, **params)
+    except InvalidInputError as exc:
+        raise InvalidInputError("file", f"material file '{path}': {exc}") from None
+    return kind, params
+
+
+def inline_material_files(spec: SceneSpec, base_dir: str | Path) -> SceneSpec:
+    """``spec`` with every ``{file: ...}`` material replaced by the file's ``{kind, params}``
+    (adjusted by its ``params``), for a worker that has not the scene's folder.
+
+    Raises
+    ------
+    SceneError
+        A material file is missing or invalid (the field names it).
+    """
+    data = spec.model_dump(mode="json")
+    for i, obj in enumerate(spec.objects):
+        for key, m in (("material", obj.material), ("black", getattr(obj.mesh, "black", None)),
+                       ("white", getattr(obj.mesh, "white", None))):
+            if not isinstance(m, MaterialSpec) or m.file is None:
+                continue
+            field_name = f"objects[{i}].{'material' if key == 'material' else 'mesh.' + key}"
+            try:
+                kind, params = _material_file(material_file_path(m, base_dir))
+            except InvalidInputError as exc:
+                raise SceneError(f"{field_name}.{exc.field}", exc.message) from None
+            inlined = {"preset": None, "kind": kind, "file": None,
+                       "params": {**params, **m.params}}
+            target = data["objects"][i] if key == "material" else data["objects"][i]["mesh"]
+            target[key] = inlined
+    return SceneSpec.model_validate(data)
 
 
 def _preset(name: str) -> tuple[str, dict]:
@@ -304,6 +357,9 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
             p = Path(obj.mesh.path)
             p = p if p.is_absolute() else base_dir / p
             h.update(p.read_bytes())
+        for m in (obj.material, getattr(obj.mesh, "black", None), getattr(obj.mesh, "white", None)):
+            if isinstance(m, MaterialSpec) and m.file is not None:
+                h.update(material_file_path(m, base_dir).read_bytes())
     for p in _tabulated_files(spec, base_dir):
         h.update(p.read_bytes())
     h.update(repr(sorted(rig.items())).encode())
@@ -311,11 +367,18 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
 
 
 def scene_twin(spec: SceneSpec, base_dir: str | Path = ".") -> TwinParameters | None:
-    """The calibration the scene references (``calibration: FILE``, relative to ``base_dir``)."""
-    if spec.calibration is None:
-        return None
-    path = Path(spec.calibration)
-    return load_calibration(path if path.is_absolute() else Path(base_dir) / path)
+    """The twin the scene references: its ``calibration: FILE`` combined with its
+    ``object_twin: FILE`` (:func:`sim_core.twin_file.with_object_twin`), both relative to
+    ``base_dir``; None when it names neither."""
+    base = Path(base_dir)
+    cal = obj = None
+    if spec.calibration is not None:
+        path = Path(spec.calibration)
+        cal = load_calibration(path if path.is_absolute() else base / path)
+    if spec.object_twin is not None:
+        path = Path(spec.object_twin)
+        obj = load_object_twin(path if path.is_absolute() else base / path)
+    return with_object_twin(cal, obj)
 
 
 def build_scene(
@@ -327,9 +390,10 @@ def build_scene(
 ) -> Scene:
     """Pose a scene: load meshes, apply object poses and the turntable, build lights.
 
-    ``twin`` (a calibration, or the simulated lab's reality) says how the rig really is
-    (:mod:`sim_core.twin_file`); without it the scene's own ``calibration`` file applies, if it
-    names one. Reported turntable angles and set solar levels are converted to true ones.
+    ``twin`` (a calibration, the simulated lab's reality, or a calibration combined with an
+    object file) says how the rig really is (:mod:`sim_core.twin_file`); without it the scene's
+    own ``calibration`` and ``object_twin`` files apply, if it names them (:func:`scene_twin`).
+    Reported turntable angles and set solar levels are converted to true ones.
 
     Parameters
     ----------
@@ -370,10 +434,10 @@ def build_scene(
             )
         angle = float(turntable_deg)
     angle = true_turntable_deg(angle, twin)
-    scales = twin.objects if isinstance(twin, RealityFile) else {}
+    scales = twin.objects if has_object_keys(twin) else {}
     unknown = sorted(set(scales) - {o.name for o in spec.objects})
     if unknown:
-        raise SceneError("reality.objects", f"names no object of the scene: {unknown}")
+        raise SceneError("twin.objects", f"names no object of the scene: {unknown}")
     for i, obj in enumerate(spec.objects):
         fname = f"objects[{i}]"
         tris = _object_triangles(obj, base, fname)

@@ -181,20 +181,23 @@ class Ambient(_Strict):
 
 # --- objects --------------------------------------------------------------------------------
 class MaterialSpec(_Strict):
-    """A material: a preset name, or a model ``kind`` with its parameters.
+    """A material: a preset name, a model ``kind`` with its parameters, or a material file.
 
-    ``{preset: thermal-control-film}`` or ``{kind: lambertian, params: {albedo: 0.5}}``;
-    a preset may be adjusted with ``params``.
+    ``{preset: thermal-control-film}``, ``{kind: lambertian, params: {albedo: 0.5}}`` or
+    ``{file: fit.yaml}`` (a material file, e.g. written by ``toftwin calibrate brdf``, holding
+    ``kind`` and ``params``; a relative path is resolved against the scene file's folder);
+    a preset or a file may be adjusted with ``params``.
     """
 
     preset: str | None = None
     kind: str | None = None
+    file: str | None = None
     params: dict[str, Finite | str] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _preset_or_kind(self):
-        if (self.preset is None) == (self.kind is None):
-            raise ValueError("give exactly one of 'preset' or 'kind'")
+        if sum(v is not None for v in (self.preset, self.kind, self.file)) != 1:
+            raise ValueError("give exactly one of 'preset', 'kind' or 'file'")
         return self
 
 
@@ -349,6 +352,7 @@ class SceneSpec(_Strict):
     optics: OpticsSpec = OpticsSpec()
     render: RenderSpec = RenderSpec()
     calibration: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
+    object_twin: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
 
     @model_validator(mode="after")
     def _unique_names(self):

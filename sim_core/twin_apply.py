@@ -1,9 +1,10 @@
 """Applying a calibration (or the simulated lab's reality) to a scene.
 
 :func:`apply_to_spec` rewrites the parts of a :class:`~sim_core.scene_spec.SceneSpec` the file
-measures (intrinsics, distortion, sensor, source power, turntable axis, and for a reality the
-mount's pose); :func:`sim_core.scene.build_scene` then applies the rest at pose time (turntable
-zero, solar scale, per-object reflectance, depth errors), see :mod:`sim_core.twin_file` for the
+measures (intrinsics, distortion, sensor, source power, turntable axis, and for a twin with the
+object keys - a reality, a calibration combined with an object file - the mount's pose);
+:func:`sim_core.scene.build_scene` then applies the rest at pose time (turntable zero, solar
+scale, per-object reflectance, depth errors), see :mod:`sim_core.twin_file` for the
 conventions.
 """
 
@@ -17,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from sim_core.geometry import rotation_matrix_xyz_deg
 from sim_core.materials import Material
 from sim_core.scene_spec import ObjectPose, SceneSpec
-from sim_core.twin_file import RealityFile, TwinParameters
+from sim_core.twin_file import ObjectTwinParameters, TwinParameters, has_object_keys
 
 #: material parameters that scale with reflectance (``objects.<name>.reflectance_scale``)
 REFLECTANCE_FIELDS = ("albedo", "kd", "ks", "w")
@@ -52,14 +53,14 @@ def apply_to_spec(spec: SceneSpec, twin: TwinParameters) -> SceneSpec:
         tt_update = {k: getattr(tt, k) for k in ("axis_point_m", "axis_direction")
                      if getattr(tt, k) is not None}
         update["turntable"] = spec.turntable.model_copy(update=tt_update)
-    if isinstance(twin, RealityFile):
+    if has_object_keys(twin):
         objects = _mounted_objects(spec, twin)
         if objects is not None:
             update["objects"] = objects
     return spec.model_copy(update=update) if update else spec
 
 
-def _mounted_objects(spec: SceneSpec, reality: RealityFile):
+def _mounted_objects(spec: SceneSpec, reality: ObjectTwinParameters):
     """The objects with the mount's pose offset applied to those on the turntable (or None)."""
     off = reality.mount.pose_offset
     if off == ObjectPose() or spec.turntable is None:

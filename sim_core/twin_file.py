@@ -4,10 +4,13 @@ Both files share one set of keys (:class:`TwinParameters`): what calibration can
 the camera (intrinsics, distortion, depth errors, sensor gain and noise), its light source
 (effective optical power), the turntable (true axis and zero) and the solar simulator (the scale
 of its level). A calibration file (:class:`CalibrationFile`) adds its provenance; a reality file
-(:class:`RealityFile`) adds what only the object twin can measure: the pose of what is mounted
-on the turntable and the objects' reflectance. Every key is optional; a missing key means "as
-the nominal scene says". The format is documented in ``docs/calibration.md``; unknown keys and
-out-of-range values are errors naming the field (:class:`sim_core.errors.InvalidInputError`).
+(:class:`RealityFile`) adds what only the object twin can measure (:class:`ObjectTwinParameters`):
+the pose of what is mounted on the turntable and the objects' reflectance; an object file
+(:class:`ObjectTwinFile`, ``object.yaml``) holds those keys alone, and :func:`with_object_twin`
+combines it with a calibration into the twin a scene applies. Every key is optional; a
+missing key means "as the nominal scene says". The format is documented in
+``docs/calibration.md``; unknown keys and out-of-range values are errors naming the field
+(:class:`sim_core.errors.InvalidInputError`).
 
 Conventions (issue 13, section 1)
 ---------------------------------
@@ -155,7 +158,7 @@ class TwinParameters(_Strict):
     solar_simulator: SolarParameters = SolarParameters()
 
 
-# --- reality-only keys ----------------------------------------------------------------------
+# --- the object twin's keys (reality files and object files) ----------------------------------
 class MountParameters(_Strict):
     """What is on the turntable, as one rigid body: its pose error.
 
@@ -173,12 +176,34 @@ class ObjectParameters(_Strict):
     reflectance_scale: Annotated[float, Field(gt=0.0, le=10.0, allow_inf_nan=False)] = 1.0
 
 
-class RealityFile(TwinParameters):
-    """The simulated lab's world: calibration keys plus the object twin's (issue 13, section 1)."""
+class ObjectTwinParameters(_Strict):
+    """The object twin's keys: the mount's pose offset and the objects' reflectance (issue 14).
+
+    The one home of these keys: a reality file holds them beside the calibration keys, an
+    object file (``object.yaml``, :class:`ObjectTwinFile`) holds them alone.
+    :func:`sim_core.twin_apply.apply_to_spec` and :func:`sim_core.scene.build_scene` apply them
+    whenever the twin they are given has them (:func:`has_object_keys`).
+    """
 
     mount: MountParameters = MountParameters()
     objects: dict[Annotated[str, Field(min_length=1, max_length=100)], ObjectParameters] = Field(
         default_factory=dict)
+
+
+def has_object_keys(twin: Any) -> bool:
+    """Whether ``twin`` carries the object twin's keys (a reality, an object file, a combination).
+
+    >>> has_object_keys(TwinParameters()), has_object_keys(ObjectTwinParameters())
+    (False, True)
+    """
+    return isinstance(twin, ObjectTwinParameters)
+
+
+class RealityFile(ObjectTwinParameters, TwinParameters):
+    """The simulated lab's world: calibration keys plus the object twin's (issue 13, section 1).
+
+    Also what :func:`with_object_twin` returns: a calibration combined with an object file.
+    """
 
 
 # --- calibration-only keys ------------------------------------------------------------------
@@ -206,7 +231,49 @@ class CalibrationFile(TwinParameters):
         return self
 
 
-def twin_hash(params: TwinParameters) -> str:
+class ObjectTwinFile(ObjectTwinParameters):
+    """``object.yaml``: the object twin's keys as fitted, plus their provenance (issue 14).
+
+    The provenance (``procedures.object_fit``: residuals, uncertainties, what was determined) is
+    not applied and not hashed.
+    """
+
+    provenance: Provenance = Provenance()
+
+    @model_validator(mode="after")
+    def _json_safe_provenance(self):
+        try:
+            json.dumps(self.provenance.procedures, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"provenance.procedures must be plain finite JSON: {exc}") from None
+        return self
+
+
+def with_object_twin(calibration: TwinParameters | None,
+                     object_twin: ObjectTwinParameters | None) -> TwinParameters | None:
+    """The twin :func:`sim_core.scene.build_scene` applies: a calibration and an object file.
+
+    ``calibration`` None means the nominal camera and rig; ``object_twin`` None the nominal
+    mount and reflectance. Without an object twin the calibration comes back unchanged (its
+    hash too); otherwise a :class:`RealityFile` with the calibration's keys (not its provenance)
+    and the object file's keys (not its provenance), whose :func:`twin_hash` covers both.
+
+    >>> cal = CalibrationFile(illumination=IlluminationParameters(power_w=1.2))
+    >>> obj = ObjectTwinFile(objects={"body": ObjectParameters(reflectance_scale=0.9)})
+    >>> twin = with_object_twin(cal, obj)
+    >>> twin.illumination.power_w, twin.objects["body"].reflectance_scale
+    (1.2, 0.9)
+    >>> with_object_twin(cal, None) is cal, with_object_twin(None, None)
+    (True, None)
+    """
+    if object_twin is None:
+        return calibration
+    base = calibration if calibration is not None else TwinParameters()
+    keys = {k: getattr(base, k) for k in TwinParameters.model_fields}
+    return RealityFile(**keys, mount=object_twin.mount, objects=dict(object_twin.objects))
+
+
+def twin_hash(params: TwinParameters | ObjectTwinParameters) -> str:
     """SHA-256 of the parameters that change a simulation (provenance excluded), 16 hex digits.
 
     Every simulated frame and pose result records this, so a result says which calibration made
@@ -272,17 +339,40 @@ def load_reality(path: str | Path) -> RealityFile:
     return parse_reality(_read_mapping(path, "reality"))
 
 
-def dump_yaml(params: TwinParameters) -> str:
-    """The YAML text of a calibration or reality, without keys at their defaults."""
+def parse_object_twin(data: Any) -> ObjectTwinFile:
+    """Validate an object file given as a dict (same errors as :func:`parse_calibration`).
+
+    >>> parse_object_twin({"objects": {"body": {"reflectance_scale": 0.93}}}).objects["body"]
+    ObjectParameters(reflectance_scale=0.93)
+    """
+    return _parse(ObjectTwinFile, data, "object_twin")
+
+
+def load_object_twin(path: str | Path) -> ObjectTwinFile:
+    """Read and validate an object file (``object.yaml``, YAML or JSON)."""
+    return parse_object_twin(_read_mapping(path, "object_twin"))
+
+
+def dump_yaml(params: TwinParameters | ObjectTwinParameters) -> str:
+    """The YAML text of a calibration, reality or object file, without keys at their defaults."""
     data = params.model_dump(mode="json", exclude_defaults=True)
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
 
 
-def write_calibration(path: str | Path, calibration: CalibrationFile) -> Path:
-    """Write ``calibration`` as YAML, atomically (a temporary file renamed over the target)."""
+def _write_atomic(path: str | Path, text: str) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(dump_yaml(calibration), encoding="utf-8")
+    tmp.write_text(text, encoding="utf-8")
     tmp.replace(p)
     return p
+
+
+def write_calibration(path: str | Path, calibration: CalibrationFile) -> Path:
+    """Write ``calibration`` as YAML, atomically (a temporary file renamed over the target)."""
+    return _write_atomic(path, dump_yaml(calibration))
+
+
+def write_object_twin(path: str | Path, object_twin: ObjectTwinFile) -> Path:
+    """Write an object file (``object.yaml``) as YAML, atomically, like a calibration."""
+    return _write_atomic(path, dump_yaml(object_twin))

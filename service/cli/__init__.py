@@ -10,7 +10,16 @@ import sys
 
 import typer
 
-from service.cli import calibrate, compare, correct, devices, schema, serve, simulate
+from service.cli import (
+    calibrate,
+    compare,
+    correct,
+    devices,
+    fit_object,
+    schema,
+    serve,
+    simulate,
+)
 from service.cli.bench import bench_app
 from service.cli.common import err_console
 from sim_core.errors import InvalidInputError
@@ -30,6 +39,7 @@ app.command("sim-device")(devices.sim_device)
 app.add_typer(bench_app, name="bench")
 app.add_typer(schema.schema_app, name="schema")
 app.add_typer(calibrate.calibrate_app, name="calibrate")
+app.command("fit-object")(fit_object.fit_object_command)
 
 
 def main() -> None:

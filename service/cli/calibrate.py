@@ -127,6 +127,172 @@ def rig_command(
     console.print(f"calibration written to {paths['calibration']} (report {paths['html']})")
 
 
+
+@calibrate_app.command("material")
+def material_command(
+    out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML); the slices "
+                                      "go to OUT.slices.csv, the report to OUT.report.json.")],
+    simulated: Annotated[
+        bool, typer.Option("--simulated", help="Measure on the simulated lab's rig.")
+    ] = False,
+    reality: Annotated[
+        Path | None,
+        typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
+    ] = None,
+    sample_material: Annotated[
+        str | None,
+        typer.Option("--sample-material",
+                     help="The simulated lab's sample: a preset name or a material file "
+                          "(needs --simulated; default: the prior)."),
+    ] = None,
+    calibration: Annotated[
+        Path | None,
+        typer.Option("--calibration", help="The rig's calibration (toftwin calibrate rig); "
+                     "default: the nominal twin."),
+    ] = None,
+    model: Annotated[str, typer.Option("--model", help="Material kind fitted.")] = "cook-torrance",
+    prior: Annotated[
+        str | None,
+        typer.Option("--prior", help="Preset (or material file) holding the values of the "
+                     "parameters the slices do not determine; default: the model's defaults."),
+    ] = None,
+    size_m: Annotated[float, typer.Option("--size-m", help="Side of the square sample [m].")] = 0.2,
+    angles: Annotated[
+        str, typer.Option("--angles", help="Turntable angles: FROM:TO:STEP or a list [deg].")
+    ] = "-70:70:5",
+    frames_per_state: Annotated[
+        int, typer.Option("--frames-per-state", help="Frames averaged per rig state (2-64).")
+    ] = 4,
+    solar_suns: Annotated[
+        float, typer.Option("--solar-suns", help="Solar simulator level of the solar slice "
+                            "[sun]; 0 leaves it out.")
+    ] = 0.8,
+    scene: Annotated[
+        str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
+                          "solar simulator.")
+    ] = "satellite_ground_test",
+    camera_spp: Annotated[
+        int, typer.Option("--camera-spp", help="Samples per pixel of the simulated camera.")
+    ] = 32,
+    seed: Annotated[int, typer.Option(help="Noise seed of the simulated camera and the fit.")] = 0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Measure a material's BRDF on the rig: a sample plate swept by the turntable (issue 14)."""
+    from calibration.brdf.material_file import write_material_file
+    from calibration.rig_material import (
+        MaterialSweepPlan,
+        calibrate_material,
+        parse_angles,
+        prior_material,
+    )
+    from calibration.rig_sequence import SimulatedOperator
+    from drivers.rig import Rig
+    from drivers.sim.world import SimulatedWorld
+    from service.lab.scenes import SceneSource, resolve_scene
+    from service.settings import EXAMPLES_DIR
+    from sim_core.render import RenderSettings
+    from sim_core.scene_spec import load_scene_spec
+    from sim_core.twin_file import load_calibration, load_reality
+
+    try:
+        if reality is not None and not simulated:
+            raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
+        if sample_material is not None and not simulated:
+            raise InvalidInputError("--sample-material", "is the simulated lab's sample: needs "
+                                    "--simulated")
+        bounded("--camera-spp", camera_spp, 1, 4096)
+        plan = MaterialSweepPlan(angles_deg=parse_angles(angles), size_m=size_m,
+                                 frames_per_state=frames_per_state, solar_suns=solar_suns)
+        prior_mat = prior_material(model, _material_arg(prior, "--prior"))
+        cal = load_calibration(calibration) if calibration is not None else None
+        if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
+            source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
+        else:
+            source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        world = truth = None
+        if simulated:
+            from calibration.rig_material.plan import SAMPLE_NAME
+
+            truth = _material_arg(sample_material, "--sample-material")
+            truth = truth if truth is not None else prior_mat
+            if not isinstance(truth, str):
+                truth = _spec_dict(truth)
+            world = SimulatedWorld(source.spec, source.base_dir,
+                                   RenderSettings(integrator="direct", spp=camera_spp),
+                                   reality=None if reality is None else load_reality(reality))
+            truth = {SAMPLE_NAME: truth}
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    with contextlib.ExitStack() as stack:
+        if world is not None:
+            rig = stack.enter_context(Rig.simulated(frame_source=world, seed=seed))
+            operator = SimulatedOperator(world, materials=truth)
+        else:
+            rig = stack.enter_context(_real_rig())
+            operator = ConsoleOperator()
+        bar = stack.enter_context(Progress(
+            TextColumn("{task.description}"), BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TimeElapsedColumn(), console=err_console, transient=True,
+            disable=quiet or not err_console.is_terminal))
+        task = bar.add_task("measuring", total=plan.n_captures)
+
+        def progress(done: int, total: int, message: str) -> None:
+            bar.update(task, completed=done, total=total, description=message)
+
+        try:
+            result = calibrate_material(rig, operator, source.spec, source.base_dir, cal, plan,
+                                        model, prior_mat, progress, seed=seed)
+        except InvalidInputError as exc:
+            fail_invalid(exc)
+    path = write_material_file(out, result.result.fit)
+    csv_path = out.with_name(out.stem + ".slices.csv")
+    result.slices.write_csv(csv_path)
+    report_path = out.with_name(out.stem + ".report.json")
+    _write_json(report_path, result.report())
+    rows = ", ".join(f"{len(p)} {p.slice_name}" for p in result.slices.parts)
+    console.print(f"{model} fitted to the rig's slices ({rows} rows)")
+    for name, st in result.result.parameters.items():
+        note = {"determined": f"± {st.uncertainty:.2g}", "conditional":
+                f"± {st.uncertainty:.2g}  given the prior of the held ones",
+                "prior": "held at the prior: NOT DETERMINED by these slices"}[st.status]
+        console.print(f"  {name:>16} = {st.value:.4g}  {note}")
+    for w in result.slices.check.warnings:
+        console.print(f"[yellow]warning:[/] {w}")
+    console.print(f"material file written to {path} (slices {csv_path}, report {report_path})")
+
+
+def _material_arg(value: str | None, option: str):
+    """A preset name, or the ``{kind, params}`` of a material file (None stays None)."""
+    if value is None:
+        return None
+    if Path(value).suffix.lower() in (".yaml", ".yml", ".json"):
+        from sim_core.materials.material_file import read_material_file
+
+        kind, params = read_material_file(value)
+        return {"kind": kind, "params": params}
+    from sim_core.materials import PRESETS
+
+    if value not in PRESETS:
+        raise InvalidInputError(option, f"'{value}' is neither a preset ({', '.join(PRESETS)}) "
+                                "nor a material file (.yaml, .json)")
+    return value
+
+
+def _spec_dict(material) -> dict:
+    from dataclasses import fields
+
+    return {"kind": material.name,
+            "params": {f.name: getattr(material, f.name) for f in fields(material)}}
+
+
+def _write_json(path: Path, data: dict) -> None:
+    import json
+
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, allow_nan=False), encoding="utf-8")
+    tmp.replace(path)
+
 def _real_rig():
     from drivers.rig import Rig
 
@@ -138,3 +304,73 @@ def _real_rig():
         raise typer.Exit(code=2)
     return Rig.open(env["TOFTWIN_TURNTABLE_PORT"], env["TOFTWIN_LAMP_PORT"],
                     env["TOFTWIN_SHUTTER_PORT"], camera_serial=env.get("TOFTWIN_CAMERA_SERIAL"))
+
+
+BRDF_MODELS = ("seed-microfacet", "cook-torrance", "lambertian", "hapke")
+
+
+def _parse_fixed(items: Sequence[str]) -> dict[str, float]:
+    """``["m=0.1", "n2=1.5"]`` -> ``{"m": 0.1, "n2": 1.5}``; an input error naming ``--fix``."""
+    fixed: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not sep or not name.strip() or not math.isfinite(value):
+            raise InvalidInputError("--fix", f"{item!r} is not NAME=VALUE with a finite number")
+        fixed[name.strip()] = value
+    return fixed
+
+
+@calibrate_app.command("brdf")
+def brdf_command(
+    data: Annotated[Path, typer.Argument(help="Goniometer CSV: incidence_zenith_deg, "
+                                         "reflection_zenith_deg, azimuth_difference_deg, "
+                                         "brdf_per_sr (optional wavelength_nm, brdf_std_per_sr).")],
+    model: Annotated[str, typer.Option("--model", help=f"One of {', '.join(BRDF_MODELS)}.")],
+    out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML).")],
+    wavelength_nm: Annotated[
+        float | None,
+        typer.Option("--wavelength-nm", help="Band to fit when the file holds several [nm]."),
+    ] = None,
+    fix: Annotated[
+        list[str] | None,
+        typer.Option("--fix", help="Pin a parameter: NAME=VALUE (repeatable)."),
+    ] = None,
+    outlier_threshold: Annotated[
+        float, typer.Option("--outlier-threshold",
+                            help="Relative error beyond which a sample is an outlier (0-10).")
+    ] = 0.25,
+    seed: Annotated[int, typer.Option(help="Seed of RANSAC and differential evolution.")] = 0,
+) -> None:
+    """Fit a material model to goniometer data and write a material file (issue 14)."""
+    from calibration.brdf import FitSettings, fit_brdf
+    from calibration.brdf.material_file import write_material_file
+    from service.cli.common import choice
+    from sim_core.materials.goniometer import read_goniometer_csv
+
+    try:
+        choice("--model", model, BRDF_MODELS)
+        settings = FitSettings(outlier_relative_error=outlier_threshold)
+        fixed = _parse_fixed(fix or [])
+        table = read_goniometer_csv(data, wavelength_nm=wavelength_nm)
+        fit = fit_brdf(table, model, fixed=fixed, seed=seed, settings=settings)
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    path = write_material_file(out, fit)
+    console.print(f"{fit.kind} fitted to {len(table)} samples of {data}"
+                  + (f" at {table.wavelength_nm:g} nm" if table.wavelength_nm else ""))
+    for name, value in fit.params.items():
+        if name in fit.fixed:
+            note = "fixed"
+        else:
+            note = f"± {fit.uncertainty[name]:.2g}" + ("" if fit.determined[name]
+                                                      else "  NOT DETERMINED by these data")
+        console.print(f"  {name:>16} = {value:.4g}  {note}")
+    console.print(f"  e_fit (seed eq. 11) = {100 * fit.e_fit:.3g} % over the inliers, "
+                  f"{100 * fit.e_fit_all:.3g} % over all samples")
+    console.print(f"  outliers flagged: {fit.n_outliers} of {len(table)} (relative error beyond "
+                  f"{100 * outlier_threshold:g} %)")
+    console.print(f"material file written to {path}")

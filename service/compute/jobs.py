@@ -94,6 +94,9 @@ def make_job(
     twin: dict[str, Any] | None = None,
 ) -> SimulationJob:
     """A job for ``spec`` posed at the given rig state, with its mesh files packed in."""
+    from sim_core.scene import inline_material_files
+
+    spec = inline_material_files(spec, base_dir)  # the worker has not the scene's folder
     meshes: dict[str, bytes] = {}
     for obj in spec.objects:
         if obj.mesh.kind == "file":

@@ -34,7 +34,13 @@ from service.store.tables import CalibrationActivationRow
 from sim_core.errors import InvalidInputError
 from sim_core.scene import scene_twin
 from sim_core.scene_spec import scene_error_from_validation
-from sim_core.twin_file import CalibrationFile, TwinParameters, parse_calibration, twin_hash
+from sim_core.twin_file import (
+    CalibrationFile,
+    TwinParameters,
+    parse_calibration,
+    parse_reality,
+    twin_hash,
+)
 
 
 @dataclass(frozen=True)
@@ -71,9 +77,19 @@ def parse_body(data: Any) -> CalibrationFile:
             field, err.message.replace("docs/scene-format.md", "docs/calibration.md")) from None
 
 
-def calibration_from_json(text: str | None) -> CalibrationFile | None:
-    """A stored calibration (validated again, as a file would be), or None."""
-    return None if text is None else parse_calibration(json.loads(text))
+def calibration_from_json(text: str | None) -> TwinParameters | None:
+    """A stored calibration (validated again, as a file would be), or None.
+
+    A scene's calibration combined with its object file (``object_twin: FILE``,
+    :func:`sim_core.twin_file.with_object_twin`) is stored with the object keys: it comes back
+    as that combination.
+    """
+    if text is None:
+        return None
+    data = json.loads(text)
+    if isinstance(data, dict) and ({"mount", "objects"} & data.keys()):
+        return parse_reality(data)
+    return parse_calibration(data)
 
 
 def active_twin(sessions: sessionmaker) -> Twin:

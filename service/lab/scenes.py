@@ -100,6 +100,11 @@ def resolve_scene(
             "an inline scene may not name a calibration file (it would be read on the server); "
             "the service applies its active calibration (PUT /api/v1/calibration)",
         )
+    if spec.object_twin is not None:
+        raise InvalidInputError(
+            f"{field}.object_twin",
+            "an inline scene may not name an object file (it would be read on the server)",
+        )
     if len(spec.objects) > max_objects:
         raise InvalidInputError(
             f"{field}.objects",

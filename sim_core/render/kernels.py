@@ -240,6 +240,31 @@ def camera_rays(u_px, v_px, cam):
     return out
 
 
+#: the R2 sequence's steps (Roberts 2018): 1/g and 1/g^2 with g the plastic number, the real
+#: root of x^3 = x + 1
+R2_STEP_U = 0.7548776662466927
+R2_STEP_V = 0.5698402909980532
+#: the sample pass whose key seeds a pixel's jitter offset; real passes stay below 65536
+_JITTER_PASS = 0xFFFFFFFF
+
+
+@njit(cache=True, inline="always")
+def pixel_jitter(seed_hash, pixel, sample):
+    """Point ``sample`` of a pixel's jitter pattern in [0, 1)^2: the R2 low-discrepancy sequence
+    shifted by a random offset per pixel (a Cranley-Patterson rotation).
+
+    Each point is uniform on the pixel (the offset is), so the estimate stays unbiased; the
+    points of one pixel are stratified, which makes the pixel's coverage of an edge converge
+    like O(1/N) instead of O(1/sqrt(N)) (uniform random jitter): a silhouette's mixed pixels
+    were the renderer's largest noise in grey on the rig's objects. Like the path keys, point k
+    of a pixel depends only on (seed, pixel, k), whatever the batching.
+    """
+    ou, ov = uniform_pair(path_key(seed_hash, _JITTER_PASS, pixel), 0, 0)
+    fu = ou + sample * R2_STEP_U
+    fv = ov + sample * R2_STEP_V
+    return fu - math.floor(fu), fv - math.floor(fv)
+
+
 @njit(**_SERIAL)
 def primary_rays(seed, pixels, first_sample, n_passes, u_px, v_px, footprint_px, cam):
     """Camera rays of the :class:`Pinhole` ``cam`` for ``n_passes`` more samples of each pixel
@@ -247,9 +272,10 @@ def primary_rays(seed, pixels, first_sample, n_passes, u_px, v_px, footprint_px,
 
     Ray ``r`` belongs to pixel ``pixels[r % n]`` and is that pixel's sample number
     ``first_sample[r % n] + r // n``: its path key hashes (seed, that sample number, pixel), so
-    a pixel's k-th sample is the same whichever pixels are traced with it. It lands uniformly
-    in the ``footprint_px`` square around the pixel centre (0: the centre itself), drawn from
-    the uniforms of bounce 0. Returns float32 render-frame directions (m, 3) and the path keys.
+    a pixel's k-th sample is the same whichever pixels are traced with it. It lands in the
+    ``footprint_px`` square around the pixel centre (0: the centre itself) at
+    :func:`pixel_jitter`'s point k: stratified over the pixel's samples, each one uniform.
+    Returns float32 render-frame directions (m, 3) and the path keys.
     """
     n = pixels.shape[0]
     m = n_passes * n
@@ -260,11 +286,12 @@ def primary_rays(seed, pixels, first_sample, n_passes, u_px, v_px, footprint_px,
         for j in range(n):
             r = p * n + j
             q = pixels[j]
-            key = path_key(sk, first_sample[j] + p, q)
+            k = first_sample[j] + p
+            key = path_key(sk, k, q)
             keys[r] = key
             u, v = u_px[q], v_px[q]
             if footprint_px > 0.0:
-                ju, jv = uniform_pair(key, 0, 0)
+                ju, jv = pixel_jitter(sk, q, k)
                 u += (ju - 0.5) * footprint_px
                 v += (jv - 0.5) * footprint_px
             d[r, 0], d[r, 1], d[r, 2] = camera_ray(u, v, cam)

@@ -5,20 +5,36 @@ Code under test never sees these: it gets frames from the simulated lab built wi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from sim_core.camera import CAMERA_PRESETS
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.twin_file import RealityFile, parse_reality
+from sim_core.twin_file import CalibrationFile, RealityFile, TwinParameters, parse_reality
 
 PRESET = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
 #: range of a radian of phase at 60.24 MHz [m]
 M_PER_RAD = SPEED_OF_LIGHT_M_S / (4.0 * np.pi * 60.24e6)
 
 
+#: issue 14's object realities: mount offsets up to this per axis [m] and [deg], scales in range
+OBJECT_OFFSET_M = 0.010
+OBJECT_ROTATION_DEG = 2.0
+REFLECTANCE_SCALES = (0.8, 1.2)
+
+
 def random_reality(seed: int, nominal_power_w: float = 1.0, wiggling_mm: float = 15.0,
-                   pattern_mm: float = 4.0, object_differences: bool = False) -> RealityFile:
-    """A reality drawn from plausible ranges (issue 13's round trip)."""
+                   pattern_mm: float = 4.0, object_differences: bool = False,
+                   object_twin_names: Sequence[str] = ()) -> RealityFile:
+    """A reality drawn from plausible ranges (issue 13's round trip).
+
+    ``object_twin_names`` (issue 14's object round trip): the mount's pose offset is drawn up to
+    :data:`OBJECT_OFFSET_M` per axis and :data:`OBJECT_ROTATION_DEG` about each axis, and each
+    named object gets a reflectance scale in :data:`REFLECTANCE_SCALES`; drawn from a stream of
+    their own, so the other keys are those of the same seed without it. Overrides
+    ``object_differences``' mount offset.
+    """
     rng = np.random.default_rng(seed)
     u = rng.uniform
     tilt = np.radians(u(0.0, 1.5))
@@ -52,4 +68,19 @@ def random_reality(seed: int, nominal_power_w: float = 1.0, wiggling_mm: float =
     if object_differences:
         data["mount"] = {"pose_offset": {"position_m": [float(u(-3e-3, 3e-3)) for _ in range(3)],
                                          "rotation_deg": [0.0, 0.0, float(u(-1.0, 1.0))]}}
+    if object_twin_names:
+        v = np.random.default_rng([seed, 14]).uniform
+        data["mount"] = {"pose_offset": {
+            "position_m": [float(v(-OBJECT_OFFSET_M, OBJECT_OFFSET_M)) for _ in range(3)],
+            "rotation_deg": [float(v(-OBJECT_ROTATION_DEG, OBJECT_ROTATION_DEG))
+                             for _ in range(3)]}}
+        data["objects"] = {name: {"reflectance_scale": float(v(*REFLECTANCE_SCALES))}
+                           for name in object_twin_names}
     return parse_reality(data)
+
+
+def perfect_calibration(reality: RealityFile) -> CalibrationFile:
+    """The calibration a perfect rig calibration would give: the reality's camera and rig keys
+    (camera, illumination, turntable, solar simulator) only, never its object keys (mount pose,
+    reflectance), which the object fit must estimate from the frames."""
+    return CalibrationFile(**{k: getattr(reality, k) for k in TwinParameters.model_fields})

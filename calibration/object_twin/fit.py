@@ -1,0 +1,247 @@
+"""The object twin from measured frames: mount pose and reflectance (issue 14, section 3).
+
+:func:`fit_object` takes averaged captures of the mounted object at some turntable angles (what
+``toftwin fit-object`` or a campaign's first poses capture; it never drives the rig) and:
+
+1. turns every view into points (:mod:`calibration.object_twin.point_cloud`: calibrated
+   intrinsics, depth errors removed, edges dropped) and checks each has enough;
+2. registers the merged points to the mounted objects' meshes by point-to-plane ICP from the
+   nominal pose (:mod:`calibration.object_twin.pose`), or refuses when they do not overlap;
+3. fits each visible object's reflectance scale at that pose by linear least squares of
+   rendered against measured phasors (:mod:`calibration.object_twin.reflectance`), objects with
+   too few pixels or too little signal reported as undetermined;
+4. refines pose and scales together against the rendered views
+   (:mod:`calibration.object_twin.refine`): the height along the axis, which ICP cannot see on
+   vertical faces, and the uncertainties.
+
+The result is the object file (:class:`sim_core.twin_file.ObjectTwinFile`) with the report in
+its provenance. BRDF roughness is not fitted: the glossy films' specular lobes (a degree wide)
+appear in at most a pixel patch of one view, which does not determine it; the report says so.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.captures import AveragedCapture
+from calibration.object_twin.point_cloud import (
+    EDGE_JUMP_M,
+    MIN_AMPLITUDE_DN,
+    capture_cloud,
+    usable_pixels,
+)
+from calibration.object_twin.pose import mount_model, register_mount
+from calibration.object_twin.refine import fit_regions, refine_object_twin
+from calibration.object_twin.reflectance import ROUNDS, object_pixels, scale_ratio
+from calibration.object_twin.render_model import FIT_RENDER, TwinRenderer, measured_phasor
+from calibration.object_twin.views import calibrated_camera, capture_spec, mount_from_camera
+from sim_core.depth_errors import DepthErrorModel
+from sim_core.errors import InvalidInputError
+from sim_core.json_safe import json_safe
+from sim_core.raw import ValidityThresholds
+from sim_core.render import RenderSettings
+from sim_core.scene_spec import SceneSpec
+from sim_core.twin_file import (
+    MountParameters,
+    ObjectParameters,
+    ObjectTwinFile,
+    ObjectTwinParameters,
+    Provenance,
+    TwinParameters,
+    has_object_keys,
+)
+
+#: least usable pixels (signal, not flagged) a view must have
+MIN_VALID_PIXELS = 300
+#: floor of the averaged phasor's noise estimate [DN]
+NOISE_FLOOR_DN = 0.3
+
+
+@dataclass(frozen=True)
+class ObjectFit:
+    """The fitted object twin and its report (plain JSON)."""
+
+    object_twin: ObjectTwinFile
+    report: dict[str, Any]
+
+
+def _check_captures(captures: Sequence[AveragedCapture], min_valid_pixels: int,
+                    min_amplitude_dn: float) -> list[np.ndarray]:
+    if not captures:
+        raise InvalidInputError("captures", "no captures: at least one view of the mounted "
+                                "object is needed (better three or more turntable angles)")
+    usable = []
+    for i, cap in enumerate(captures):
+        if not np.isfinite(cap.turntable_angle_deg):
+            raise InvalidInputError(f"captures[{i}].turntable_angle_deg",
+                                    "the capture does not say the turntable's angle")
+        u = usable_pixels(cap.amplitude, cap.valid, min_amplitude_dn)
+        if int(u.sum()) < min_valid_pixels:
+            raise InvalidInputError(
+                f"captures[{i}]", f"{int(u.sum())} valid pixels (amplitude >= "
+                f"{min_amplitude_dn:g} DN, not saturated) at {cap.turntable_angle_deg:g} deg; at "
+                f"least {min_valid_pixels} are needed (is the lamp on, the object in view?)")
+        usable.append(u)
+    return usable
+
+
+def fit_object(
+    spec: SceneSpec,
+    base_dir: str | Path,
+    calibration: TwinParameters | None,
+    captures: Sequence[AveragedCapture],
+    *,
+    render_settings: RenderSettings = FIT_RENDER,
+    min_valid_pixels: int = MIN_VALID_PIXELS,
+    min_amplitude_dn: float = MIN_AMPLITUDE_DN,
+    edge_jump_m: float = EDGE_JUMP_M,
+    rig_name: str = "",
+) -> ObjectFit:
+    """Fit the mount's pose offset and the objects' reflectance scales (module docstring).
+
+    Parameters
+    ----------
+    spec, base_dir
+        The nominal scene (its on-turntable objects are the mount) and its folder.
+    calibration : TwinParameters or None
+        The rig's calibration (None: nominal camera and rig). Its object keys, if it has any,
+        are not used: the object twin is what is being fitted.
+    captures : sequence of AveragedCapture
+        Averaged frames of the mounted object, each at one reported turntable angle, the solar
+        simulator's shutter closed.
+    render_settings : RenderSettings
+        How the twin renders the views for the reflectance and the refinement.
+    min_valid_pixels, min_amplitude_dn, edge_jump_m
+        The view checks and the point cloud's filters.
+    rig_name : str
+        Recorded in the provenance.
+
+    Raises
+    ------
+    InvalidInputError
+        ``captures[i]`` with too few valid pixels; ``mesh`` when the measured points do not
+        overlap the mounted objects' meshes (never a pose in that case).
+    """
+    t0 = time.perf_counter()
+    base = Path(base_dir)
+    if calibration is not None and has_object_keys(calibration):
+        calibration = TwinParameters(**{k: getattr(calibration, k)
+                                         for k in TwinParameters.model_fields})
+    captures = list(captures)
+    usable = _check_captures(captures, min_valid_pixels, min_amplitude_dn)
+    model = mount_model(spec, base)
+
+    # 1-2. points, ICP ------------------------------------------------------------------------
+    points, cams, views = [], [], []
+    for cap in captures:
+        cspec = capture_spec(spec, cap)
+        intr = calibrated_camera(cspec, calibration).intrinsics
+        depth = calibration.camera.depth if calibration is not None else None
+        model_d = None if depth is None else DepthErrorModel.from_spec(
+            depth, cap.frequencies_hz, cap.shape)
+        cloud = capture_cloud(cap, intr, model_d, min_amplitude_dn, edge_jump_m)
+        m = mount_from_camera(cspec, calibration, cap.turntable_angle_deg)
+        points.append(cloud.points_cam_m @ m[:3, :3].T + m[:3, 3])
+        cams.append(m[:3, 3])
+        views.append({"turntable_angle_deg": cap.turntable_angle_deg, "frames": cap.n_frames,
+                      "usable_pixels": int(cloud.usable.sum()), "points": cloud.n_points})
+    reg = register_mount(np.concatenate(points), model, np.asarray(cams))
+    t_icp = time.perf_counter() - t0
+
+    # 3. reflectance at the ICP pose ------------------------------------------------------
+    renderer = TwinRenderer(spec, base, calibration, captures, render_settings)
+    measured = [measured_phasor(c) for c in captures]
+    scales = {n: 1.0 for n in model.names}
+
+    def twin_at(pose, s):
+        return ObjectTwinParameters(
+            mount=MountParameters(pose_offset=pose),
+            objects={n: ObjectParameters(reflectance_scale=v) for n, v in s.items()})
+
+    predicted = renderer.predict(twin_at(reg.offset, scales))
+    scene_names = tuple(o.name for o in spec.objects)
+    pixels = object_pixels(model.names, scene_names, predicted, usable)
+    fitted = tuple(n for n in model.names if pixels[n].determined)
+    noise = [max(NOISE_FLOOR_DN, float(np.median(c.intensity_std[u])) / np.sqrt(c.n_frames))
+             for c, u in zip(captures, usable, strict=True)]
+    weights = [np.ones(c.shape) for c in captures]
+    linear_rounds = []
+    for _ in range(ROUNDS):
+        for n in fitted:
+            scales[n] *= scale_ratio(measured, predicted, pixels[n].masks, weights)
+        linear_rounds.append(dict(scales))
+        predicted = renderer.predict(twin_at(reg.offset, scales))
+
+    # 4. pose and scales together against the renders ---------------------------------------
+    flagged = [~c.valid & (c.amplitude >= ValidityThresholds().min_amplitude_dn)
+               for c in captures]
+    mounted_ids = [scene_names.index(n) for n in model.names]
+    regions = fit_regions(flagged, predicted, mounted_ids)
+    tt = spec.turntable
+    axis = (calibration.turntable.axis_direction if calibration is not None
+            and calibration.turntable.axis_direction is not None else tt.axis_direction)
+    refined = refine_object_twin(renderer, measured, regions, noise, reg.offset, scales,
+                                 fitted, np.asarray(axis))
+    final_pred = renderer.predict(twin_at(refined.offset, refined.scales))
+    objects_report = {}
+    for n in model.names:
+        px = pixels[n]
+        entry: dict[str, Any] = {"determined": px.determined, "pixels": px.n_pixels,
+                                 "mean_amplitude_dn": px.mean_amplitude_dn}
+        if px.determined:
+            k = scale_ratio(measured, final_pred, px.masks, weights)
+            entry.update({
+                "reflectance_scale": refined.scales[n],
+                "std": refined.std_scale[n],
+                "linear_estimate": linear_rounds[-1][n] if linear_rounds else 1.0,
+                "amplitude_ratio_after": k,
+                "determined": refined.determined.get(n, False),
+            })
+            if not refined.determined.get(n, False):
+                entry["reason"] = f"standard deviation {refined.std_scale[n]:.3f} is too large"
+        else:
+            entry.update({"reflectance_scale": 1.0, "reason": px.reason})
+        objects_report[n] = entry
+    pose_determined = all(refined.determined[k] for k in
+                          ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg"))
+    report = json_safe({
+        "views": views,
+        "icp": reg.summary(),
+        "refined": refined.summary(),
+        "pose_determined": pose_determined,
+        "objects": objects_report,
+        "roughness": {"determined": False, "reason": "the glossy films' specular lobes are about "
+                      "a degree wide: they appear in at most a small patch of one view, which "
+                      "does not determine the roughness; the presets' roughness is kept"},
+        "render": {"integrator": render_settings.integrator, "spp": render_settings.spp,
+                   "multipath": bool(any(p.multipath for p in final_pred)),
+                   "renders": renderer.renders},
+        "seconds": {"icp": t_icp, "total": time.perf_counter() - t0},
+    }, non_finite=None)
+    determined_scales = {n: ObjectParameters(reflectance_scale=refined.scales[n])
+                         for n in fitted if objects_report[n]["determined"]}
+    twin = ObjectTwinFile(
+        mount=MountParameters(pose_offset=refined.offset),
+        objects=determined_scales,
+        provenance=Provenance(
+            created_utc=dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            rig=rig_name, software=f"toftwin {_version()}",
+            frames_used=int(sum(c.n_frames for c in captures)),
+            procedures={"object_fit": report}),
+    )
+    return ObjectFit(twin, report)
+
+
+def _version() -> str:
+    try:
+        return metadata.version("toftwin")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a checkout
+        return "unknown"

@@ -1,0 +1,156 @@
+"""The material sweep's plan and its sample: a flat plate on the turntable (issue 14, §2).
+
+The sample is a square plate of the material, mounted like the calibration board
+(:class:`calibration.fixtures.BoardFixture`: one home for how plates sit on the turntable),
+upright, facing the camera at the turntable's zero, centred on the axis at the camera's height.
+The sweep turns it through :attr:`MaterialSweepPlan.angles_deg`; at each angle the rig captures
+the camera's light alone (the solar simulator's shutter closed) and, when the plan has a solar
+level, with the solar simulator's shutter open.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from calibration.fixtures import BoardFixture, fixture_object
+from drivers.rig import RigState
+from sim_core.errors import InvalidInputError
+from sim_core.lights import SUNS_RANGE
+from sim_core.scene_spec import ObjectSpec, SceneSpec
+
+#: the sample's object name in the scene (the simulated lab's operator mounts it by this name)
+SAMPLE_NAME = "material_sample"
+#: default sweep: -70 ... 70 deg every 5 deg
+DEFAULT_ANGLES_DEG: tuple[float, ...] = tuple(float(a) for a in range(-70, 71, 5))
+
+
+@dataclass(frozen=True)
+class MaterialSweepPlan:
+    """What the material sweep captures and how the slices are cut.
+
+    Attributes
+    ----------
+    angles_deg : tuple of float
+        Reported turntable angles [deg], each in [-85, 85]: beyond, the plate is seen edge-on.
+    size_m : float
+        Side of the square sample [m], in [0.02, 0.5].
+    frames_per_state : int
+        Frames averaged per rig state (2-64: the spread of the frames is the samples'
+        uncertainty).
+    solar_suns : float
+        Set level of the solar simulator for the solar slice [sun]: 0 (no solar slice) or in
+        the lamp's range (:data:`sim_core.lights.SUNS_RANGE`). The lowest level keeps most
+        pixels below SBI.
+    bin_deg : float
+        Width of the angle bins the plate's pixels are grouped in [deg], in [0.1, 5]. A plate
+        seen from 1 m spans about 10 deg of viewing angle: each turntable angle gives several
+        rows of the slice.
+    edge_margin_px : int
+        Pixels of the plate's outline left out (optics blur, a fraction of a pixel of pose
+        error), 1-20.
+    min_pixels_per_bin : int
+        Fewest pixels a row is averaged over, 3-1000.
+    reference_albedo : float
+        Albedo of the twin's reference Lambertian plate, in (0, 1].
+    """
+
+    angles_deg: tuple[float, ...] = DEFAULT_ANGLES_DEG
+    size_m: float = 0.2
+    frames_per_state: int = 4
+    solar_suns: float = 0.8
+    bin_deg: float = 1.0
+    edge_margin_px: int = 3
+    min_pixels_per_bin: int = 12
+    reference_albedo: float = 0.5
+
+    def __post_init__(self) -> None:
+        angles = tuple(float(a) for a in self.angles_deg)
+        object.__setattr__(self, "angles_deg", angles)
+        if not angles:
+            raise InvalidInputError("angles_deg", "no turntable angles: give at least one")
+        bad = [a for a in angles if not (math.isfinite(a) and -85.0 <= a <= 85.0)]
+        if bad:
+            raise InvalidInputError("angles_deg", f"{bad[0]!r} is outside [-85, 85] deg (beyond, "
+                                    "the plate is seen edge-on)")
+        _bounded("size_m", self.size_m, 0.02, 0.5)
+        _bounded("frames_per_state", self.frames_per_state, 2, 64)
+        if self.solar_suns != 0.0:
+            _bounded("solar_suns", self.solar_suns, *SUNS_RANGE)
+        _bounded("bin_deg", self.bin_deg, 0.1, 5.0)
+        _bounded("edge_margin_px", self.edge_margin_px, 1, 20)
+        _bounded("min_pixels_per_bin", self.min_pixels_per_bin, 3, 1000)
+        if not (math.isfinite(self.reference_albedo) and 0.0 < self.reference_albedo <= 1.0):
+            raise InvalidInputError("reference_albedo", f"{self.reference_albedo!r} is outside "
+                                    "(0, 1]")
+
+    @property
+    def with_solar(self) -> bool:
+        """Whether the sweep captures the solar slice."""
+        return self.solar_suns > 0.0
+
+    def states(self, angle_deg: float) -> list[RigState]:
+        """The rig states captured at one angle: lamp only, then the solar simulator if planned."""
+        out = [RigState(angle_deg, 0.0, False)]
+        if self.with_solar:
+            out.append(RigState(angle_deg, self.solar_suns, True))
+        return out
+
+    @property
+    def n_captures(self) -> int:
+        """Rig states the sweep visits (for progress)."""
+        return len(self.angles_deg) * (2 if self.with_solar else 1)
+
+
+def parse_angles(text: str) -> tuple[float, ...]:
+    """Turntable angles from ``"FROM:TO:STEP"`` (both ends included) or ``"a,b,c"`` [deg].
+
+    >>> parse_angles("-10:10:5")
+    (-10.0, -5.0, 0.0, 5.0, 10.0)
+    >>> parse_angles("0, 12.5")
+    (0.0, 12.5)
+    """
+    t = text.strip()
+    try:
+        if ":" in t:
+            parts = [float(p) for p in t.split(":")]
+            if len(parts) != 3:
+                raise ValueError
+            start, stop, step = parts
+            if not (math.isfinite(step) and step > 0.0 and stop >= start):
+                raise InvalidInputError("angles", f"'{text}': FROM:TO:STEP needs TO >= FROM and "
+                                        "a positive STEP")
+            n = math.floor((stop - start) / step + 1e-9) + 1
+            return tuple(float(start + i * step) for i in range(n))
+        return tuple(float(p) for p in t.split(",") if p.strip())
+    except ValueError:
+        raise InvalidInputError("angles", f"'{text}' is not FROM:TO:STEP nor a comma-separated "
+                                "list of angles [deg]") from None
+
+
+def sample_fixture(spec: SceneSpec) -> BoardFixture:
+    """Upright, on the axis, its centre at the camera's height (the camera's z)."""
+    from sim_core.scene import build_camera
+
+    axis_z = spec.turntable.axis_point_m[2] if spec.turntable else 0.0
+    height = float(build_camera(spec).position_m[2] - axis_z)
+    return BoardFixture("material-sample", 0.0, centre_height_m=height)
+
+
+def sample_object(spec: SceneSpec, size_m: float, material: Any) -> ObjectSpec:
+    """The sample plate in its fixture (:func:`sample_fixture`) at the turntable's zero.
+
+    ``material`` is the plate's material in the scene: the sample's prior for the procedure
+    (which never relies on it: it renders a reference Lambertian instead), the true material
+    where the simulated lab mounts it.
+    """
+    mesh = {"kind": "rectangle", "size_m": [float(size_m), float(size_m)]}
+    return fixture_object(mesh, sample_fixture(spec), spec, SAMPLE_NAME, material=material)
+
+
+def _bounded(name: str, value: float, lo: float, hi: float) -> None:
+    if not (np.isfinite(value) and lo <= value <= hi):
+        raise InvalidInputError(name, f"{value!r} is outside [{lo:g}, {hi:g}]")

@@ -1,0 +1,163 @@
+"""``toftwin calibrate material``: a material's BRDF from a sample plate on the rig (issue 14, §2).
+
+1. The operator mounts the sample plate (:func:`calibration.rig_material.plan.sample_object`);
+   the rig sweeps it (:mod:`calibration.rig_material.sweep`) and the test object goes back.
+2. The twin, with the calibration applied and the plate nominally mounted, renders the same
+   views with a reference Lambertian (:mod:`calibration.rig_material.reference`).
+3. Measured over reference gives the retro-reflection and the solar slice
+   (:mod:`calibration.rig_material.slices`), one goniometer table.
+4. The model is fitted to the table; parameters the slices do not determine are held at the
+   prior (:mod:`calibration.rig_material.fit`).
+
+The procedure sees frames and the rig's reported states only; the sample's true material is
+whatever the operator mounted.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from calibration.captures import Progress, no_progress
+from calibration.rig_material.fit import DEFAULT_MODEL, SliceFit, fit_slices, prior_material
+from calibration.rig_material.plan import MaterialSweepPlan, sample_object
+from calibration.rig_material.reference import reference_view
+from calibration.rig_material.slices import Slices, extract_slices
+from calibration.rig_material.sweep import capture_sweep
+from calibration.rig_sequence import Operator
+from calibration.twin_prediction import mounted_spec
+from drivers.rig import Rig
+from sim_core.json_safe import json_safe
+from sim_core.materials import Material
+from sim_core.scene import build_camera
+from sim_core.scene_spec import SceneSpec
+from sim_core.twin_file import TwinParameters, twin_hash
+
+
+@dataclass
+class MaterialCalibration:
+    """The procedure's outcome.
+
+    Attributes
+    ----------
+    slices : Slices
+        The two slices and the plate's check.
+    result : SliceFit
+        The fit and what the slices determine.
+    plan : MaterialSweepPlan
+    frames_used : int
+    calibration_hash : str or None
+        :func:`sim_core.twin_file.twin_hash` of the calibration the references used.
+    seconds : dict of str to float
+        Wall time of the sweep, the references and the fit.
+    """
+
+    slices: Slices
+    result: SliceFit
+    plan: MaterialSweepPlan
+    frames_used: int
+    calibration_hash: str | None
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def report(self) -> dict[str, Any]:
+        """Plain JSON: the parameters' statuses, the fit, the slices' sizes and check."""
+        p = self.plan
+        return json_safe({
+            **self.result.report(),
+            "slices": {part.slice_name: {"rows": len(part)} for part in self.slices.parts},
+            "check": self.slices.check.to_dict(),
+            "plan": {"angles_deg": list(p.angles_deg), "size_m": p.size_m,
+                     "frames_per_state": p.frames_per_state, "solar_suns": p.solar_suns,
+                     "bin_deg": p.bin_deg, "edge_margin_px": p.edge_margin_px,
+                     "reference_albedo": p.reference_albedo},
+            "frames_used": self.frames_used,
+            "calibration_hash": self.calibration_hash,
+            "seconds": self.seconds,
+        })
+
+
+def calibrate_material(
+    rig: Rig,
+    operator: Operator,
+    spec: SceneSpec,
+    base_dir: str | Path,
+    calibration: TwinParameters | None,
+    plan: MaterialSweepPlan | None = None,
+    model: str = DEFAULT_MODEL,
+    prior: str | Mapping[str, Any] | Material | None = None,
+    progress: Progress = no_progress,
+    seed: int = 0,
+) -> MaterialCalibration:
+    """Run the procedure (module docstring).
+
+    Parameters
+    ----------
+    rig : Rig
+    operator : Operator
+        Mounts the sample and, at the end, the test object again.
+    spec : SceneSpec
+        The nominal scene (camera, illumination, turntable, solar simulator).
+    base_dir : path
+    calibration : TwinParameters or None
+        The rig's calibration (``toftwin calibrate rig``); None: the nominal twin.
+    plan : MaterialSweepPlan, optional
+    model : str
+        The material kind fitted.
+    prior : preset name, material spec, Material or None
+        Values of the parameters the slices do not determine (None: the model's defaults).
+    progress : callable
+    seed : int
+        Seed of the fit.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad plan, model or prior (before the rig moves); no usable plate pixels or retro rows
+        (:func:`calibration.rig_material.slices.extract_slices`); slices that determine nothing
+        (:func:`calibration.rig_material.fit.fit_slices`).
+    """
+    plan = plan or MaterialSweepPlan()
+    prior_mat = prior_material(model, prior)  # fail before the rig moves
+    twin = calibration if calibration is not None else TwinParameters()
+    total = plan.n_captures + len(plan.angles_deg) + 1
+    t0 = time.perf_counter()
+    sample = sample_object(spec, plan.size_m, _spec_of(prior_mat))
+    operator.mount([sample], f"mount the {plan.size_m * 1e3:.0f} mm square sample plate "
+                   "upright, centred on the axis at the camera's height, facing the camera at "
+                   "the turntable's zero")
+    try:
+        captures = capture_sweep(rig, plan, progress, 0, total)
+    finally:
+        operator.mount(None, "mount the test object again")
+    t1 = time.perf_counter()
+    reference = sample_object(spec, plan.size_m, {"kind": "lambertian",
+                                                  "params": {"albedo": plan.reference_albedo}})
+    ref_spec = mounted_spec(spec, [reference], rig.camera.use_case)
+    references = []
+    for i, cap in enumerate(captures):
+        progress(plan.n_captures + i, total, f"twin's reference at {cap.turntable_angle_deg:+.0f}"
+                 " deg")
+        references.append(reference_view(ref_spec, base_dir, twin, cap.turntable_angle_deg,
+                                         plan))
+    t2 = time.perf_counter()
+    progress(total - 1, total, "slices and fit")
+    slices = extract_slices(captures, references, plan.bin_deg, plan.min_pixels_per_bin)
+    table = slices.table(source="rig slices",
+                         wavelength_nm=float(build_camera(spec).wavelength_m * 1e9))
+    result = fit_slices(table, model, prior_mat, seed=seed)
+    t3 = time.perf_counter()
+    progress(total, total, "done")
+    n_frames = plan.n_captures * plan.frames_per_state
+    return MaterialCalibration(slices, result, plan, n_frames,
+                               twin_hash(calibration) if calibration is not None else None,
+                               {"sweep": t1 - t0, "references": t2 - t1, "fit": t3 - t2})
+
+
+def _spec_of(material: Material) -> dict[str, Any]:
+    from dataclasses import fields
+
+    params = {f.name: getattr(material, f.name) for f in fields(material)}
+    return {"kind": material.name, "params": params}

@@ -1,0 +1,148 @@
+"""``toftwin fit-object``: the mounted object's pose offset and reflectance from its frames.
+
+Drives the rig (the real one, or the simulated lab with ``--simulated [--reality FILE]``, the
+same rig path as ``toftwin calibrate rig``) to each ``--angles`` turntable angle with the solar
+simulator's shutter closed, averages ``--frames`` frames per angle, runs
+:func:`calibration.object_twin.fit.fit_object` with the ``--calibration`` (or the nominal rig)
+and writes ``DIR/object.yaml`` (the object file a scene's ``object_twin:`` names) and
+``DIR/object-report.json``, each atomically.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from service.cli.common import bounded, console, err_console, fail_invalid
+from sim_core.errors import InvalidInputError
+
+#: default turntable angles [deg]: three views, the faces seen from three sides
+DEFAULT_ANGLES = "0,30,60"
+
+
+def parse_angles(text: str) -> list[float]:
+    """``"0,30,60"`` -> [0.0, 30.0, 60.0]; 1-36 distinct finite angles within [-360, 360].
+
+    >>> parse_angles("0, 30,60")
+    [0.0, 30.0, 60.0]
+    >>> parse_angles("0,x")
+    Traceback (most recent call last):
+    ...
+    sim_core.errors.InvalidInputError: --angles: 'x' is not a number; give e.g. 0,30,60
+    """
+    out = []
+    for part in text.split(","):
+        try:
+            a = float(part.strip())
+        except ValueError:
+            raise InvalidInputError("--angles", f"'{part.strip()}' is not a number; give e.g. "
+                                    "0,30,60") from None
+        if not (abs(a) <= 360.0):
+            raise InvalidInputError("--angles", f"{a} is outside [-360, 360] degrees")
+        out.append(a)
+    if not 1 <= len(set(out)) == len(out) <= 36:
+        raise InvalidInputError("--angles", f"{len(out)} angles; give 1-36 distinct angles")
+    return out
+
+
+def fit_object_command(
+    out: Annotated[Path, typer.Option("--out", help="Output folder (must not exist).")],
+    simulated: Annotated[
+        bool, typer.Option("--simulated", help="Use the simulated lab's rig.")
+    ] = False,
+    reality: Annotated[
+        Path | None,
+        typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
+    ] = None,
+    scene: Annotated[
+        str, typer.Option(help="Bundled scene name or scene file: what is on the turntable.")
+    ] = "satellite_ground_test",
+    angles: Annotated[
+        str, typer.Option("--angles", help="Reported turntable angles to capture [deg].")
+    ] = DEFAULT_ANGLES,
+    calibration: Annotated[
+        Path | None,
+        typer.Option("--calibration", help="The rig's calibration.yaml (default: the scene's "
+                     "own calibration, else the nominal rig)."),
+    ] = None,
+    frames: Annotated[
+        int, typer.Option("--frames", help="Frames averaged per angle (1-256).")
+    ] = 32,
+    camera_spp: Annotated[
+        int, typer.Option("--camera-spp", help="Samples per pixel of the simulated camera.")
+    ] = 32,
+    seed: Annotated[int, typer.Option(help="Noise seed of the simulated camera.")] = 0,
+) -> None:
+    """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
+    from calibration.captures import average_frames
+    from calibration.object_twin.fit import fit_object
+    from drivers.rig import Rig, RigState
+    from drivers.sim.world import SimulatedWorld
+    from service.cli.calibrate import _real_rig
+    from service.lab.scenes import SceneSource, resolve_scene
+    from service.settings import EXAMPLES_DIR
+    from sim_core.render import RenderSettings
+    from sim_core.scene import scene_twin
+    from sim_core.scene_spec import load_scene_spec
+    from sim_core.twin_file import load_calibration, load_reality, write_object_twin
+
+    try:
+        if out.exists():
+            raise InvalidInputError("--out", f"'{out}' exists; give a new folder")
+        if reality is not None and not simulated:
+            raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
+        bounded("--frames", frames, 1, 256)
+        bounded("--camera-spp", camera_spp, 1, 4096)
+        angle_list = parse_angles(angles)
+        if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
+            source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
+        else:
+            source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        cal = (load_calibration(calibration) if calibration is not None
+               else scene_twin(source.spec.model_copy(update={"object_twin": None}),
+                               source.base_dir))
+        world = None
+        if simulated:
+            world = SimulatedWorld(source.spec, source.base_dir,
+                                   RenderSettings(integrator="path", spp=camera_spp,
+                                                  max_bounces=2),
+                                   reality=None if reality is None else load_reality(reality))
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    with contextlib.ExitStack() as stack:
+        if world is not None:
+            rig = stack.enter_context(Rig.simulated(frame_source=world, seed=seed))
+            rig_name = "simulated"
+        else:
+            rig = stack.enter_context(_real_rig())
+            rig_name = "lab"
+        captures = []
+        with rig.hold():
+            for a in angle_list:
+                err_console.print(f"capturing {frames} frames at {a:g} deg")
+                rig.apply(RigState(a, 0.0, False))
+                captures.append(average_frames(rig.capture(frames)))
+    try:
+        err_console.print("fitting the object twin")
+        fit = fit_object(source.spec, source.base_dir, cal, captures, rig_name=rig_name)
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    out.mkdir(parents=True)
+    path = write_object_twin(out / "object.yaml", fit.object_twin)
+    report = out / "object-report.json"
+    tmp = report.with_name(report.name + ".tmp")
+    tmp.write_text(json.dumps(fit.report, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    tmp.replace(report)
+    off = fit.object_twin.mount.pose_offset
+    console.print(f"object twin written to {path} (report {report}): offset "
+                  f"{[round(v * 1e3, 2) for v in off.position_m]} mm, "
+                  f"{[round(v, 3) for v in off.rotation_deg]} deg")
+    undetermined = [n for n, e in fit.report["objects"].items() if not e["determined"]]
+    if undetermined or not fit.report["pose_determined"]:
+        err_console.print(f"[yellow]not determined:[/] "
+                          f"{'pose, ' if not fit.report['pose_determined'] else ''}"
+                          f"{', '.join(undetermined)} (see the report)")

@@ -1,0 +1,1 @@
+"""Tests of the object twin (issue 14, section 3)."""

@@ -1,0 +1,96 @@
+"""The mount offset's convention, and ICP recovering a known offset from exact points."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.captures import AveragedCapture
+from calibration.object_twin.fit import fit_object
+from calibration.object_twin.pose import (
+    MountModel,
+    mount_model,
+    offset_from_transform,
+    register_mount,
+    sample_model,
+    transform_from_offset,
+)
+from sim_core.camera import F_60_24_MHZ
+from sim_core.errors import InvalidInputError
+from sim_core.geometry import transform_triangles
+from sim_core.scene import build_scene
+from sim_core.scene_spec import ObjectPose, load_scene_spec
+from sim_core.twin_file import MountParameters, ObjectTwinFile, with_object_twin
+from tests.sim_core.scenes import EXAMPLES
+
+SPEC = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
+OFFSET = ObjectPose(position_m=(0.006, -0.004, 0.003), rotation_deg=(1.2, -0.7, 1.6))
+#: cameras around and above the mount (exact points on every face, so all 6 DoF are determined)
+CAMERAS = np.array([[np.sin(a), -np.cos(a), 0.5] for a in np.radians([0, 90, 180, 270])])
+
+
+def _real_model() -> MountModel:
+    """The mounted objects with OFFSET applied the way a scene applies an object file."""
+    twin = with_object_twin(None, ObjectTwinFile(mount=MountParameters(pose_offset=OFFSET)))
+    mounted = [o for o in SPEC.objects if o.on_turntable]
+    scene = build_scene(SPEC.model_copy(update={"objects": mounted}), EXAMPLES,
+                        turntable_deg=0.0, twin=twin)
+    nominal = mount_model(SPEC, EXAMPLES)
+    return MountModel(scene.triangles_m, scene.normals, scene.object_index, scene.object_names,
+                      nominal.axis_point_m)
+
+
+def test_the_offset_matrix_is_what_the_scene_applies():
+    nominal = mount_model(SPEC, EXAMPLES)
+    moved = transform_triangles(nominal.triangles_m,
+                                transform_from_offset(OFFSET, nominal.axis_point_m))
+    np.testing.assert_allclose(moved, _real_model().triangles_m, atol=1e-12)
+    back = offset_from_transform(transform_from_offset(OFFSET, nominal.axis_point_m),
+                                 nominal.axis_point_m)
+    np.testing.assert_allclose(back.position_m, OFFSET.position_m, atol=1e-12)
+    np.testing.assert_allclose(back.rotation_deg, OFFSET.rotation_deg, atol=1e-9)
+
+
+def test_icp_recovers_a_known_offset_from_exact_points():
+    points, _, _ = sample_model(_real_model(), CAMERAS, spacing_m=0.003, seed=3)
+    reg = register_mount(points, mount_model(SPEC, EXAMPLES), CAMERAS)
+    np.testing.assert_allclose(reg.offset.position_m, OFFSET.position_m, atol=1e-4)
+    np.testing.assert_allclose(reg.offset.rotation_deg, OFFSET.rotation_deg, atol=0.02)
+    assert reg.fitness > 0.95
+
+
+def test_a_cloud_that_does_not_overlap_the_mesh_is_refused_without_a_pose():
+    points, _, _ = sample_model(_real_model(), CAMERAS, spacing_m=0.003, seed=3)
+    with pytest.raises(InvalidInputError) as exc:
+        register_mount(np.add(points, (0.4, 0.0, 0.0)), mount_model(SPEC, EXAMPLES), CAMERAS)
+    assert exc.value.field == "mesh"
+    assert "does not overlap" in str(exc.value)
+
+
+def test_a_different_object_at_the_same_place_is_refused():
+    """A sphere where the satellite should be: points near the model, but no fit."""
+    sphere = np.random.default_rng(0).standard_normal((4000, 3))
+    sphere = 0.07 * sphere / np.linalg.norm(sphere, axis=1, keepdims=True) + [0.0, 0.0, 0.14]
+    with pytest.raises(InvalidInputError) as exc:
+        register_mount(sphere, mount_model(SPEC, EXAMPLES), CAMERAS)
+    assert exc.value.field == "mesh"
+
+
+def _dark_capture(angle_deg: float) -> AveragedCapture:
+    shape = (171, 224)
+    return AveragedCapture(
+        turntable_angle_deg=angle_deg, solar_suns=0.0, shutter_open=False, n_frames=8,
+        phase_images=np.zeros((1, 4, *shape)), intensity=np.full(shape, 100.0),
+        intensity_std=np.ones(shape), amplitude=np.full(shape, 2.0),
+        phase_rad=np.zeros((1, *shape)), valid=np.zeros(shape, dtype=bool),
+        frequencies_hz=np.array([F_60_24_MHZ]), exposure_s=500e-6)
+
+
+def test_frames_with_too_few_valid_pixels_are_refused():
+    with pytest.raises(InvalidInputError) as exc:
+        fit_object(SPEC, EXAMPLES, None, [_dark_capture(0.0)])
+    assert exc.value.field == "captures[0]"
+    assert "valid pixels" in str(exc.value)
+    with pytest.raises(InvalidInputError) as exc:
+        fit_object(SPEC, EXAMPLES, None, [])
+    assert exc.value.field == "captures"

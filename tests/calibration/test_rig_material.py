@@ -1,0 +1,240 @@
+"""The material on the rig (issue 14, §2): slices of a sample plate, the fit, what they determine.
+
+The simulated lab holds a Cook–Torrance sample the procedure never sees (the simulated operator
+mounts it); the procedure gets a perfect calibration of the rig (the reality's camera and rig
+keys only) and must recover the parameters the slices determine within 5 %, hold the others at
+the prior and say so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from calibration.captures import AveragedCapture
+from calibration.rig_material import (
+    SAMPLE_NAME,
+    MaterialSweepPlan,
+    calibrate_material,
+    extract_slices,
+    parse_angles,
+    prior_material,
+)
+from calibration.rig_material.reference import PlateGeometry, ReferenceView
+from calibration.rig_material.sweep import SampleCaptures
+from calibration.rig_sequence import SimulatedOperator
+from drivers.rig import Rig
+from drivers.sim.world import SimulatedWorld
+from service.cli import app
+from sim_core.errors import InvalidInputError
+from sim_core.materials import CookTorrance
+from sim_core.render import RenderSettings
+from sim_core.scene_spec import load_scene_spec
+from sim_core.twin_file import dump_yaml, write_calibration
+from tests.calibration.realities import perfect_calibration, random_reality
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+SPEC = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
+PRIOR = "white-matte-tile"
+runner = CliRunner()
+
+
+def _random_sample(seed: int) -> dict[str, float]:
+    """Cook–Torrance parameters about the relay-wall paper's presets (kd 0.07-0.78, ks 0.2-0.79,
+    m 0.06-0.15, n2 1.46-2.26), drawn at random."""
+    u = np.random.default_rng([seed, 142]).uniform
+    kd = u(0.1, 0.75)
+    return {"kd": float(kd), "ks": float(u(0.1, min(0.8, 0.98 - kd))),
+            "m": float(u(0.06, 0.15)), "n2": float(u(1.45, 2.3))}
+
+
+def _measure(true: dict[str, float], reality_seed: int, plan: MaterialSweepPlan):
+    reality = random_reality(reality_seed)
+    world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="direct", spp=32),
+                           reality=reality)
+    operator = SimulatedOperator(world, {SAMPLE_NAME: {"kind": "cook-torrance",
+                                                       "params": true}})
+    with Rig.simulated(frame_source=world, seed=reality_seed) as rig:
+        return calibrate_material(rig, operator, SPEC, EXAMPLES, perfect_calibration(reality),
+                                  plan, "cook-torrance", PRIOR, seed=reality_seed)
+
+
+def _check_recovery(result, true: dict[str, float]) -> dict[str, float]:
+    """The determined parameters within 5 %, the others at the prior and reported so, the
+    fitted BRDF equal to the true one on the slices; returns the relative errors."""
+    fit = result.result
+    prior = prior_material("cook-torrance", PRIOR)
+    errors = {n: fit.parameters[n].value / true[n] - 1.0 for n in true}
+    assert {"kd", "m"} <= set(fit.determined), fit.report()["parameters"]
+    for name in fit.determined:
+        assert abs(errors[name]) < 0.05, (name, errors, fit.report()["parameters"])
+    for name in fit.at_prior:
+        assert fit.parameters[name].value == getattr(prior, name)
+        assert fit.fit.params[name] == getattr(prior, name) and name in fit.fit.fixed
+        assert "not determined by these slices" in fit.parameters[name].reason
+    report = result.report()
+    assert {n for n, p in report["parameters"].items() if p["status"] == "prior"} \
+        == set(fit.at_prior)
+    # What is not determined trades within the slices: the fitted model reproduces them.
+    wi, wo = fit.fit.table.directions()
+    f_true = CookTorrance(**true).eval_local(wi, wo)
+    f_fit = fit.fit.material().eval_local(wi, wo)
+    assert np.max(np.abs(f_fit / f_true - 1.0)) < 0.03
+    assert result.slices.check.warnings == []
+    return errors
+
+
+@pytest.mark.slow
+def test_a_cook_torrance_sample_with_few_angles():
+    true = {"kd": 0.45, "ks": 0.3, "m": 0.09, "n2": 1.9}
+    plan = MaterialSweepPlan(angles_deg=parse_angles("-40:40:10"), frames_per_state=2)
+    t0 = time.perf_counter()
+    result = _measure(true, 101, plan)
+    errors = _check_recovery(result, true)
+    print(f"\nfew angles: errors {({k: f'{100 * v:+.2f} %' for k, v in errors.items()})}, "
+          f"statuses {({k: p.status for k, p in result.result.parameters.items()})}, "
+          f"{time.perf_counter() - t0:.0f} s")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_random_cook_torrance_samples_are_recovered(seed):
+    true = _random_sample(seed)
+    t0 = time.perf_counter()
+    result = _measure(true, 100 + seed, MaterialSweepPlan())
+    errors = _check_recovery(result, true)
+    print(f"\nseed {seed}: true {true}, errors "
+          f"{({k: f'{100 * v:+.2f} %' for k, v in errors.items()})}, statuses "
+          f"{({k: p.status for k, p in result.result.parameters.items()})}, rows "
+          f"{({p.slice_name: len(p) for p in result.slices.parts})}, "
+          f"seconds {({k: round(v) for k, v in result.seconds.items()})}, "
+          f"total {time.perf_counter() - t0:.0f} s")
+
+
+# -- the slices from synthetic views: the arithmetic and the refusals ---------------------------
+def _capture(amplitude: float, intensity: float, shape) -> AveragedCapture:
+    return AveragedCapture(
+        turntable_angle_deg=0.0, solar_suns=0.0, shutter_open=False, n_frames=4,
+        phase_images=np.zeros((1, 4, *shape)), intensity=np.full(shape, intensity),
+        intensity_std=np.full(shape, 2.0), amplitude=np.full(shape, amplitude),
+        phase_rad=np.zeros((1, *shape)), valid=np.ones(shape, dtype=bool),
+        frequencies_hz=np.array([60.24e6]), exposure_s=500e-6)
+
+
+def _view(zenith_deg: float, shape=(30, 40), plate=True, solar_intensity=None):
+    """A plate of 20 x 30 pixels seen at ``zenith_deg`` (retro), measured amplitude 60 DN
+    against a reference of 100 DN (albedo 0.5), the solar simulator adding 500 DN against a
+    reference slope of 1000 DN."""
+    mask = np.zeros(shape, dtype=bool)
+    if plate:
+        mask[5:25, 5:35] = True
+    n = int(mask.sum())
+    # Zeniths spread by 2 deg across the plate's columns, as a plate at 1 m spans.
+    cols = np.nonzero(mask)[1]
+    zen = np.radians(zenith_deg + (cols - 20) * 0.1)
+    w = np.stack([np.sin(zen), np.zeros(n), np.cos(zen)], axis=1)
+    sun = np.tile([np.sin(np.radians(30.0)), 0.0, np.cos(np.radians(30.0))], (n, 1))
+    geometry = PlateGeometry(mask, w, w, sun)
+    ref = ReferenceView(0.0, 0.5, np.full(shape, 100.0), np.full(shape, np.nan),
+                        np.full(shape, 1000.0), np.full(shape, 2000.0), geometry)
+    lamp = _capture(60.0, 100.0, shape)
+    solar = _capture(60.0, 100.0 + 500.0 if solar_intensity is None else solar_intensity, shape)
+    cap = SampleCaptures(0.0, lamp, np.full(shape, 0.5), solar)
+    return cap, ref
+
+
+def test_slices_are_measured_over_reference_times_albedo_over_pi():
+    cap, ref = _view(20.0)
+    slices = extract_slices([cap], [ref], bin_deg=1.0, min_pixels_per_bin=12)
+    assert len(slices.retro) >= 2 and len(slices.solar) >= 2
+    np.testing.assert_allclose(slices.retro.brdf_per_sr, 0.6 * 0.5 / math.pi, rtol=1e-12)
+    np.testing.assert_allclose(slices.solar.brdf_per_sr, 0.5 * 0.5 / math.pi, rtol=1e-12)
+    np.testing.assert_allclose(slices.retro.incidence_zenith_deg,
+                               slices.retro.reflection_zenith_deg)
+    assert np.all(np.abs(slices.retro.reflection_zenith_deg - 20.0) < 1.6)
+    np.testing.assert_allclose(slices.solar.incidence_zenith_deg, 30.0, atol=1e-9)
+    # Uncertainty from the frames: the rows' standard error, floored by the twin's error.
+    assert np.all(slices.retro.brdf_std_per_sr < 0.01 * slices.retro.brdf_per_sr)
+    table = slices.table()
+    assert len(table) == len(slices.retro) + len(slices.solar)
+    np.testing.assert_allclose(table.brdf_std_per_sr / table.brdf_per_sr, 0.01, rtol=0.01)
+
+
+def test_solar_pixels_held_by_sbi_are_left_out():
+    cap, ref = _view(20.0, solar_intensity=1900.0)  # 0.95 of SBI's 2000 DN
+    slices = extract_slices([cap], [ref], bin_deg=1.0, min_pixels_per_bin=12)
+    assert len(slices.retro) >= 2 and len(slices.solar) == 0
+
+
+def test_no_plate_pixels_is_a_clear_error():
+    cap, ref = _view(20.0, plate=False)
+    with pytest.raises(InvalidInputError, match="no pixel of the sample plate"):
+        extract_slices([cap], [ref], bin_deg=1.0, min_pixels_per_bin=12)
+
+
+def test_angles_without_retro_coverage_are_a_clear_error():
+    cap, ref = _view(84.0)  # every pixel beyond the usable zenith
+    with pytest.raises(InvalidInputError, match="no usable retro-reflection rows") as exc:
+        extract_slices([cap], [ref], bin_deg=1.0, min_pixels_per_bin=12)
+    assert exc.value.field == "angles_deg"
+
+
+def test_the_plan_refuses_bad_input():
+    with pytest.raises(InvalidInputError, match="angles_deg"):
+        MaterialSweepPlan(angles_deg=())
+    with pytest.raises(InvalidInputError, match="edge-on"):
+        MaterialSweepPlan(angles_deg=(0.0, 88.0))
+    with pytest.raises(InvalidInputError, match="solar_suns"):
+        MaterialSweepPlan(solar_suns=0.3)
+    with pytest.raises(InvalidInputError, match="angles"):
+        parse_angles("10:-10:5")
+    with pytest.raises(InvalidInputError, match="prior"):
+        prior_material("cook-torrance", "thermal-control-film")  # a seed-microfacet preset
+    assert parse_angles("-70:70:5")[::14] == (-70.0, 0.0, 70.0)
+
+
+def test_the_cli_refuses_bad_input(tmp_path):
+    out = tmp_path / "m.yaml"
+    for args, field in ((["--reality", str(tmp_path / "r.yaml")], "--reality"),
+                        (["--sample-material", "white-matte-tile"], "--sample-material"),
+                        (["--simulated", "--angles", "a:b"], "angles"),
+                        (["--simulated", "--prior", "black-flannel"], "prior"),
+                        (["--simulated", "--sample-material", "nothing"], "--sample-material")):
+        res = runner.invoke(app, ["calibrate", "material", "--out", str(out), *args])
+        assert res.exit_code == 2, (args, res.output)
+        assert field in res.output
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_the_cli_writes_the_material_file_the_slices_and_the_report(tmp_path):
+    out = tmp_path / "sample.yaml"
+    reality = random_reality(7)
+    (tmp_path / "reality.yaml").write_text(dump_yaml(reality), encoding="utf-8")
+    write_calibration(tmp_path / "calibration.yaml", perfect_calibration(reality))
+    res = runner.invoke(app, ["calibrate", "material", "--simulated", "--reality",
+                              str(tmp_path / "reality.yaml"), "--calibration",
+                              str(tmp_path / "calibration.yaml"), "--sample-material",
+                              "black-glossy-tile", "--prior", PRIOR, "--angles", "-30:30:10",
+                              "--frames-per-state", "2", "--out", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    written = yaml.safe_load(out.read_text(encoding="utf-8"))
+    assert written["kind"] == "cook-torrance"
+    report = json.loads((tmp_path / "sample.report.json").read_text(encoding="utf-8"))
+    assert report["parameters"]["kd"]["status"] == "determined"
+    assert abs(written["params"]["kd"] / 0.07 - 1.0) < 0.05
+    held = [n for n, p in report["parameters"].items() if p["status"] == "prior"]
+    assert held and "NOT DETERMINED" in res.stdout
+    for name in held:
+        assert written["params"][name] == getattr(prior_material("cook-torrance", PRIOR), name)
+    from sim_core.materials.goniometer import read_goniometer_csv
+
+    table = read_goniometer_csv(tmp_path / "sample.slices.csv")
+    assert len(table) == written["fit"]["n_samples"]
