@@ -1,4 +1,4 @@
-"""The figure of docs/brdf-fitting.md (measured materials): a goniometer table and its interpolation.
+"""The figure of docs/brdf-fitting.md's measured materials: a goniometer table, interpolated.
 
 As the peer paper's Fig. 4 (``amcw-tof-multipath-simulation-rsm``, Section 5.1): polar plots in
 the plane of incidence for one incidence angle, the raw measurements (with the goniometer's
