@@ -30,6 +30,7 @@ from sim_core.scene_spec import BOARD_KINDS, MaterialSpec, ObjectSpec, OpticsSpe
 from sim_core.sensor import SensorParams
 from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
 from sim_core.twin_file import (
+    ObjectTwinFile,
     TwinParameters,
     has_object_keys,
     load_calibration,
@@ -371,14 +372,20 @@ def scene_twin(spec: SceneSpec, base_dir: str | Path = ".") -> TwinParameters | 
     ``object_twin: FILE`` (:func:`sim_core.twin_file.with_object_twin`), both relative to
     ``base_dir``; None when it names neither."""
     base = Path(base_dir)
-    cal = obj = None
+    cal = None
     if spec.calibration is not None:
         path = Path(spec.calibration)
         cal = load_calibration(path if path.is_absolute() else base / path)
-    if spec.object_twin is not None:
-        path = Path(spec.object_twin)
-        obj = load_object_twin(path if path.is_absolute() else base / path)
-    return with_object_twin(cal, obj)
+    return with_object_twin(cal, scene_object_twin(spec, base))
+
+
+def scene_object_twin(spec: SceneSpec, base_dir: str | Path = ".") -> ObjectTwinFile | None:
+    """The object file the scene references (``object_twin: FILE``, relative to ``base_dir``),
+    or None."""
+    if spec.object_twin is None:
+        return None
+    path = Path(spec.object_twin)
+    return load_object_twin(path if path.is_absolute() else Path(base_dir) / path)
 
 
 def build_scene(
