@@ -10,6 +10,8 @@ noise ceiling (two captures of the same state), and the median grey PSNR within 
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import statistics
 
@@ -58,3 +60,17 @@ def test_after_the_fit_the_campaign_is_at_the_noise_ceiling(make_client, tmp_pat
         DEPTH_RMSE_RATIO * figures["ceiling"]["depth_rmse_mm"]), figures
     assert figures["fitted"]["grey_psnr_db"] >= (
         figures["ceiling"]["grey_psnr_db"] - GREY_PSNR_DB), figures
+    # the campaign keeps what explains the difference: the fitted twin and its frames
+    fit = status["object_fit"]
+    assert fit["state"] == "fitted" and fit["object_twin_hash"] and fit["report"]
+    for r in rows:
+        assert r["fitted_frame_id"] and r["fitted_frame_id"] != r["simulated_frame_id"]
+        assert client.get(f"/api/v1/frames/{r['fitted_frame_id']}").status_code == 200
+    table = list(csv.DictReader(io.StringIO(
+        client.get(f"/api/v1/campaigns/{cid}/results?format=csv").text)))
+    assert {"fitted_depth_rmse_m", "ceiling_grey_psnr_db", "explained_grey"} <= set(table[0])
+    assert "Explained difference (object twin)" in client.get(
+        f"/api/v1/campaigns/{cid}/report").text
+    # deleting the campaign removes the fitted frames too
+    assert client.delete(f"/api/v1/campaigns/{cid}", headers=AUTH).status_code in (200, 204)
+    assert client.get(f"/api/v1/frames/{rows[0]['fitted_frame_id']}").status_code == 404
