@@ -217,8 +217,8 @@ class Provenance(_Strict):
     procedures: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
 
-class CalibrationFile(TwinParameters):
-    """``calibration.yaml``: the measured keys plus their provenance (issue 13, section 3)."""
+class _Provenanced(_Strict):
+    """A file's provenance: where its values came from; not applied, not hashed."""
 
     provenance: Provenance = Provenance()
 
@@ -231,22 +231,16 @@ class CalibrationFile(TwinParameters):
         return self
 
 
-class ObjectTwinFile(ObjectTwinParameters):
+class CalibrationFile(_Provenanced, TwinParameters):
+    """``calibration.yaml``: the measured keys plus their provenance (issue 13, section 3)."""
+
+
+class ObjectTwinFile(_Provenanced, ObjectTwinParameters):
     """``object.yaml``: the object twin's keys as fitted, plus their provenance (issue 14).
 
     The provenance (``procedures.object_fit``: residuals, uncertainties, what was determined) is
     not applied and not hashed.
     """
-
-    provenance: Provenance = Provenance()
-
-    @model_validator(mode="after")
-    def _json_safe_provenance(self):
-        try:
-            json.dumps(self.provenance.procedures, allow_nan=False)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"provenance.procedures must be plain finite JSON: {exc}") from None
-        return self
 
 
 def with_object_twin(calibration: TwinParameters | None,

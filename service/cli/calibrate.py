@@ -18,7 +18,14 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from service.cli.common import bounded, console, err_console, fail_invalid
+from service.cli.common import (
+    bounded,
+    check_rig_options,
+    console,
+    err_console,
+    fail_invalid,
+    rig_scene,
+)
 from sim_core.errors import InvalidInputError
 
 calibrate_app = typer.Typer(help="Measure the twin's camera and rig parameters.",
@@ -71,24 +78,15 @@ def rig_command(
     from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
     from drivers.rig import Rig
     from drivers.sim.world import SimulatedWorld
-    from service.lab.scenes import SceneSource, resolve_scene
-    from service.settings import EXAMPLES_DIR
     from sim_core.render import RenderSettings
-    from sim_core.scene_spec import load_scene_spec
     from sim_core.twin_file import load_reality
 
     try:
-        if out.exists():
-            raise InvalidInputError("--out", f"'{out}' exists; give a new folder")
-        if reality is not None and not simulated:
-            raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
+        check_rig_options(out, reality, simulated)
         bounded("--frames-per-view", frames_per_view, 1, 64)
         bounded("--camera-spp", camera_spp, 1, 4096)
         bounded("--sweep-step", sweep_step_deg, 1.0, 30.0)
-        if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
-            source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
-        else:
-            source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        source = rig_scene(scene)
         n_angles = math.floor(110.0 / sweep_step_deg + 1e-9) + 1
         plan = RigCalibrationPlan(frames_per_view=frames_per_view,
                                   sweep_deg=tuple(-55.0 + i * sweep_step_deg
@@ -188,10 +186,7 @@ def material_command(
     from calibration.rig_sequence import SimulatedOperator
     from drivers.rig import Rig
     from drivers.sim.world import SimulatedWorld
-    from service.lab.scenes import SceneSource, resolve_scene
-    from service.settings import EXAMPLES_DIR
     from sim_core.render import RenderSettings
-    from sim_core.scene_spec import load_scene_spec
     from sim_core.twin_file import load_calibration, load_reality
 
     try:
@@ -205,10 +200,7 @@ def material_command(
                                  frames_per_state=frames_per_state, solar_suns=solar_suns)
         prior_mat = prior_material(model, _material_arg(prior, "--prior"))
         cal = load_calibration(calibration) if calibration is not None else None
-        if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
-            source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
-        else:
-            source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        source = rig_scene(scene)
         world = truth = None
         if simulated:
             from calibration.rig_material.plan import SAMPLE_NAME

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from sim_core.errors import InvalidInputError
+
+if TYPE_CHECKING:
+    from service.lab.scenes import SceneSource
 
 err_console = Console(stderr=True)
 #: in a pipe (CI logs, ``| tee``) rich would squeeze the benchmark tables into 80 columns
@@ -55,3 +60,23 @@ def progress_bar(quiet: bool) -> Progress:
         disable=quiet or not err_console.is_terminal,
         transient=True,
     )
+
+
+def check_rig_options(out: Path, reality: Path | None, simulated: bool) -> None:
+    """The options of every command that runs on the rig: a new output folder, and a reality
+    only for the simulated lab."""
+    if out.exists():
+        raise InvalidInputError("--out", f"'{out}' exists; give a new folder")
+    if reality is not None and not simulated:
+        raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
+
+
+def rig_scene(scene: str) -> SceneSource:
+    """``--scene``: a scene file (its folder resolves its paths) or a bundled scene's name."""
+    from service.lab.scenes import SceneSource, resolve_scene
+    from service.settings import EXAMPLES_DIR
+    from sim_core.scene_spec import load_scene_spec
+
+    if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
+        return SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
+    return resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)

@@ -17,7 +17,14 @@ from typing import Annotated
 
 import typer
 
-from service.cli.common import bounded, console, err_console, fail_invalid
+from service.cli.common import (
+    bounded,
+    check_rig_options,
+    console,
+    err_console,
+    fail_invalid,
+    rig_scene,
+)
 from sim_core.errors import InvalidInputError
 
 #: default turntable angles [deg]: three views, the faces seen from three sides
@@ -83,25 +90,16 @@ def fit_object_command(
     from drivers.rig import Rig, RigState
     from drivers.sim.world import SimulatedWorld
     from service.cli.calibrate import _real_rig
-    from service.lab.scenes import SceneSource, resolve_scene
-    from service.settings import EXAMPLES_DIR
     from sim_core.render import RenderSettings
     from sim_core.scene import scene_twin
-    from sim_core.scene_spec import load_scene_spec
     from sim_core.twin_file import load_calibration, load_reality, write_object_twin
 
     try:
-        if out.exists():
-            raise InvalidInputError("--out", f"'{out}' exists; give a new folder")
-        if reality is not None and not simulated:
-            raise InvalidInputError("--reality", "describes the simulated lab: needs --simulated")
+        check_rig_options(out, reality, simulated)
         bounded("--frames", frames, 1, 256)
         bounded("--camera-spp", camera_spp, 1, 4096)
         angle_list = parse_angles(angles)
-        if Path(scene).suffix.lower() in (".yaml", ".yml", ".json"):
-            source = SceneSource(load_scene_spec(scene), Path(scene).parent, Path(scene).stem)
-        else:
-            source = resolve_scene(scene, EXAMPLES_DIR, max_objects=10000)
+        source = rig_scene(scene)
         cal = (load_calibration(calibration) if calibration is not None
                else scene_twin(source.spec.model_copy(update={"object_twin": None}),
                                source.base_dir))
