@@ -1,24 +1,36 @@
-"""Mount pose and reflectance scales together, by least squares against rendered views.
+"""Mount pose and reflectance scales together: maximum likelihood on the measured phasors.
 
-ICP (:mod:`calibration.object_twin.pose`) leaves the height along the turntable's axis to the
-silhouette (every face the camera sees is vertical), and its point-to-plane residuals carry the
-few-millimetre biases that blur and mixed pixels put into the measured ranges near edges. This
-step compares the measured phasors with the twin's rendered ones instead
-(:mod:`calibration.object_twin.render_model`: the same optics, sensor and depth errors, so those
-effects are in both): the residual of every pixel in and around the mounted objects,
+The simulated lab is the twin's own physics with other parameters, and a real camera is what the
+twin models; so the measured views are compared with the twin's predictions
+(:mod:`calibration.object_twin.render_model`: the same optics, depth errors and sensor, so mixed
+pixels, blur and the camera's range errors are in both) in the camera's own measurement: the
+averaged raw phasor of every frequency, real and imaginary parts, of every pixel in and around
+the mounted objects,
 
-    r = (z_measured - z_predicted(pose, scales)) / sigma,   sigma^2 = sigma_0^2 + (rel |z_m|)^2
+    r = (z_measured - z_predicted(pose, scales)) / sigma,
+    sigma^2 = var_sensor / n_frames + var_mc (1 / spp + 1 / MODEL_SPP)
 
-(``sigma_0`` the averaged frames' noise, ``rel`` = :data:`MODEL_REL_ERROR` the renders' and
-materials' share: a bright specular face must not outweigh the rest), real and imaginary parts,
-is minimised (soft-L1 loss: a glossy interreflection is Monte Carlo noise in any render) over
-the offset (3 translations [mm], 3 extrinsic xyz angles [deg], the reality's
-convention) and the determined objects' scales with scipy's trust-region least squares. The
-Jacobian is by forward differences of renders with a fixed seed. A coarse search along the axis
-first puts the height within the silhouette's reach (a pixel is about 4.7 mm at 1 m).
+(:func:`phasor_sigma`): ``var_sensor`` the shot and read noise (and quantisation) of one frame's
+phasor part from the sensor model at the predicted taps, ``var_mc`` the render's per-sample
+Monte Carlo variance, counted for the twin's render and once more for a render of
+:data:`MODEL_SPP` samples (the allowance for model error: a simulated lab renders its frames
+with the same Monte Carlo, and on glints and silhouettes that noise dominates). A glint or a
+silhouette is then weighted by how well it can be predicted, not masked. Pixels the camera
+flagged (saturated, SBI) or the twin saturates are left out.
 
-Uncertainties: ``(J^T J)^-1`` scaled by the residual variance. A parameter whose standard
-deviation exceeds its limit (:data:`UNDETERMINED_STD`) is reported as not determined.
+The residual is minimised over the offset (3 translations [mm], 3 extrinsic xyz angles [deg],
+the reality's convention) and the determined objects' scales, plain squares (the maximum
+likelihood for Gaussian noise), by Gauss-Newton with a line search along each step (a render per
+trial point; the valley between a translation across the view and the rotation about the axis
+is long and curved, so full steps fall short and the search stretches them). The Jacobian is by
+forward differences of renders with a fixed seed (common random numbers: the residual is a
+smooth function of the parameters up to the silhouettes' sample coverage, which the stratified
+pixel jitter keeps fine). The weights are fixed during a solve and made again at its result for
+a second, shorter solve.
+
+Uncertainties: ``(J^T J)^-1`` of the whitened Jacobian times the reduced chi-square. A parameter
+whose standard deviation exceeds its limit (:data:`UNDETERMINED_STD`) is reported as not
+determined.
 """
 
 from __future__ import annotations
@@ -26,27 +38,30 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
-from scipy.optimize import least_squares
 
-from calibration.object_twin.render_model import PredictedView, TwinRenderer
+from calibration.captures import AveragedCapture
+from calibration.object_twin.render_model import PredictedView, TwinRenderer, measured_phasor
+from sim_core.errors import InvalidInputError
+from sim_core.raw import ValidityThresholds
 from sim_core.scene_spec import ObjectPose
+from sim_core.sensor import SensorParams
 from sim_core.twin_file import MountParameters, ObjectParameters, ObjectTwinParameters
 
-#: share of a pixel's measured phasor the model may be off by (renders, materials) [1]
-MODEL_REL_ERROR = 0.05
+#: samples per pixel of the model-error allowance's render (module docstring)
+MODEL_SPP = 32
 #: forward-difference steps: translations [mm], rotations [deg], scales [1]
-STEP_MM, STEP_DEG, STEP_SCALE = 0.5, 0.1, 0.02
-#: pixels around the predicted objects that enter the residual (the silhouette's reach) [px]
-MARGIN_PX = 4
-#: the coarse search along the axis: half-width and step [mm]
-HEIGHT_SEARCH_MM = (10.0, 2.0)
-#: soft-L1 loss scale [sigma] (glossy interreflections are Monte Carlo fireflies in a render)
-ROBUST_SCALE = 3.0
-#: residuals beyond this [sigma] are left out of the covariance
-OUTLIER_SIGMA = 10.0
-#: most residual evaluations of the trust-region solve (each followed by a Jacobian)
-MAX_EVALUATIONS = 15
+STEP_MM, STEP_DEG, STEP_SCALE = 0.25, 0.025, 0.02
+#: the solves, each with weights made at its start: (model error relative to the predicted
+#: phasor's magnitude [1], most Gauss-Newton iterations). The first smooths the objective (a
+#: glint's edges and brightness are steep functions of the pose: with their full weight the
+#: steps from a start a few millimetres off are short), the others are the maximum likelihood.
+SOLVES = ((0.05, 6), (0.0, 6), (0.0, 2))
+#: a solve stops when a step moves no parameter by more than this share of its difference step
+CONVERGED = 0.1
+#: largest step along a Gauss-Newton direction, in multiples of it (the line search)
+MAX_STRETCH = 4.0
+#: largest change of a translation [mm], a rotation [deg], a scale [1] in one iteration
+MAX_STEP = (5.0, 1.0, 0.1)
 #: standard deviations beyond which a parameter counts as not determined
 UNDETERMINED_STD = {"position_mm": 2.0, "rotation_deg": 0.5, "scale": 0.1}
 POSE_NAMES = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
@@ -62,12 +77,13 @@ class RefinedFit:
     std_rotation_deg: tuple[float, float, float]
     std_scale: dict[str, float]
     determined: dict[str, bool]
-    rms_before: float
-    rms_after: float
+    chi2_before: float
+    chi2_after: float
     n_residuals: int
-    renders: int
-    height_search_mm: float
-    correlation: np.ndarray = field(repr=False, default=None)
+    evaluations: int
+    line_steps: tuple[float, ...] = ()
+    predicted: list[PredictedView] = field(repr=False, default_factory=list)
+    correlation: np.ndarray | None = field(repr=False, default=None)
 
     def summary(self) -> dict:
         return {
@@ -76,9 +92,9 @@ class RefinedFit:
                     "rotation_deg": list(self.std_rotation_deg),
                     "reflectance_scale": dict(self.std_scale)},
             "determined": dict(self.determined),
-            "weighted_rms_before": self.rms_before, "weighted_rms_after": self.rms_after,
-            "residuals": self.n_residuals, "renders": self.renders,
-            "height_after_search_mm": self.height_search_mm,
+            "reduced_chi2_before": self.chi2_before, "reduced_chi2_after": self.chi2_after,
+            "residuals": self.n_residuals, "evaluations": self.evaluations,
+            "line_steps": list(self.line_steps),
         }
 
 
@@ -93,35 +109,61 @@ def object_twin_of(x: np.ndarray, fitted: tuple[str, ...], fixed: dict[str, floa
     return ObjectTwinParameters(mount=MountParameters(pose_offset=pose), objects=objects)
 
 
+def phasor_sigma(pred: PredictedView, capture: AveragedCapture, sensor: SensorParams,
+                 spp: int, rel: float = 0.0) -> np.ndarray:
+    """Standard deviation of each part of the averaged measured phasor less the prediction,
+    (n_f, 2, H, W) [DN] (module docstring)."""
+    g = sensor.adc_gain_e_per_dn
+    # Each C_i = A_i - B_i: shot noise of both taps, read noise of both, their rounding.
+    var_c = (pred.taps.sum(axis=2) / g + 2.0 * (sensor.read_noise_e / g) ** 2 + 2.0 / 12.0)
+    var_sensor = np.stack([var_c[:, 0] + var_c[:, 2], var_c[:, 1] + var_c[:, 3]], axis=1)
+    var = var_sensor / capture.n_frames + pred.mc_var * (1.0 / spp + 1.0 / MODEL_SPP)
+    if rel > 0.0:
+        var = var + (rel * np.abs(pred.phasor)[:, None]) ** 2
+    return np.sqrt(var)
+
+
+def residual_masks(captures: list[AveragedCapture], predicted: list[PredictedView],
+                   regions: list[np.ndarray]) -> list[np.ndarray]:
+    """Pixels of each view that enter the residual: the re-rendered region without what the
+    camera flagged (above its amplitude threshold but invalid: saturated, SBI) or the twin
+    saturates."""
+    thr = ValidityThresholds().min_amplitude_dn
+    return [reg & ~(~c.valid & (c.amplitude >= thr)) & ~p.saturated
+            for c, p, reg in zip(captures, predicted, regions, strict=True)]
+
+
 @dataclass
 class _Problem:
     renderer: TwinRenderer
     measured: list[np.ndarray]
-    regions: list[np.ndarray]
+    masks: list[np.ndarray]
     sigma: list[np.ndarray]
     fitted: tuple[str, ...]
     fixed: dict[str, float]
+    evaluations: int = 0
     cache: dict = field(default_factory=dict)
 
     def predict(self, x: np.ndarray) -> list[PredictedView]:
         key = np.round(x, 9).tobytes()
         if key not in self.cache:
-            if len(self.cache) > 64:
+            if len(self.cache) > 16:
                 self.cache.clear()
             self.cache[key] = self.renderer.predict(object_twin_of(x, self.fitted, self.fixed))
+            self.evaluations += 1
         return self.cache[key]
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         out = []
-        for zm, pred, reg, sig in zip(self.measured, self.predict(x), self.regions, self.sigma,
-                                      strict=True):
-            r = np.where(pred.saturated, 0.0, (zm - pred.phasor) / sig)[reg]
-            out.extend([r.real, r.imag])
+        for zm, pred, m, sig in zip(self.measured, self.predict(x), self.masks, self.sigma,
+                                    strict=True):
+            d = zm - pred.phasor
+            out.extend([(d.real / sig[:, 0])[:, m].ravel(), (d.imag / sig[:, 1])[:, m].ravel()])
         return np.concatenate(out)
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         f0 = self.residual(x)
-        steps = np.array([STEP_MM] * 3 + [STEP_DEG] * 3 + [STEP_SCALE] * len(self.fitted))
+        steps = _steps(len(self.fitted))
         jac = np.empty((f0.size, x.size))
         for i, h in enumerate(steps):
             xi = x.copy()
@@ -130,63 +172,95 @@ class _Problem:
         return jac
 
 
-def fit_regions(measured_flagged: list[np.ndarray], predicted: list[PredictedView],
-                mounted_ids: list[int]) -> list[np.ndarray]:
-    """Pixels of each view that enter the residual: the predicted mounted objects, grown by
-    :data:`MARGIN_PX`, without the pixels the camera flagged."""
-    out = []
-    for flagged, pred in zip(measured_flagged, predicted, strict=True):
-        objs = np.isin(pred.object_id, mounted_ids)
-        out.append(ndimage.binary_dilation(objs, iterations=MARGIN_PX) & ~flagged)
-    return out
+def _gauss_newton(prob: _Problem, x: np.ndarray, max_iter: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
+    """Gauss-Newton with a line search along each step: halved while the cost does not drop,
+    doubled (up to :data:`MAX_STRETCH`) while it keeps dropping; a Jacobian (one render per
+    parameter) per iteration, a render per trial point. Returns the solution, its residual,
+    its Jacobian and the accepted step lengths."""
+    steps = _steps(len(x) - 6)
+    cap = np.array([MAX_STEP[0]] * 3 + [MAX_STEP[1]] * 3 + [MAX_STEP[2]] * (len(x) - 6))
+    r = prob.residual(x)
+    cost = float(r @ r)
+    jac = prob.jacobian(x)
+    taken = []
+
+    def trial(xa):
+        try:
+            ra = prob.residual(xa)
+        except InvalidInputError:  # a scale beyond what the material allows (ks + kd > 1)
+            return None, np.inf
+        return ra, float(ra @ ra)
+
+    for _ in range(max_iter):
+        dx = np.linalg.lstsq(jac, -r, rcond=1e-10)[0]
+        longest = float(np.min(cap / np.maximum(np.abs(dx), 1e-12)))
+        best = None
+        a = min(1.0, longest)
+        while a >= 1.0 / 16.0:
+            xa = x + a * dx
+            ra, ca = trial(xa)
+            if ca < cost:
+                best = (a, xa, ra, ca)
+                break
+            a /= 2.0
+        if best is None:
+            break
+        while 2.0 * best[0] <= min(MAX_STRETCH, longest):
+            xa = x + 2.0 * best[0] * dx
+            ra, ca = trial(xa)
+            if ca >= best[3]:
+                break
+            best = (2.0 * best[0], xa, ra, ca)
+        a, x, r, cost = best
+        taken.append(a)
+        jac = prob.jacobian(x)
+        if np.all(np.abs(a * dx) <= CONVERGED * steps):
+            break
+    return x, r, jac, taken
+
+
+def _steps(n_scales: int) -> np.ndarray:
+    return np.array([STEP_MM] * 3 + [STEP_DEG] * 3 + [STEP_SCALE] * n_scales)
 
 
 def refine_object_twin(
     renderer: TwinRenderer,
-    measured: list[np.ndarray],
-    regions: list[np.ndarray],
-    noise_dn: list[float],
+    captures: list[AveragedCapture],
     offset0: ObjectPose,
     scales0: dict[str, float],
     fitted: tuple[str, ...],
-    axis_direction: np.ndarray,
+    solves: tuple[tuple[float, int], ...] = SOLVES,
 ) -> RefinedFit:
     """Least squares of the pose and the ``fitted`` objects' scales (module docstring).
 
-    ``scales0`` holds every mounted object's starting scale (the others stay there);
-    ``noise_dn`` is each view's noise of an averaged phasor component [DN].
+    ``scales0`` holds every mounted object's starting scale (the others stay there).
     """
-    sigma = [np.sqrt(s**2 + (MODEL_REL_ERROR * np.abs(zm)) ** 2)
-             for zm, s in zip(measured, noise_dn, strict=True)]
     fixed = {n: s for n, s in scales0.items() if n not in fitted}
-    prob = _Problem(renderer, measured, regions, sigma, fitted, fixed)
     x = np.array([*(v * 1e3 for v in offset0.position_m), *offset0.rotation_deg,
                   *(scales0[n] for n in fitted)], dtype=np.float64)
-    r0 = prob.residual(x)
-    rms_before = float(np.sqrt(np.mean(r0**2)))
-    # Coarse search along the axis (the height ICP cannot see).
-    axis = np.asarray(axis_direction, dtype=np.float64)
-    axis = axis / np.linalg.norm(axis)
-    half, step = HEIGHT_SEARCH_MM
-    best, best_cost = x, float(r0 @ r0)
-    for dz in np.arange(-half, half + 1e-9, step):
-        xi = x.copy()
-        xi[:3] += dz * axis
-        r = prob.residual(xi)
-        if float(r @ r) < best_cost:
-            best, best_cost = xi, float(r @ r)
-    height = float((best[:3] - x[:3]) @ axis)
-    lo = np.r_[np.full(6, -np.inf), np.full(len(fitted), 0.05)]
-    hi = np.r_[np.full(6, np.inf), np.full(len(fitted), 10.0)]
-    sol = least_squares(prob.residual, best, jac=prob.jacobian, bounds=(lo, hi), method="trf",
-                        x_scale=np.r_[np.ones(6), np.full(len(fitted), 0.05)],
-                        loss="soft_l1", f_scale=ROBUST_SCALE, xtol=1e-4, ftol=1e-6,
-                        max_nfev=MAX_EVALUATIONS)
-    x = sol.x
-    r = prob.residual(x)
-    jac = prob.jacobian(x)
-    inlier = np.abs(r) <= OUTLIER_SIGMA
-    r, jac = r[inlier], jac[inlier]
+    measured = [measured_phasor(c) for c in captures]
+    spp = renderer.settings.spp
+    sensors = [v.sensor for v in renderer.views]
+    prob = None
+    r = jac = None
+    chi2_before = None
+    evaluations = 0
+    line_steps: list[float] = []
+    for rel, n_iter in solves:
+        pred = renderer.predict(object_twin_of(x, fitted, fixed))
+        sigma = [phasor_sigma(p, c, s, spp, rel)
+                 for p, c, s in zip(pred, captures, sensors, strict=True)]
+        masks = residual_masks(captures, pred, renderer.regions)
+        prob = _Problem(renderer, measured, masks, sigma, fitted, fixed)
+        prob.cache[np.round(x, 9).tobytes()] = pred
+        if chi2_before is None:
+            r0 = prob.residual(x)
+            chi2_before = float(r0 @ r0) / max(1, r0.size - x.size)
+        x, r, jac, taken = _gauss_newton(prob, x, n_iter)
+        line_steps.extend(taken)
+        evaluations += prob.evaluations
+    assert prob is not None and r is not None and jac is not None
     dof = max(1, r.size - x.size)
     s2 = float(r @ r) / dof
     try:
@@ -208,6 +282,7 @@ def refine_object_twin(
         scales={n: p.reflectance_scale for n, p in twin.objects.items()},
         std_position_m=tuple(float(v) * 1e-3 for v in std[:3]),
         std_rotation_deg=tuple(float(v) for v in std[3:6]),
-        std_scale=std_scale, determined=determined, rms_before=rms_before,
-        rms_after=float(np.sqrt(np.mean(r**2))), n_residuals=int(r.size),
-        renders=renderer.renders, height_search_mm=height, correlation=corr)
+        std_scale=std_scale, determined=determined, chi2_before=chi2_before,
+        chi2_after=s2, n_residuals=int(r.size), evaluations=evaluations,
+        line_steps=tuple(line_steps),
+        predicted=prob.predict(x), correlation=corr)
