@@ -50,6 +50,7 @@ from calibration.object_twin.render_model import FIT_RENDER, TwinRenderer, measu
 from calibration.object_twin.views import calibrated_camera, capture_spec, mount_from_camera
 from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError
+from sim_core.geometry import triangle_areas
 from sim_core.json_safe import json_safe
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import SceneSpec
@@ -182,7 +183,9 @@ def fit_object(
     t_setup = time.perf_counter() - t1
 
     # 4. pose and scales together: maximum likelihood on the phasors ------------------------
-    refined = refine_object_twin(renderer, captures, reg.offset, scales, fitted)
+    areas = triangle_areas(model.triangles_m)
+    centroid = (model.triangles_m.mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
+    refined = refine_object_twin(renderer, captures, reg.offset, centroid, scales, fitted)
     final_pred = refined.predicted
     objects_report = {}
     for n in model.names:

@@ -19,11 +19,13 @@ silhouette is then weighted by how well it can be predicted, not masked. Pixels 
 flagged (saturated, SBI) or the twin saturates are left out.
 
 The residual is minimised over the offset (3 translations [mm], 3 extrinsic xyz angles [deg],
-the reality's convention) and the determined objects' scales, plain squares (the maximum
-likelihood for Gaussian noise), by Gauss-Newton with a line search along each step (a render per
-trial point; the valley between a translation across the view and the rotation about the axis
-is long and curved, so full steps fall short and the search stretches them). The Jacobian is by
-forward differences of renders with a fixed seed (common random numbers: the residual is a
+the reality's convention, but the translation taken at the mounted objects' centroid instead of
+the axis point on the turntable: about the axis point a tilt and a translation move the object
+almost alike, a long valley in which the steps crawl) and the determined objects' scales,
+plain squares (the maximum likelihood for Gaussian noise), by Gauss-Newton with a line search
+along each step (a render per trial point; full steps can fall short on the curved residual, and
+the search stretches them). The Jacobian is by forward differences of renders with a fixed seed
+(common random numbers: the residual is a
 smooth function of the parameters up to the silhouettes' sample coverage, which the stratified
 pixel jitter keeps fine). The weights are fixed during a solve and made again at its result for
 a second, shorter solve.
@@ -42,6 +44,7 @@ import numpy as np
 from calibration.captures import AveragedCapture
 from calibration.object_twin.render_model import PredictedView, TwinRenderer, measured_phasor
 from sim_core.errors import InvalidInputError
+from sim_core.geometry import rotation_matrix_xyz_deg
 from sim_core.raw import ValidityThresholds
 from sim_core.scene_spec import ObjectPose
 from sim_core.sensor import SensorParams
@@ -59,7 +62,7 @@ SOLVES = ((0.05, 6), (0.0, 6), (0.0, 2))
 #: a solve stops when a step moves no parameter by more than this share of its difference step
 CONVERGED = 0.1
 #: largest step along a Gauss-Newton direction, in multiples of it (the line search)
-MAX_STRETCH = 4.0
+MAX_STRETCH = 8.0
 #: largest change of a translation [mm], a rotation [deg], a scale [1] in one iteration
 MAX_STEP = (5.0, 1.0, 0.1)
 #: standard deviations beyond which a parameter counts as not determined
@@ -98,11 +101,29 @@ class RefinedFit:
         }
 
 
-def object_twin_of(x: np.ndarray, fitted: tuple[str, ...], fixed: dict[str, float]
-                   ) -> ObjectTwinParameters:
-    """The object twin of a parameter vector (offset, then the fitted scales)."""
-    pose = ObjectPose(position_m=tuple(float(v) * 1e-3 for v in x[:3]),
-                      rotation_deg=tuple(float(v) for v in x[3:6]))
+def offset_of(x: np.ndarray, lever_m: np.ndarray) -> np.ndarray:
+    """The offset ``(t [mm], angles [deg])`` of the parameters ``(t' [mm], angles [deg])``, the
+    translation ``t'`` taken at the pivot ``c + lever`` instead of the axis point ``c``:
+    ``c + R (x - c) + t = p + R (x - p) + t'`` with ``t = t' - (R - I) lever``."""
+    r = rotation_matrix_xyz_deg(tuple(float(v) for v in x[3:6]))
+    t = np.asarray(x[:3], dtype=np.float64) - (r - np.eye(3)) @ lever_m * 1e3
+    return np.r_[t, x[3:6]]
+
+
+def pivot_parameters(offset: ObjectPose, lever_m: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`offset_of`: ``(t' [mm], angles [deg])`` of an offset."""
+    r = rotation_matrix_xyz_deg(offset.rotation_deg)
+    t = np.asarray(offset.position_m, dtype=np.float64) * 1e3
+    return np.r_[t + (r - np.eye(3)) @ lever_m * 1e3, offset.rotation_deg]
+
+
+def object_twin_of(x: np.ndarray, fitted: tuple[str, ...], fixed: dict[str, float],
+                   lever_m: np.ndarray) -> ObjectTwinParameters:
+    """The object twin of a parameter vector (translation at the pivot, angles, then the fitted
+    scales)."""
+    off = offset_of(x, lever_m)
+    pose = ObjectPose(position_m=tuple(float(v) * 1e-3 for v in off[:3]),
+                      rotation_deg=tuple(float(v) for v in off[3:6]))
     objects = {n: ObjectParameters(reflectance_scale=float(s)) for n, s in fixed.items()}
     objects.update({n: ObjectParameters(reflectance_scale=float(s))
                     for n, s in zip(fitted, x[6:], strict=True)})
@@ -141,6 +162,7 @@ class _Problem:
     sigma: list[np.ndarray]
     fitted: tuple[str, ...]
     fixed: dict[str, float]
+    lever_m: np.ndarray
     evaluations: int = 0
     cache: dict = field(default_factory=dict)
 
@@ -149,7 +171,8 @@ class _Problem:
         if key not in self.cache:
             if len(self.cache) > 16:
                 self.cache.clear()
-            self.cache[key] = self.renderer.predict(object_twin_of(x, self.fitted, self.fixed))
+            self.cache[key] = self.renderer.predict(
+                object_twin_of(x, self.fitted, self.fixed, self.lever_m))
             self.evaluations += 1
         return self.cache[key]
 
@@ -215,19 +238,21 @@ def _gauss_newton(prob: _Problem, x: np.ndarray, max_iter: int
         a, x, r, cost = best
         taken.append(a)
         jac = prob.jacobian(x)
-        if np.all(np.abs(a * dx) <= CONVERGED * steps):
+        if np.all(np.abs(a * dx) <= CONVERGED * np.abs(steps)):
             break
     return x, r, jac, taken
 
 
 def _steps(n_scales: int) -> np.ndarray:
-    return np.array([STEP_MM] * 3 + [STEP_DEG] * 3 + [STEP_SCALE] * n_scales)
+    """The forward-difference steps (scales step down: a material allows ks + kd <= 1 only)."""
+    return np.array([STEP_MM] * 3 + [STEP_DEG] * 3 + [-STEP_SCALE] * n_scales)
 
 
 def refine_object_twin(
     renderer: TwinRenderer,
     captures: list[AveragedCapture],
     offset0: ObjectPose,
+    pivot_m: np.ndarray,
     scales0: dict[str, float],
     fitted: tuple[str, ...],
     solves: tuple[tuple[float, int], ...] = SOLVES,
@@ -237,8 +262,8 @@ def refine_object_twin(
     ``scales0`` holds every mounted object's starting scale (the others stay there).
     """
     fixed = {n: s for n, s in scales0.items() if n not in fitted}
-    x = np.array([*(v * 1e3 for v in offset0.position_m), *offset0.rotation_deg,
-                  *(scales0[n] for n in fitted)], dtype=np.float64)
+    lever = np.asarray(pivot_m, dtype=np.float64) - np.asarray(renderer.spec.turntable.axis_point_m)
+    x = np.r_[pivot_parameters(offset0, lever), [scales0[n] for n in fitted]]
     measured = [measured_phasor(c) for c in captures]
     spp = renderer.settings.spp
     sensors = [v.sensor for v in renderer.views]
@@ -248,11 +273,11 @@ def refine_object_twin(
     evaluations = 0
     line_steps: list[float] = []
     for rel, n_iter in solves:
-        pred = renderer.predict(object_twin_of(x, fitted, fixed))
+        pred = renderer.predict(object_twin_of(x, fitted, fixed, lever))
         sigma = [phasor_sigma(p, c, s, spp, rel)
                  for p, c, s in zip(pred, captures, sensors, strict=True)]
         masks = residual_masks(captures, pred, renderer.regions)
-        prob = _Problem(renderer, measured, masks, sigma, fitted, fixed)
+        prob = _Problem(renderer, measured, masks, sigma, fitted, fixed, lever)
         prob.cache[np.round(x, 9).tobytes()] = pred
         if chi2_before is None:
             r0 = prob.residual(x)
@@ -264,7 +289,13 @@ def refine_object_twin(
     dof = max(1, r.size - x.size)
     s2 = float(r @ r) / dof
     try:
-        cov = s2 * np.linalg.inv(jac.T @ jac)
+        # to the offset's own parameters (translation at the axis point)
+        conv = np.eye(x.size)
+        for i in range(6):
+            h = np.zeros(x.size)
+            h[i] = 1e-3
+            conv[:6, i] = (offset_of(x + h, lever) - offset_of(x - h, lever)) / 2e-3
+        cov = s2 * conv @ np.linalg.inv(jac.T @ jac) @ conv.T
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         corr = cov / np.outer(std, std)
     except np.linalg.LinAlgError:
@@ -276,7 +307,7 @@ def refine_object_twin(
     std_scale = {n: float(std[6 + i]) for i, n in enumerate(fitted)}
     for n, s in std_scale.items():
         determined[n] = bool(np.isfinite(s) and s <= UNDETERMINED_STD["scale"])
-    twin = object_twin_of(x, fitted, fixed)
+    twin = object_twin_of(x, fitted, fixed, lever)
     return RefinedFit(
         offset=twin.mount.pose_offset,
         scales={n: p.reflectance_scale for n, p in twin.objects.items()},
