@@ -61,6 +61,8 @@ STEP_MM, STEP_DEG, STEP_SCALE = 0.25, 0.025, 0.02
 SOLVES = ((0.05, 6), (0.0, 6), (0.0, 2))
 #: a solve stops when a step moves no parameter by more than this share of its difference step
 CONVERGED = 0.1
+#: the coarse search of the start along the turntable's axis: half-width and step [mm]
+HEIGHT_SEARCH_MM = (8.0, 2.0)
 #: largest step along a Gauss-Newton direction, in multiples of it (the line search)
 MAX_STRETCH = 8.0
 #: largest change of a translation [mm], a rotation [deg], a scale [1] in one iteration
@@ -243,6 +245,26 @@ def _gauss_newton(prob: _Problem, x: np.ndarray, max_iter: int
     return x, r, jac, taken
 
 
+def _height_search(prob: _Problem, x: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The start moved along the turntable's axis to the lowest cost of a coarse grid
+    (:data:`HEIGHT_SEARCH_MM`): ICP sees only vertical faces, so its height can be off by more
+    than the silhouette's reach."""
+    best, best_cost = x, float(np.sum(prob.residual(x) ** 2))
+    half, step = HEIGHT_SEARCH_MM
+    for dz in np.arange(-half, half + 1e-9, step):
+        if dz == 0.0:
+            continue
+        xi = x.copy()
+        xi[:3] += dz * axis
+        try:
+            c = float(np.sum(prob.residual(xi) ** 2))
+        except InvalidInputError:
+            continue
+        if c < best_cost:
+            best, best_cost = xi, c
+    return best
+
+
 def _steps(n_scales: int) -> np.ndarray:
     """The forward-difference steps (scales step down: a material allows ks + kd <= 1 only)."""
     return np.array([STEP_MM] * 3 + [STEP_DEG] * 3 + [-STEP_SCALE] * n_scales)
@@ -264,6 +286,8 @@ def refine_object_twin(
     fixed = {n: s for n, s in scales0.items() if n not in fitted}
     lever = np.asarray(pivot_m, dtype=np.float64) - np.asarray(renderer.spec.turntable.axis_point_m)
     x = np.r_[pivot_parameters(offset0, lever), [scales0[n] for n in fitted]]
+    axis = np.asarray(renderer.spec.turntable.axis_direction, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
     measured = [measured_phasor(c) for c in captures]
     spp = renderer.settings.spp
     sensors = [v.sensor for v in renderer.views]
@@ -282,6 +306,7 @@ def refine_object_twin(
         if chi2_before is None:
             r0 = prob.residual(x)
             chi2_before = float(r0 @ r0) / max(1, r0.size - x.size)
+            x = _height_search(prob, x, axis)
         x, r, jac, taken = _gauss_newton(prob, x, n_iter)
         line_steps.extend(taken)
         evaluations += prob.evaluations
