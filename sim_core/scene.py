@@ -30,6 +30,7 @@ from sim_core.scene_spec import BOARD_KINDS, MaterialSpec, ObjectSpec, OpticsSpe
 from sim_core.sensor import SensorParams
 from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
 from sim_core.twin_file import (
+    ObjectTwinFile,
     TwinParameters,
     has_object_keys,
     load_calibration,
@@ -228,7 +229,10 @@ def build_ambient(
 def build_material(m: MaterialSpec | str, field_name: str,
                    base_dir: str | Path = ".") -> Material:
     """Material from a preset name, a kind with parameters or a material file (a relative path
-    resolved against ``base_dir``, the scene file's folder); errors name the field."""
+    resolved against ``base_dir``, the scene file's folder); errors name the field.
+
+    A tabulated material's ``table`` (a goniometer CSV) is resolved against ``base_dir`` too.
+    """
     try:
         if isinstance(m, str):
             kind, params = _preset(m)
@@ -240,11 +244,37 @@ def build_material(m: MaterialSpec | str, field_name: str,
             params = {**base, **m.params}
         else:
             kind, params = m.kind, dict(m.params)
+        params = _resolve_table_path(kind, params, base_dir)
         return make_material(kind, **params)
     except InvalidInputError as exc:
         raise SceneError(f"{field_name}.{exc.field}", str(exc).split(": ", 1)[-1]) from None
     except TypeError as exc:
         raise SceneError(field_name, f"invalid material parameters: {exc}") from None
+
+
+def _resolve_table_path(kind: str | None, params: dict, base_dir: str | Path | None) -> dict:
+    """``params`` with a tabulated material's relative ``table`` path made relative to
+    ``base_dir`` (unchanged for other kinds, absolute paths or no ``base_dir``)."""
+    table = params.get("table")
+    if kind != "tabulated" or not isinstance(table, str) or base_dir is None:
+        return params
+    path = Path(table)
+    return {**params, "table": str(path if path.is_absolute() else Path(base_dir) / path)}
+
+
+def _tabulated_files(spec: SceneSpec, base_dir: Path) -> list[Path]:
+    """The goniometer CSVs the scene's tabulated materials read (for the scene hash)."""
+    specs = []
+    for obj in spec.objects:
+        specs.extend([obj.material, getattr(obj.mesh, "black", None),
+                      getattr(obj.mesh, "white", None)])
+    paths = []
+    for m in specs:
+        if isinstance(m, MaterialSpec) and m.kind == "tabulated":
+            table = _resolve_table_path(m.kind, dict(m.params), base_dir).get("table")
+            if isinstance(table, str) and Path(table).is_file():
+                paths.append(Path(table))
+    return paths
 
 
 def material_file_path(m: MaterialSpec, base_dir: str | Path) -> Path:
@@ -331,6 +361,8 @@ def _hash_inputs(spec: SceneSpec, base_dir: Path, rig: dict) -> str:
         for m in (obj.material, getattr(obj.mesh, "black", None), getattr(obj.mesh, "white", None)):
             if isinstance(m, MaterialSpec) and m.file is not None:
                 h.update(material_file_path(m, base_dir).read_bytes())
+    for p in _tabulated_files(spec, base_dir):
+        h.update(p.read_bytes())
     h.update(repr(sorted(rig.items())).encode())
     return h.hexdigest()
 
@@ -340,14 +372,20 @@ def scene_twin(spec: SceneSpec, base_dir: str | Path = ".") -> TwinParameters | 
     ``object_twin: FILE`` (:func:`sim_core.twin_file.with_object_twin`), both relative to
     ``base_dir``; None when it names neither."""
     base = Path(base_dir)
-    cal = obj = None
+    cal = None
     if spec.calibration is not None:
         path = Path(spec.calibration)
         cal = load_calibration(path if path.is_absolute() else base / path)
-    if spec.object_twin is not None:
-        path = Path(spec.object_twin)
-        obj = load_object_twin(path if path.is_absolute() else base / path)
-    return with_object_twin(cal, obj)
+    return with_object_twin(cal, scene_object_twin(spec, base))
+
+
+def scene_object_twin(spec: SceneSpec, base_dir: str | Path = ".") -> ObjectTwinFile | None:
+    """The object file the scene references (``object_twin: FILE``, relative to ``base_dir``),
+    or None."""
+    if spec.object_twin is None:
+        return None
+    path = Path(spec.object_twin)
+    return load_object_twin(path if path.is_absolute() else Path(base_dir) / path)
 
 
 def build_scene(

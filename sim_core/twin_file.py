@@ -318,6 +318,20 @@ def parse_reality(data: Any) -> RealityFile:
     return _parse(RealityFile, data, "reality")
 
 
+def parse_twin(data: Any) -> TwinParameters:
+    """A twin as the service stores it and sends it to workers: a calibration, or a calibration
+    combined with an object twin (:func:`with_object_twin`: it has ``mount`` or ``objects``).
+
+    >>> type(parse_twin({"camera": {"fx_px": 210.0}})).__name__
+    'CalibrationFile'
+    >>> type(parse_twin({"objects": {"body": {"reflectance_scale": 0.9}}})).__name__
+    'RealityFile'
+    """
+    if isinstance(data, dict) and ({"mount", "objects"} & data.keys()):
+        return parse_reality(data)
+    return parse_calibration(data)
+
+
 def _read_mapping(path: str | Path, what: str) -> Any:
     p = Path(path)
     if not p.is_file():

@@ -64,8 +64,13 @@ class CampaignCreated(BaseModel):
 
 
 class CurrentPose(BaseModel):
-    """The pose being worked on (running) or next to do (paused, interrupted)."""
+    """The pose being worked on (running) or next to do (paused, interrupted).
 
+    ``stage``: ``pose`` (a planned pose and repeat) or ``object_fit`` (a campaign with an
+    object fit capturing its fit angles; ``pose_index`` then counts those).
+    """
+
+    stage: Literal["pose", "object_fit"] = "pose"
     pose_index: int
     repeat: int
     turntable_deg: float
@@ -90,6 +95,9 @@ class CampaignPublic(BaseModel):
     calibration_hash: str | None = Field(
         None, description="The calibration pinned when the campaign was created (None: nominal);"
         " every pose of it applies this one.")
+    object_fit: dict[str, Any] | None = Field(
+        None, description="The object fit (campaigns created with object_fit): its settings, "
+        "state ('pending' or 'fitted'), the fitted object twin and the fit's report.")
     current_pose: CurrentPose | None
     eta_s: float | None
     error: str | None
@@ -111,6 +119,9 @@ class ResultPublic(BaseModel):
     metrics: dict[str, Any]
     measured_frame_id: str
     simulated_frame_id: str
+    fitted_frame_id: str | None = Field(
+        None, description="The simulation with the fitted object twin (campaigns with an "
+        "object fit).")
     created_at: float
     timings_s: dict[str, float]
     calibration_hash: str | None = None

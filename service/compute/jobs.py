@@ -14,6 +14,7 @@ renderer's results do not depend on the number of threads.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 import threading
@@ -56,9 +57,11 @@ class SimulationJob:
     extra : dict
         Written into the frame's ``frame.json`` (rig state, object names, ...).
     twin : dict or None
-        The calibration to apply (``CalibrationFile.model_dump(mode="json")``), resolved by the
-        service (its active calibration, or the scene's own file); None: nominal. The worker
-        never reads a calibration file itself: the scene's ``calibration`` key is ignored here.
+        The calibration to apply (``CalibrationFile.model_dump(mode="json")``, or a calibration
+        combined with an object twin: :func:`sim_core.twin_file.parse_twin`), resolved by the
+        service (its active calibration, the scene's own files, a campaign's fitted object);
+        None: nominal. The worker never reads a twin file itself: the scene's ``calibration``
+        and ``object_twin`` keys are ignored here.
     """
 
     scene: dict[str, Any]
@@ -76,6 +79,19 @@ class SimulationJob:
     scene_name: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
     twin: dict[str, Any] | None = None
+    #: contents of the goniometer tables of tabulated materials, keyed by ``params.table``
+    tables: dict[str, bytes] = field(default_factory=dict)
+
+
+def _material_specs(spec: SceneSpec):
+    """Every ``MaterialSpec`` of the scene's objects (boards bring two)."""
+    from sim_core.scene_spec import MaterialSpec
+
+    for obj in spec.objects:
+        for m in (obj.material, getattr(obj.mesh, "black", None),
+                  getattr(obj.mesh, "white", None)):
+            if isinstance(m, MaterialSpec):
+                yield m
 
 
 def make_job(
@@ -102,10 +118,17 @@ def make_job(
         if obj.mesh.kind == "file":
             p = Path(obj.mesh.path)
             meshes[obj.mesh.path] = (p if p.is_absolute() else Path(base_dir) / p).read_bytes()
+    tables: dict[str, bytes] = {}
+    for m in _material_specs(spec):
+        table = m.params.get("table") if m.kind == "tabulated" else None
+        if isinstance(table, str) and table not in tables:
+            p = Path(table)
+            tables[table] = (p if p.is_absolute() else Path(base_dir) / p).read_bytes()
     r = spec.render
     return SimulationJob(
         scene=spec.model_dump(mode="json"),
         meshes=meshes,
+        tables=tables,
         turntable_deg=turntable_deg,
         solar_suns=solar_suns,
         integrator=r.integrator,
@@ -154,6 +177,27 @@ class SimulationResult:
     grey_full_scale: float = 0.0
 
 
+def _local_tables(obj: dict[str, Any], tables: dict[str, bytes], folder: Path) -> dict:
+    """``obj`` (scene JSON) with its tabulated materials' tables written to ``folder`` and
+    named by their local file."""
+
+    def local(m: Any) -> Any:
+        if not isinstance(m, dict) or m.get("kind") != "tabulated":
+            return m
+        table = (m.get("params") or {}).get("table")
+        if table not in tables:
+            return m
+        name = f"table_{hashlib.sha256(table.encode()).hexdigest()[:12]}.csv"
+        (folder / name).write_bytes(tables[table])
+        return {**m, "params": {**m["params"], "table": name}}
+
+    out = {**obj, "material": local(obj.get("material"))}
+    mesh = obj.get("mesh", {})
+    if isinstance(mesh, dict) and ("black" in mesh or "white" in mesh):
+        out["mesh"] = {**mesh, **{k: local(mesh[k]) for k in ("black", "white") if k in mesh}}
+    return out
+
+
 def run_job(job: SimulationJob) -> SimulationResult:
     """Simulate ``job`` on this worker."""
     import socket
@@ -163,12 +207,13 @@ def run_job(job: SimulationJob) -> SimulationResult:
     from sim_core.render import RenderSettings
     from sim_core.scene import build_scene
     from sim_core.scene_spec import parse_scene_spec
-    from sim_core.twin_file import parse_calibration
+    from sim_core.twin_file import parse_twin
 
-    twin = None if job.twin is None else parse_calibration(job.twin)
+    twin = None if job.twin is None else parse_twin(job.twin)
     with tempfile.TemporaryDirectory(prefix="toftwin-job-") as tmp:
         scene = dict(job.scene)
-        scene["calibration"] = None  # resolved by the service: ``job.twin``
+        # resolved by the service: ``job.twin`` (the calibration and the object twin)
+        scene["calibration"] = scene["object_twin"] = None
         if job.meshes:
             objects = []
             for i, obj in enumerate(scene.get("objects", [])):
@@ -179,6 +224,9 @@ def run_job(job: SimulationJob) -> SimulationResult:
                     obj = {**obj, "mesh": {**mesh, "path": local.name}}
                 objects.append(obj)
             scene["objects"] = objects
+        if job.tables:
+            scene["objects"] = [_local_tables(obj, job.tables, Path(tmp))
+                                for obj in scene.get("objects", [])]
         spec = parse_scene_spec(scene)
         built = build_scene(
             spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin

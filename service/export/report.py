@@ -39,7 +39,7 @@ _PLOTS = (
     ("Mean grey [level]", (("measured", "grey", "mean_measured"),
                            ("simulated", "grey", "mean_simulated"))),
 )
-_COLOURS = ("#1f77b4", "#d62728")
+_COLOURS = ("#1f77b4", "#d62728", "#2ca02c")
 
 
 def _png(rgb: np.ndarray) -> str:
@@ -141,6 +141,71 @@ def _metric(row: dict[str, Any], ch: str, name: str) -> float | None:
     return float(v) if isinstance(v, int | float) and np.isfinite(v) else None
 
 
+def _explained(row: dict[str, Any], twin: str, name: str) -> float | None:
+    v = ((row["metrics"].get("explained") or {}).get(twin) or {}).get(name)
+    return float(v) if isinstance(v, int | float) and np.isfinite(v) else None
+
+
+def _median(values: list[float | None]) -> float | None:
+    vals = [v for v in values if v is not None]
+    return float(np.median(vals)) if vals else None
+
+
+def _cell(value: float | None, scale: float = 1.0, fmt: str = "{:.2f}") -> str:
+    return "-" if value is None else fmt.format(value * scale)
+
+
+def explained_section(camp: Any, first: list[dict[str, Any]]) -> list[str]:
+    """The explained difference of a campaign with an object fit (issue 14, section 4): the
+    fitted object twin, then per pose the depth RMSE and grey PSNR against the nominal twin,
+    the fitted twin and the noise ceiling (two captures of the same state), with their medians.
+    """
+    esc = html.escape
+    out = ["<h2>Explained difference (object twin)</h2>"]
+    if camp.object_twin_json is None:
+        return [*out, "<p>The object fit has not run yet.</p>"]
+    twin = json.loads(camp.object_twin_json)
+    report = json.loads(camp.object_fit_report_json or "{}")
+    off = (twin.get("mount") or {}).get("pose_offset") or {}
+    scales = {k: v.get("reflectance_scale") for k, v in (twin.get("objects") or {}).items()}
+    out.append(
+        f"<p>Fitted mount offset: position {esc(str(off.get('position_m')))} m, rotation "
+        f"{esc(str(off.get('rotation_deg')))} deg; reflectance scales {esc(str(scales))}.</p>"
+        f"<details><summary>Fit report</summary><pre>"
+        f"{esc(json.dumps(report, indent=1)[:20000])}</pre></details>")
+    x = [r["turntable_deg"] for r in first]
+    twins = ("nominal", "fitted", "ceiling")
+    out.append("<div class='plots'>" + svg_plot(
+        "Depth RMSE [mm]", x, [(t, [None if (v := _explained(r, t, "depth_rmse_m")) is None
+                                    else v * 1e3 for r in first]) for t in twins])
+        + svg_plot("Grey PSNR [dB]", x, [(t, [_explained(r, t, "grey_psnr_db") for r in first])
+                                         for t in twins]) + "</div>")
+    head = ("pose", "angle [deg]", "depth RMSE nominal [mm]", "fitted [mm]", "ceiling [mm]",
+            "grey PSNR nominal [dB]", "fitted [dB]", "ceiling [dB]", "explained depth",
+            "explained grey")
+    rows = []
+    for r in first:
+        ex = (r["metrics"].get("explained") or {}).get("explained") or {}
+        rows.append((str(r["pose_index"]), f"{r['turntable_deg']:g}",
+                     *(_cell(_explained(r, t, "depth_rmse_m"), 1e3) for t in twins),
+                     *(_cell(_explained(r, t, "grey_psnr_db")) for t in twins),
+                     *(_cell(ex.get(ch), 100.0, "{:.0f} %") for ch in ("depth", "grey"))))
+    rows.append(("median", "",
+                 *(_cell(_median([_explained(r, t, "depth_rmse_m") for r in first]), 1e3)
+                   for t in twins),
+                 *(_cell(_median([_explained(r, t, "grey_psnr_db") for r in first]))
+                   for t in twins), "", ""))
+    out.append("<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>"
+               + "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in row) + "</tr>"
+                         for row in rows) + "</table>")
+    out.append("<p>Nominal: the campaign's calibration with the scene's object as designed; "
+               "fitted: the same calibration with the fitted object twin; ceiling: a second "
+               "capture of the same state (what no twin can beat). 'Explained' is the share "
+               "of the nominal twin's excess MSE over the ceiling that the fit removes; what "
+               "is left is model error.</p>")
+    return out
+
+
 def campaign_report(sessions: sessionmaker, store: FrameStore, campaign_id: str) -> str:
     """The whole HTML page."""
     with sessions() as s:
@@ -168,8 +233,11 @@ def campaign_report(sessions: sessionmaker, store: FrameStore, campaign_id: str)
         f"<a href='{base}/results?format=csv'>results (CSV)</a> &middot; "
         f"<a href='{base}/documents'>Bluesky documents</a></p>",
         "<h2>Metrics over the poses (first repeat)</h2><div class='plots'>",
-        *plots, "</div><h2>Poses</h2>",
+        *plots, "</div>",
     ]
+    if camp.object_fit_json is not None:
+        out += explained_section(camp, first)
+    out.append("<h2>Poses</h2>")
     if len(first) > MAX_PANEL_POSES:
         out.append(f"<p>Image panels of the first {MAX_PANEL_POSES} poses only.</p>")
     for r in first[:MAX_PANEL_POSES]:

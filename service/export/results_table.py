@@ -18,6 +18,11 @@ CHANNEL_FIELDS = ("mean_measured", "mean_simulated", "var_measured", "var_simula
                   "ssim", "psnr_db", "rel_err_mean", "rel_err_var")
 
 
+#: the explained difference's comparisons (campaigns with an object fit) and their columns
+EXPLAINED_TWINS = ("nominal", "fitted", "ceiling")
+EXPLAINED_FIELDS = ("depth_rmse_m", "grey_psnr_db")
+
+
 def result_rows(
     sessions: sessionmaker, campaign_id: str, limit: int | None = None, offset: int = 0
 ) -> list[dict[str, Any]]:
@@ -36,7 +41,8 @@ def result_dict(r: PoseResultRow) -> dict[str, Any]:
         "pose_index": r.pose_index, "repeat": r.repeat, "turntable_deg": r.turntable_deg,
         "solar_suns": r.solar_suns, "metrics": metrics,
         "measured_frame_id": r.measured_frame_id,
-        "simulated_frame_id": r.simulated_frame_id, "created_at": r.created_at,
+        "simulated_frame_id": r.simulated_frame_id, "fitted_frame_id": r.fitted_frame_id,
+        "created_at": r.created_at,
         "timings_s": json.loads(r.timings_json), "calibration_hash": r.calibration_hash,
     }
 
@@ -51,13 +57,20 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
     flat["grey_chi_square"] = metrics.get("grey_chi_square")
     flat["n_pixels"] = metrics.get("n_pixels")
     flat["error"] = metrics.get("error")
+    explained = metrics.get("explained") or {}
+    for twin in EXPLAINED_TWINS:
+        values = explained.get(twin) or {}
+        for f in EXPLAINED_FIELDS:
+            flat[f"{twin}_{f}"] = values.get(f)
+    for ch in ("depth", "grey"):
+        flat[f"explained_{ch}"] = (explained.get("explained") or {}).get(ch)
     return flat
 
 
 def results_csv(rows: Iterable[dict[str, Any]]) -> Iterator[str]:
     """The rows as CSV, metrics flattened to one column each: the header, then a line a row."""
     head = ["pose_index", "repeat", "turntable_deg", "solar_suns", "measured_frame_id",
-            "simulated_frame_id", "created_at", "calibration_hash"]
+            "simulated_frame_id", "fitted_frame_id", "created_at", "calibration_hash"]
     metric_cols = list(flat_metrics({}).keys())
     buf = io.StringIO()
     writer = csv.writer(buf)

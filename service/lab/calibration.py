@@ -32,14 +32,14 @@ from service.lab.scenes import SceneSource
 from service.store import queries
 from service.store.tables import CalibrationActivationRow
 from sim_core.errors import InvalidInputError
-from sim_core.scene import scene_twin
+from sim_core.scene import scene_object_twin, scene_twin
 from sim_core.scene_spec import scene_error_from_validation
 from sim_core.twin_file import (
     CalibrationFile,
     TwinParameters,
-    parse_calibration,
-    parse_reality,
+    parse_twin,
     twin_hash,
+    with_object_twin,
 )
 
 
@@ -84,12 +84,7 @@ def calibration_from_json(text: str | None) -> TwinParameters | None:
     :func:`sim_core.twin_file.with_object_twin`) is stored with the object keys: it comes back
     as that combination.
     """
-    if text is None:
-        return None
-    data = json.loads(text)
-    if isinstance(data, dict) and ({"mount", "objects"} & data.keys()):
-        return parse_reality(data)
-    return parse_calibration(data)
+    return None if text is None else parse_twin(json.loads(text))
 
 
 def active_twin(sessions: sessionmaker) -> Twin:
@@ -103,9 +98,11 @@ def active_twin(sessions: sessionmaker) -> Twin:
 
 def effective_twin(active: Twin, scene: SceneSource) -> Twin:
     """What a simulation of ``scene`` applies: the active calibration, else the scene's own
-    ``calibration: FILE``, else nothing."""
+    ``calibration: FILE``, else nothing; combined with the scene's ``object_twin: FILE`` if it
+    names one (the rig's calibration and the object's are independent)."""
     if active.calibration is not None:
-        return active
+        obj = scene_object_twin(scene.spec, scene.base_dir)
+        return active if obj is None else Twin.of(with_object_twin(active.calibration, obj))
     return Twin.of(scene_twin(scene.spec, scene.base_dir))
 
 

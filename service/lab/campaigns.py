@@ -52,6 +52,10 @@ def create_campaign(
                 f"got {pose.repeats}; allowed: 1 to {settings.max_repeats} (max_repeats)")
         if rig is not None:
             check_angle(rig, pose.turntable_deg, f"poses[{i}].turntable_deg")
+    fit = req.object_fit_settings()
+    if fit is not None and not scene.turntable_object_ids:
+        raise InvalidInputError(
+            "object_fit", f"scene {scene.name!r} has no object on the turntable to fit")
     twin = effective_twin(active_twin(sessions), scene)
     pinned = twin.to_json()
     campaign_id = uuid.uuid4().hex
@@ -63,6 +67,7 @@ def create_campaign(
             poses=[(p.turntable_deg, p.solar_suns, p.repeats) for p in req.poses],
             calibration_json=None if pinned is None else json.dumps(pinned, sort_keys=True),
             calibration_hash=twin.hash,
+            object_fit=None if fit is None else fit.model_dump(mode="json"),
         )
     return campaign_id
 
@@ -110,11 +115,30 @@ def campaign_status(
         "id": row.id, "name": row.name, "scene_name": row.scene_name, "state": row.state,
         "poses_done": done, "poses_total": row.poses_total, "pose_count": len(poses),
         "calibration_hash": row.calibration_hash,
+        "object_fit": object_fit_public(row),
         "current_pose": current, "eta_s": eta, "error": row.error, "runs": row.runs,
         "created_at": row.created_at, "started_at": row.started_at,
         "updated_at": row.updated_at, "finished_at": row.finished_at,
         "links": {k: f"{base}/{k}" for k in ("events", "results", "report", "documents")}
         | {"self": base},
+    }
+
+
+def object_fit_public(row) -> dict[str, Any] | None:
+    """A campaign's object fit as ``GET /campaigns/{id}`` shows it (None: no fit).
+
+    ``state`` is ``pending`` until the fit has run, then ``fitted`` with the object twin (the
+    reality file's keys ``mount`` and ``objects``), its hash and the fit's report.
+    """
+    if row.object_fit_json is None:
+        return None
+    fitted = row.object_twin_json is not None
+    return {
+        "settings": json.loads(row.object_fit_json),
+        "state": "fitted" if fitted else "pending",
+        "object_twin_hash": row.object_twin_hash,
+        "object_twin": json.loads(row.object_twin_json) if fitted else None,
+        "report": json.loads(row.object_fit_report_json) if row.object_fit_report_json else None,
     }
 
 

@@ -28,7 +28,7 @@ from drivers.rig import Rig, RigState
 from service.compute.executors import Executor, JobFuture
 from service.compute.jobs import make_job
 from service.lab.calibration import Twin, active_twin, effective_twin
-from service.lab.comparison import build_mask, compare
+from service.lab.comparison import build_mask, compare, explained_difference
 from service.lab.requests import MaskSpec, PoseCreate
 from service.lab.rig_lease import RigLease
 from service.lab.scenes import (
@@ -44,7 +44,9 @@ from service.store import queries
 from service.store.disk_space import require_free
 from service.store.frame_files import FrameStore, new_frame_id
 from service.store.tables import FrameRow, PoseResultRow
+from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.errors import InvalidInputError
+from sim_core.raw import reconstruct_raw
 from sim_core.tof import ToFImage
 from sim_core.twin_apply import apply_to_spec
 
@@ -70,6 +72,9 @@ class PosePlan:
     repeat: int = 0
     #: the calibration the simulation applies (and whose intrinsics reconstruct the measurement)
     twin: Twin = field(default_factory=Twin)
+    #: the fitted twin (calibration and fitted object) of a campaign with an object fit: the
+    #: pose is also simulated with it, and captured twice for the noise ceiling
+    fitted: Twin | None = None
 
     @property
     def target(self) -> RigState:
@@ -88,6 +93,20 @@ class Measurement:
     timings_s: dict[str, float] = field(default_factory=dict)
     started: float = 0.0
     grey_full_scale: float = 0.0
+    #: a second capture of the same state (the noise ceiling; plans with a fitted twin)
+    second: ToFImage | None = None
+
+
+@dataclass(frozen=True)
+class Submitted:
+    """Stage 2's jobs: each is (frame id, future); ``fitted`` only with a fitted twin."""
+
+    nominal: tuple[str, JobFuture]
+    fitted: tuple[str, JobFuture] | None = None
+
+    @property
+    def frame_ids(self) -> list[str]:
+        return [self.nominal[0]] + ([] if self.fitted is None else [self.fitted[0]])
 
 
 @dataclass(frozen=True)
@@ -124,8 +143,9 @@ def measure(
         wait = stable_timeout_s if plan.solar_suns > 0 else None
         state = rig.apply(plan.target, wait_stable_s=wait)
         t1 = time.perf_counter()
-        raw = rig.capture(1)[0]
+        raws = rig.capture(1 if plan.fitted is None else 2)
         use_case = rig.camera.use_case
+    raw = raws[0]
     t2 = time.perf_counter()
     spec = for_use_case(plan.scene.spec, use_case)
     if plan.twin.calibration is not None:  # the calibrated intrinsics turn range into depth
@@ -137,6 +157,8 @@ def measure(
         "calibration_hash": plan.twin.hash,
     }
     frame_id, image, grey_full_scale = store.save_measured(raw, camera, extra)
+    second = None if len(raws) < 2 else reconstruct_raw(raws[1], camera_z_over_range(
+        camera.intrinsics))
     t3 = time.perf_counter()
     row = queries.frame_row(
         frame_id, "measured", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
@@ -144,13 +166,24 @@ def measure(
     )
     return Measurement(row, image, state, use_case,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
-                       grey_full_scale)
+                       grey_full_scale, second)
 
 
 def submit(
     executor: Executor, plan: PosePlan, m: Measurement, threads: int | None
-) -> tuple[str, Any]:
-    """Stage 2: simulate the scene at the measured rig state; returns (frame id, future)."""
+) -> Submitted:
+    """Stage 2: simulate the scene at the measured rig state, with the plan's twin and (if the
+    plan has one) with the fitted twin."""
+    nominal = _submit_one(executor, plan, m, threads, plan.twin, "nominal")
+    if plan.fitted is None:
+        return Submitted(nominal)
+    return Submitted(nominal, _submit_one(executor, plan, m, threads, plan.fitted, "fitted"))
+
+
+def _submit_one(
+    executor: Executor, plan: PosePlan, m: Measurement, threads: int | None, twin: Twin,
+    label: str,
+) -> tuple[str, JobFuture]:
     spec = for_use_case(plan.scene.spec, m.use_case)
     frame_id = new_frame_id()
     job = make_job(
@@ -166,38 +199,41 @@ def submit(
             "pose_index": plan.pose_index, "repeat": plan.repeat,
             "object_names": [o.name for o in plan.scene.spec.objects],
             "turntable_object_ids": plan.scene.turntable_object_ids,
-            "measured_frame_id": m.row.id,
+            "measured_frame_id": m.row.id, "twin": label,
         },
-        twin=plan.twin.to_json(),
+        twin=twin.to_json(),
     )
     return frame_id, executor.submit(job)
 
 
 def finish(
     sessions: sessionmaker, store: FrameStore, plan: PosePlan, m: Measurement,
-    job: tuple[str, JobFuture], timeout_s: float,
+    jobs: Submitted, timeout_s: float,
 ) -> Outcome:
-    """Stage 3: store the simulated frame, compare, commit the result and both frame rows.
+    """Stage 3: store the simulated frame(s), compare, commit the result and its frame rows.
 
-    If anything fails on the way (the simulation, its files, the comparison, the commit), both
-    of the unit's frame folders are removed at once: no frame is left without a row.
+    If anything fails on the way (a simulation, its files, the comparison, the commit), all of
+    the unit's frame folders are removed at once: no frame is left without a row.
     """
     try:
-        return _finish(sessions, store, plan, m, job, timeout_s)
+        return _finish(sessions, store, plan, m, jobs, timeout_s)
     except BaseException:
-        store.delete([m.row.id, job[0]])
+        store.delete([m.row.id, *jobs.frame_ids])
         raise
 
 
 def _finish(
     sessions: sessionmaker, store: FrameStore, plan: PosePlan, m: Measurement,
-    job: tuple[str, JobFuture], timeout_s: float,
+    jobs: Submitted, timeout_s: float,
 ) -> Outcome:
-    sim_id, future = job
+    sim_id, future = jobs.nominal
     t0 = time.perf_counter()
     result = future.result(timeout=timeout_s)
+    fitted = None if jobs.fitted is None else jobs.fitted[1].result(timeout=timeout_s)
     t1 = time.perf_counter()
     store.save_files(sim_id, result.files)
+    if fitted is not None:
+        store.save_files(jobs.fitted[0], fitted.files)
     t2 = time.perf_counter()
     names = [o.name for o in plan.scene.spec.objects]
     try:
@@ -208,17 +244,30 @@ def _finish(
         metrics: dict[str, Any] = report.to_dict()
         metrics["table"] = [list(r) for r in report.table_rows()]
     except InvalidInputError as exc:  # e.g. no pixel valid in both frames: recorded, not fatal
-        metrics = {"error": str(exc), "table": []}
+        report, metrics = None, {"error": str(exc), "table": []}
+    if fitted is not None:
+        metrics["explained"] = explained_difference(
+            plan.mask, m.image, m.second, m.grey_full_scale, report, fitted.image,
+            fitted.object_id, fitted.grey_full_scale, names, plan.scene.turntable_object_ids)
     t3 = time.perf_counter()
     sim_row = queries.frame_row(
         sim_id, "simulated", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
         scene_hash=result.scene_hash, rig=m.rig.to_dict(), summary=_summary(result.image),
         calibration_hash=plan.twin.hash,
     )
+    fitted_row = None
+    if fitted is not None:
+        fitted_row = queries.frame_row(
+            jobs.fitted[0], "simulated", campaign_id=plan.campaign_id,
+            scene_name=plan.scene.name, scene_hash=fitted.scene_hash, rig=m.rig.to_dict(),
+            summary=_summary(fitted.image), calibration_hash=plan.fitted.hash,
+        )
     timings = {
         **m.timings_s,
-        "simulate": result.timings_s.get("total", 0.0) + result.timings_s.get("save", 0.0),
-        "simulate_files": result.timings_s.get("save", 0.0),
+        "simulate": sum(r.timings_s.get("total", 0.0) + r.timings_s.get("save", 0.0)
+                        for r in (result, fitted) if r is not None),
+        "simulate_files": sum(r.timings_s.get("save", 0.0) for r in (result, fitted)
+                              if r is not None),
         "simulate_wait": t1 - t0,
         "compare": t3 - t2,
     }
@@ -230,7 +279,7 @@ def _finish(
             repeat=plan.repeat, turntable_deg=plan.turntable_deg,
             solar_suns=plan.solar_suns, measured=m.row, simulated=sim_row,
             metrics=metrics, rig=m.rig.to_dict(), timings_s=timings,
-            calibration_hash=plan.twin.hash,
+            calibration_hash=plan.twin.hash, fitted=fitted_row,
         )
     return Outcome(row, timings, time.perf_counter() - t3)
 
@@ -251,8 +300,8 @@ def run_single_pose(
     with lease.manual() as rig:
         m = measure(rig, store, plan, settings.solar_stable_timeout_s)
     try:
-        job = submit(executor, plan, m, settings.threads_per_job)
-        return finish(sessions, store, plan, m, job, settings.job_timeout_s)
+        jobs = submit(executor, plan, m, settings.threads_per_job)
+        return finish(sessions, store, plan, m, jobs, settings.job_timeout_s)
     except BaseException:
         store.delete([m.row.id])
         raise

@@ -168,6 +168,23 @@ class CampaignPoseIn(RequestBody):
         1, ge=1, le=10000, description="Captures at this pose (<= max_repeats).")
 
 
+class ObjectFitIn(RequestBody):
+    """Fit the object twin first, then explain every pose's difference.
+
+    Before its poses the campaign captures averaged frames at its first ``poses`` distinct
+    turntable angles and fits what stands on the turntable: its pose offset and each object's
+    reflectance (``toftwin fit-object``). Every pose is then compared with the nominal twin
+    (the campaign's calibration), with the fitted twin (calibration and fitted object), and with
+    a second capture of the same state (the noise ceiling).
+    """
+
+    poses: Annotated[int, Strict()] = Field(
+        3, ge=1, le=20, description="Distinct turntable angles of the campaign's first poses "
+        "the fit captures (fewer if the campaign has fewer).")
+    frames: Annotated[int, Strict()] = Field(
+        16, ge=1, le=256, description="Frames averaged per fit angle.")
+
+
 class CampaignCreate(RequestBody):
     """A campaign: a scene and the poses to measure and simulate."""
 
@@ -177,6 +194,26 @@ class CampaignCreate(RequestBody):
     mask: MaskSpec = MaskSpec()
     seed: Seed = 0
     spp: Spp | None = None
+    object_fit: ObjectFitIn | None = Field(
+        None, description="true (the defaults) or the fit's settings: fit the object twin "
+        "from the first poses, then compare every pose with the nominal twin, the fitted twin "
+        "and the noise ceiling (docs/calibration.md, the object twin); false or absent: no fit.")
+
+    @field_validator("object_fit", mode="before")
+    @classmethod
+    def _object_fit_switch(cls, v: Any) -> Any:
+        if v is True:
+            return {}
+        if v is False:
+            return None
+        if v is not None and not isinstance(v, dict):
+            raise ValueError(f"got {v!r}; allowed: true, false, or an object with 'poses' "
+                             "and 'frames'")
+        return v
+
+    def object_fit_settings(self) -> ObjectFitIn | None:
+        """The fit's settings, or None without a fit."""
+        return self.object_fit
 
 
 # -- calibration jobs ----------------------------------------------------------------------------

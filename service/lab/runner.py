@@ -38,14 +38,17 @@ from drivers.errors import DeviceError
 from service.compute.executors import Executor
 from service.errors import ConflictError
 from service.lab.calibration import Twin, calibration_from_json
+from service.lab.object_fit import FitPose, capture_for_fit, fit_poses, fitted_twin, run_fit
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
-from service.lab.requests import MaskSpec
+from service.lab.requests import MaskSpec, ObjectFitIn
 from service.lab.rig_lease import RigLease
 from service.lab.scenes import SceneSource
 from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
+from sim_core.errors import InvalidInputError
+from sim_core.twin_file import twin_hash
 
 _log = logging.getLogger(__name__)
 
@@ -228,6 +231,14 @@ class CampaignRunner:
         scene = SceneSource.from_json(camp.scene_json, camp.scene_base_dir, camp.scene_name)
         mask = MaskSpec.model_validate_json(camp.mask_json)
         twin = Twin.of(calibration_from_json(camp.calibration_json))  # pinned at creation
+        fitted = None
+        if camp.object_fit_json is not None:
+            object_twin_json = camp.object_twin_json
+            if object_twin_json is None:  # not fitted yet (or the last try did not finish)
+                object_twin_json, stopped = self._object_fit(run, camp, scene, twin, poses)
+                if object_twin_json is None:
+                    return stopped
+            fitted = fitted_twin(twin, object_twin_json)
         todo = [(p, r) for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done]
         in_flight: collections.deque[tuple[PosePlan, Measurement, Any]] = collections.deque()
         to, error = "completed", None
@@ -243,7 +254,8 @@ class CampaignRunner:
                     _log.warning("campaign %s paused: %s", run.campaign_id, error)
                     break
                 plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,
-                                camp.spp, run.campaign_id, pose.pose_index, repeat, twin)
+                                camp.spp, run.campaign_id, pose.pose_index, repeat, twin,
+                                fitted)
                 run.current = {"pose_index": pose.pose_index, "repeat": repeat,
                                "turntable_deg": pose.turntable_deg,
                                "solar_suns": pose.solar_suns}
@@ -268,6 +280,41 @@ class CampaignRunner:
                 self.store.delete([m.row.id])
             raise
         return to, error
+
+    def _object_fit(self, run: _Run, camp: Any, scene: SceneSource, twin: Twin,
+                    poses: list[Any]) -> tuple[str | None, tuple[str, str | None]]:
+        """The campaign's object fit stage (:mod:`service.lab.object_fit`).
+
+        Returns the fitted object twin as JSON (stored with the campaign), or None and the
+        state to stop in: stopped by the operator, a device fault (paused, resumable), or a fit
+        the frames cannot determine (failed, with the estimator's message).
+        """
+        fit = ObjectFitIn.model_validate_json(camp.object_fit_json)
+        targets = fit_poses(poses, fit.poses)
+
+        def current(pose: FitPose, i: int) -> None:
+            run.current = {"stage": "object_fit", "pose_index": i, "repeat": 0,
+                           "turntable_deg": pose.turntable_deg, "solar_suns": pose.solar_suns}
+
+        rig = self.lease.require()
+        try:
+            captures = capture_for_fit(rig, targets, fit.frames, run.stop, current)
+        except DeviceError as exc:
+            _log.warning("campaign %s paused: device fault: %s", run.campaign_id, exc)
+            if run.stop.is_set():
+                return None, (run.stop_to, run.stop_error)
+            return None, ("paused", f"device fault ({type(exc).__name__}): {exc}")
+        if captures is None:
+            return None, (run.stop_to, run.stop_error)
+        try:
+            object_twin, report = run_fit(scene, twin, captures, rig.camera.use_case)
+        except InvalidInputError as exc:
+            _log.warning("campaign %s: object fit failed: %s", run.campaign_id, exc)
+            return None, ("failed", f"object fit: {exc}")
+        data = object_twin.model_dump(mode="json")
+        with self.sessions() as s:
+            queries.set_object_twin(s, run.campaign_id, data, twin_hash(object_twin), report)
+        return queries.dumps(data), ("completed", None)
 
     def _finish(self, run: _Run, plan: PosePlan, m: Measurement, job: Any) -> None:
         outcome = finish(self.sessions, self.store, plan, m, job, self.settings.job_timeout_s)

@@ -97,8 +97,12 @@ def create_campaign(
     poses: Iterable[tuple[float, float, int]],
     calibration_json: str | None = None,
     calibration_hash: str | None = None,
+    object_fit: dict | None = None,
 ) -> CampaignRow:
-    """Store a new campaign (state ``created``) with its poses; one transaction."""
+    """Store a new campaign (state ``created``) with its poses; one transaction.
+
+    ``object_fit``: the object fit's settings (None: the campaign fits no object twin).
+    """
     poses = list(poses)
     t = now()
     row = CampaignRow(
@@ -107,6 +111,7 @@ def create_campaign(
         state="created", error=None, poses_total=sum(p[2] for p in poses), runs=0,
         created_at=t, started_at=None, updated_at=t, finished_at=None,
         calibration_json=calibration_json, calibration_hash=calibration_hash,
+        object_fit_json=None if object_fit is None else dumps(object_fit),
     )
     session.add(row)
     session.flush()
@@ -140,6 +145,15 @@ def require_campaign(session: Session, campaign_id: str) -> CampaignRow:
 def list_campaigns(session: Session, limit: int, offset: int) -> list[CampaignRow]:
     q = select(CampaignRow).order_by(CampaignRow.created_at.desc()).limit(limit).offset(offset)
     return list(session.scalars(q))
+
+
+def set_object_twin(session: Session, campaign_id: str, object_twin: dict, twin_hash: str,
+                    report: dict) -> None:
+    """Store a campaign's fitted object twin, its hash and the fit's report; commit."""
+    session.execute(update(CampaignRow).where(CampaignRow.id == campaign_id).values(
+        object_twin_json=dumps(object_twin), object_twin_hash=twin_hash,
+        object_fit_report_json=dumps(report), updated_at=now()))
+    session.commit()
 
 
 def planned_poses(session: Session, campaign_id: str) -> list[PlannedPoseRow]:
@@ -262,16 +276,19 @@ def add_result(
     rig: dict,
     timings_s: dict,
     calibration_hash: str | None = None,
+    fitted: FrameRow | None = None,
 ) -> PoseResultRow:
-    """Commit a result and its two frame rows in one transaction."""
+    """Commit a result and its frame rows (two, or three with ``fitted``, the simulation with
+    the fitted object twin) in one transaction."""
     row = PoseResultRow(
         campaign_id=campaign_id, pose_index=pose_index, repeat=repeat,
         turntable_deg=turntable_deg, solar_suns=solar_suns,
         measured_frame_id=measured.id, simulated_frame_id=simulated.id,
         metrics_json=dumps(metrics), rig_json=dumps(rig), timings_json=dumps(timings_s),
         created_at=now(), calibration_hash=calibration_hash,
+        fitted_frame_id=None if fitted is None else fitted.id,
     )
-    session.add_all([measured, simulated])
+    session.add_all([measured, simulated] + ([] if fitted is None else [fitted]))
     session.flush()
     session.add(row)
     if campaign_id is not None:
@@ -296,9 +313,10 @@ def delete_campaign(session: Session, campaign_id: str) -> list[str]:
 
 
 def results_naming_frame(session: Session, frame_id: str) -> list[int]:
-    """Ids of the results that compare ``frame_id`` (as measured or as simulated frame)."""
+    """Ids of the results that compare ``frame_id`` (as measured, simulated or fitted frame)."""
     q = select(PoseResultRow.id).where((PoseResultRow.measured_frame_id == frame_id)
-                                       | (PoseResultRow.simulated_frame_id == frame_id))
+                                       | (PoseResultRow.simulated_frame_id == frame_id)
+                                       | (PoseResultRow.fitted_frame_id == frame_id))
     return [int(i) for i in session.scalars(q)]
 
 

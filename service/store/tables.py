@@ -13,6 +13,10 @@ calibration (the newest row is the active one; a row without content means "nomi
 ``calibration_jobs`` are the calibration sequences run on the rig. Frames, results and campaigns
 record the calibration hash (:func:`sim_core.twin_file.twin_hash`) they used; a campaign keeps
 the calibration it pinned when it was created, so a resume applies the same one.
+
+Object twin (revision 0003): a campaign with an object fit stores the fit's settings, the fitted
+object twin and its report; each of its results names a third frame, the simulation with the
+fitted twin.
 Times are seconds since the epoch (floats), as in Bluesky documents. Every change to these
 classes comes with a migration (:mod:`service.store.migrations`).
 """
@@ -51,6 +55,13 @@ class CampaignRow(Base):
     #: the calibration pinned at creation (its JSON and hash; None: nominal)
     calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
     calibration_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    #: the object fit's settings (:class:`~service.lab.requests.ObjectFitIn`; None: no fit)
+    object_fit_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    #: the fitted object twin (``ObjectTwinFile`` as JSON) and its hash, once fitted
+    object_twin_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    object_twin_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    #: the fit's report (residuals, uncertainties, what was not determined)
+    object_fit_report_json: Mapped[str | None] = mapped_column(Text, nullable=True)
 
 
 class PlannedPoseRow(Base):
@@ -107,6 +118,10 @@ class PoseResultRow(Base):
     created_at: Mapped[float] = mapped_column(Float)
     #: the calibration the simulation applied; None: nominal
     calibration_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    #: the simulation with the fitted object twin (campaigns with an object fit; else None).
+    #: No foreign key: SQLite cannot add or drop one on an existing table without copying it
+    #: (see revision 0003); the frame row is committed in the same transaction as the result.
+    fitted_frame_id: Mapped[str | None] = mapped_column(String(32), nullable=True)
 
 
 class CalibrationActivationRow(Base):

@@ -15,6 +15,8 @@ Models
   relay-wall paper eqs. (8)-(12).
 - :class:`Lambertian` (``"lambertian"``).
 - :class:`Hapke` (``"hapke"``): regolith reflectance, SLIM paper eq. (11).
+- :class:`Tabulated` (``"tabulated"``): a measured goniometer table, interpolated by the AMCW
+  ToF multipath paper's inverse distance weighting, eqs. (16)-(17).
 
 Build them directly, with ``make_material(kind, **params)``, or by preset name with
 ``material_preset(name)``; ``PRESETS`` lists the presets as ``name -> (kind, params)``.
@@ -32,6 +34,7 @@ from sim_core.materials.hapke import Hapke
 from sim_core.materials.lambertian import Lambertian
 from sim_core.materials.presets import MATERIAL_KINDS, PRESETS, make_material, material_preset
 from sim_core.materials.seed_microfacet import SeedMicrofacet
+from sim_core.materials.tabulated import Tabulated
 
 __all__ = [
     "MATERIAL_KINDS",
@@ -42,6 +45,7 @@ __all__ = [
     "Lambertian",
     "Material",
     "SeedMicrofacet",
+    "Tabulated",
     "frame_from_normal",
     "make_material",
     "material_preset",

@@ -38,8 +38,10 @@ Compiled kernels
 The formulas exist once, as scalar numba kernels in :mod:`sim_core.materials.kernels`, which
 the renderer calls per ray. A model states which kernel it is (``kernel_kind``, one of
 ``kernels.KIND_*``) and its parameters (``kernel_params()``, a float64 vector of length
-``kernels.N_PARAMS``); ``eval_local``, ``pdf_local`` and ``sample_local`` are implemented here,
-once, by the kernels' batch wrappers, so the numpy API and the renderer cannot disagree.
+``kernels.N_PARAMS``, or longer for a model with data, e.g. a measured table: the first
+``N_PARAMS`` entries are then its header); ``eval_local``, ``pdf_local`` and
+``sample_local`` are implemented here, once, by the kernels' batch wrappers, so the numpy API
+and the renderer cannot disagree.
 """
 
 from __future__ import annotations
@@ -132,7 +134,8 @@ class Material(ABC):
     @abstractmethod
     def kernel_params(self) -> np.ndarray:
         """The model's parameters as the kernels read them: shape ``(kernels.N_PARAMS,)``,
-        float64, unused entries 0.
+        float64, unused entries 0; or longer, a header of ``N_PARAMS`` entries followed by the
+        model's data (the tabulated material).
 
         Built by the ``kernels.*_params`` function of the model, which also folds in derived
         constants (Beckmann width, lobe probabilities, normalisations) so that the kernels do
@@ -146,9 +149,10 @@ class Material(ABC):
 
     def _kernel(self) -> tuple[int, np.ndarray]:
         p = np.ascontiguousarray(self.kernel_params(), dtype=np.float64)
-        if p.shape != (kernels.N_PARAMS,):  # the kernels index p without bounds checks
-            raise ValueError(
-                f"kernel_params() must have shape ({kernels.N_PARAMS},), not {p.shape}"
+        if p.ndim != 1 or p.shape[0] < kernels.N_PARAMS:  # the kernels index the header
+            raise ValueError(                              # without bounds checks
+                f"kernel_params() must have shape (L,) with L >= {kernels.N_PARAMS}, "
+                f"not {p.shape}"
             )
         return int(self.kernel_kind), p
 

@@ -34,6 +34,7 @@ from sim_core.materials.cook_torrance import CookTorrance
 from sim_core.materials.hapke import Hapke
 from sim_core.materials.lambertian import Lambertian
 from sim_core.materials.seed_microfacet import SeedMicrofacet
+from sim_core.materials.tabulated import Tabulated
 
 __all__ = ["MATERIAL_KINDS", "PRESETS", "make_material", "material_preset"]
 
@@ -44,6 +45,7 @@ MATERIAL_KINDS: Mapping[str, type[Material]] = MappingProxyType(
         "cook-torrance": CookTorrance,
         "lambertian": Lambertian,
         "hapke": Hapke,
+        "tabulated": Tabulated,
     }
 )
 
@@ -90,9 +92,10 @@ def make_material(kind: str, **params: Any) -> Material:
 
     Parameters
     ----------
-    kind : {"seed-microfacet", "cook-torrance", "lambertian", "hapke"}
+    kind : {"seed-microfacet", "cook-torrance", "lambertian", "hapke", "tabulated"}
     **params
-        The constructor parameters of that model; omitted ones take the model's defaults.
+        The constructor parameters of that model; omitted ones take the model's defaults
+        (``"tabulated"`` needs ``table``, a goniometer CSV path).
 
     Raises
     ------

@@ -359,11 +359,16 @@ def render(
 
 
 def material_tables(materials) -> tuple[np.ndarray, np.ndarray]:
-    """Kernel ids (M,) int64 and parameter vectors (M, N_PARAMS) float64 of the materials."""
+    """Kernel ids (M,) int64 and parameter vectors (M, L) float64 of the materials.
+
+    ``L`` is the longest vector (at least ``N_PARAMS``: a tabulated material carries its whole
+    table); shorter vectors are padded with zeros, which no kernel reads.
+    """
     kinds = np.array([m.kernel_kind for m in materials], dtype=np.int64)
-    params = np.zeros((len(materials), N_PARAMS))
-    for i, m in enumerate(materials):
-        params[i] = m.kernel_params()
+    vectors = [np.asarray(m.kernel_params(), dtype=np.float64).ravel() for m in materials]
+    params = np.zeros((len(materials), max([N_PARAMS, *(v.size for v in vectors)])))
+    for i, v in enumerate(vectors):
+        params[i, : v.size] = v
     return kinds, params
 
 
@@ -390,6 +395,7 @@ class _Context:
             np.ascontiguousarray(scene.material_index, dtype=np.int64),
             mat_kind,
             mat_params,
+            mat_params if mat_params.shape[1] > N_PARAMS else None,
         )
         light = scene.light
         if light.profile_angle_rad is None:

@@ -33,9 +33,9 @@ import sim_core.numba_runtime  # noqa: F401  (camera_rays is a parallel kernel)
 import sim_core.render.rng as _rng
 from sim_core.materials.kernels import (
     duff_frame,
-    eval_brdf,
+    eval_brdf_row,
     param_row,
-    sample_brdf,
+    sample_brdf_row,
     sincos_turns,
 )
 from sim_core.render.rng import path_key, seed_key, uniform_pair
@@ -136,7 +136,11 @@ class SceneTables(NamedTuple):
     normals: np.ndarray  #: (T, 3) float64 unit normals
     tri_mat: np.ndarray  #: (T,) int64 material row of each triangle
     mat_kind: np.ndarray  #: (M,) int64 kernel ids (``sim_core.materials.kernels.KIND_*``)
-    mat_params: np.ndarray  #: (M, N_PARAMS) float64 parameter vectors
+    #: (M, L) float64 parameter vectors, L >= N_PARAMS (shorter ones padded with zeros)
+    mat_params: np.ndarray
+    #: ``mat_params`` again where a material has data beyond its header (a tabulated one), else
+    #: None: ``bounce`` is then compiled without any code for such materials
+    mat_data: np.ndarray | None
 
 
 class CameraLight(NamedTuple):
@@ -345,7 +349,7 @@ def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_inde
         paths.o, paths.d, paths.slot, paths.key, paths.length, paths.throughput
     )
     normals, tri_mat = tables.normals, tables.tri_mat
-    mat_kind, mat_params = tables.mat_kind, tables.mat_params
+    mat_kind, mat_params, mat_data = tables.mat_kind, tables.mat_params, tables.mat_data
     light_pos, light_axis, light_scale = light.position, light.axis, light.scale
     prof_angle, prof_rel = light.profile_angle, light.profile_rel
     min_light_distance_m = light.min_distance_m
@@ -406,8 +410,8 @@ def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_inde
         inv_dist = 1.0 / (dist if dist > min_light_distance_m else min_light_distance_m)
         cos_p = lx * nx + ly * ny + lz * nz
         if cos_p > 0.0:
-            fr = eval_brdf(kind, par, lx * t0 + ly * t1 + lz * t2, lx * b0 + ly * b1 + lz * b2,
-                           cos_p, wol0, wol1, wol2)
+            fr = eval_brdf_row(kind, par, mat_data, mat, lx * t0 + ly * t1 + lz * t2,
+                               lx * b0 + ly * b1 + lz * b2, cos_p, wol0, wol1, wol2)
             inten = _profile_intensity(
                 -(lx * light_axis[0] + ly * light_axis[1] + lz * light_axis[2]),
                 light_scale, prof_angle, prof_rel,
@@ -438,8 +442,8 @@ def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_inde
                 cv = abs(rx * amb_v[a, 0] + ry * amb_v[a, 1] + rz * amb_v[a, 2])
                 if cu > 0.5 * amb_size[a, 0] or cv > 0.5 * amb_size[a, 1]:
                     continue
-            fr = eval_brdf(kind, par, ax * t0 + ay * t1 + az * t2, ax * b0 + ay * b1 + az * b2,
-                           cos_a, wol0, wol1, wol2)
+            fr = eval_brdf_row(kind, par, mat_data, mat, ax * t0 + ay * t1 + az * t2,
+                               ax * b0 + ay * b1 + az * b2, cos_a, wol0, wol1, wol2)
             c = thr * fr * amb_irr[a] * cos_a
             if c > 0.0:
                 sh_o[ns, 0], sh_o[ns, 1], sh_o[ns, 2] = ox, oy, oz
@@ -456,7 +460,8 @@ def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_inde
         key = keys[i]
         u0, u1 = uniform_pair(key, bounce_index, 0)
         u2, u3 = uniform_pair(key, bounce_index, 1)
-        x, y, z, _pdf, w = sample_brdf(kind, par, wol0, wol1, wol2, u0, u1, u2)
+        x, y, z, _pdf, w = sample_brdf_row(kind, par, mat_data, mat, wol0, wol1, wol2, u0,
+                                           u1, u2)
         tn = thr * w
         if not tn > 0.0:
             continue

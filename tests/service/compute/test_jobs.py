@@ -32,3 +32,30 @@ def test_a_job_carries_its_mesh_files_to_the_worker(tmp_path):
     centre = result.image.range_m[6:10, 10:14]
     assert np.nanmedian(centre) == pytest.approx(1.0, abs=0.01)  # the cube's front face
     assert (result.object_id[6:10, 10:14] == 0).all()
+
+
+def test_a_job_carries_its_goniometer_tables_to_the_worker(tmp_path):
+    """A tabulated material reads its table on the worker too (issue 14): the job packs it."""
+    from tests.sim_core.materials.test_tabulated import goniometer_table, write_csv
+
+    scene_dir = tmp_path / "scene"
+    scene_dir.mkdir()
+    write_csv(scene_dir / "gonio.csv", goniometer_table("white-matte-tile", 5.0, retro_gap_deg=0.0))
+    data = {
+        "camera": {"pose": {"position_m": [0, 0, 0], "look_at_m": [0, 0, 1], "up": [0, -1, 0]},
+                   "width_px": 24, "height_px": 16},
+        "objects": [{"name": "wall", "mesh": {"kind": "rectangle", "size_m": [3, 3]},
+                     "material": {"kind": "tabulated", "params": {"table": "gonio.csv"}},
+                     "pose": {"position_m": [0, 0, 1.0], "rotation_deg": [180, 0, 0]}}],
+    }
+    job = make_job(parse_scene_spec(data), scene_dir, turntable_deg=None, solar_suns=None,
+                   spp=4, seed=0, threads=1, ideal=True)
+    analytic = {**data, "objects": [{**data["objects"][0], "material": "white-matte-tile"}]}
+    reference = run_job(make_job(parse_scene_spec(analytic), scene_dir, turntable_deg=None,
+                                 solar_suns=None, spp=4, seed=0, threads=1, ideal=True))
+    shutil.rmtree(scene_dir)  # the worker must not need the service's files
+    result = run_job(job)
+    ratio = np.nanmedian(result.image.amplitude / reference.image.amplitude)
+    # the table is the tile it was sampled from (measured up to retro-reflection, which the
+    # camera looks along here: its light sits at the camera)
+    assert ratio == pytest.approx(1.0, abs=0.1)
