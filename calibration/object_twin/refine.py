@@ -22,13 +22,13 @@ The residual is minimised over the offset (3 translations [mm], 3 extrinsic xyz 
 the reality's convention, but the translation taken at the mounted objects' centroid instead of
 the axis point on the turntable: about the axis point a tilt and a translation move the object
 almost alike, a long valley in which the steps crawl) and the determined objects' scales,
-plain squares (the maximum likelihood for Gaussian noise), by Gauss-Newton with a line search
-along each step (a render per trial point; full steps can fall short on the curved residual, and
-the search stretches them). The Jacobian is by forward differences of renders with a fixed seed
-(common random numbers: the residual is a
-smooth function of the parameters up to the silhouettes' sample coverage, which the stratified
-pixel jitter keeps fine). The weights are fixed during a solve and made again at its result for
-a second, shorter solve.
+plain squares (the maximum likelihood for Gaussian noise), by Levenberg-Marquardt with a
+stretch along each accepted step (a render per trial point). Candidates stay within
+:data:`REACH` of the pose at which the re-rendered regions were made; a solve that reaches that
+edge has its regions made again there and goes on. The Jacobian is by forward differences of
+renders with a fixed seed (common random numbers: the residual is a smooth function of the
+parameters up to the silhouettes' sample coverage, which the stratified pixel jitter keeps
+fine). The weights are fixed during a solve and made again at its result for the next.
 
 Uncertainties: ``(J^T J)^-1`` of the whitened Jacobian times the reduced chi-square. A parameter
 whose standard deviation exceeds its limit (:data:`UNDETERMINED_STD`) is reported as not
@@ -37,6 +37,7 @@ determined.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,21 +56,35 @@ MODEL_SPP = 32
 #: forward-difference steps: translations [mm], rotations [deg], scales [1]
 STEP_MM, STEP_DEG, STEP_SCALE = 0.25, 0.025, 0.02
 #: the solves, each with weights made at its start: (model error relative to the predicted
-#: phasor's magnitude [1], most Gauss-Newton iterations). The first smooths the objective (a
+#: phasor's magnitude [1], most iterations). The first smooths the objective (a
 #: glint's edges and brightness are steep functions of the pose: with their full weight the
 #: steps from a start a few millimetres off are short), the others are the maximum likelihood.
-SOLVES = ((0.05, 6), (0.0, 6), (0.0, 2))
+SOLVES = ((0.05, 12), (0.0, 8), (0.0, 2))
 #: a solve stops when a step moves no parameter by more than this share of its difference step
 CONVERGED = 0.1
 #: the coarse search of the start along the turntable's axis: half-width and step [mm]
 HEIGHT_SEARCH_MM = (8.0, 2.0)
-#: largest step along a Gauss-Newton direction, in multiples of it (the line search)
+#: largest stretch of an accepted step, in multiples of it
 MAX_STRETCH = 8.0
+#: Levenberg-Marquardt's damping: the least, its factor up after a failed trial (down by its
+#: square after a success), and the most before a solve gives up
+DAMPING = (1e-4, 4.0, 1e4)
 #: largest change of a translation [mm], a rotation [deg], a scale [1] in one iteration
-MAX_STEP = (5.0, 1.0, 0.1)
+MAX_STEP = (5.0, 1.0, 0.5)
+#: farthest a candidate's translation [mm] and angles [deg] go, per axis, from the pose at which
+#: the regions were rendered (a silhouette then stays inside its region's margin: ~2 px at the
+#: rig's distance, against :data:`~calibration.object_twin.render_model.MARGIN_PX`); a solve that
+#: reaches that edge stops, the regions are made again where it stopped, and it goes on
+REACH = (8.0, 1.5)
+#: a solve starts with new regions when its start uses more than this share of the reach
+RECENTRE_AT = 0.5
+#: most re-made regions per solve
+MAX_RECENTRES = 4
 #: standard deviations beyond which a parameter counts as not determined
 UNDETERMINED_STD = {"position_mm": 2.0, "rotation_deg": 0.5, "scale": 0.1}
 POSE_NAMES = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -87,6 +102,7 @@ class RefinedFit:
     n_residuals: int
     evaluations: int
     line_steps: tuple[float, ...] = ()
+    recentres: int = 0
     predicted: list[PredictedView] = field(repr=False, default_factory=list)
     correlation: np.ndarray | None = field(repr=False, default=None)
 
@@ -99,7 +115,7 @@ class RefinedFit:
             "determined": dict(self.determined),
             "reduced_chi2_before": self.chi2_before, "reduced_chi2_after": self.chi2_after,
             "residuals": self.n_residuals, "evaluations": self.evaluations,
-            "line_steps": list(self.line_steps),
+            "line_steps": list(self.line_steps), "recentred_regions": self.recentres,
         }
 
 
@@ -197,18 +213,32 @@ class _Problem:
         return jac
 
 
-def _gauss_newton(prob: _Problem, x: np.ndarray, max_iter: int
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
-    """Gauss-Newton with a line search along each step: halved while the cost does not drop,
-    doubled (up to :data:`MAX_STRETCH`) while it keeps dropping; a Jacobian (one render per
-    parameter) per iteration, a render per trial point. Returns the solution, its residual,
-    its Jacobian and the accepted step lengths."""
+def _reach_used(x: np.ndarray, centre: np.ndarray) -> float:
+    """The largest share of :data:`REACH` the pose of ``x`` uses from ``centre``."""
+    reach = np.array([REACH[0]] * 3 + [REACH[1]] * 3)
+    return float(np.max(np.abs(x[:6] - centre[:6]) / reach))
+
+
+def _levenberg_marquardt(prob: _Problem, x: np.ndarray, max_iter: int, centre: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float], bool]:
+    """Levenberg-Marquardt (Marquardt's scaling: the damping times the diagonal of ``J^T J``)
+    with a stretch along each accepted step: doubled (up to :data:`MAX_STRETCH`) while the cost
+    keeps dropping. A Jacobian (one render per parameter) per iteration, a render per trial.
+    The damping bends a step away from the weakly determined directions (a body's tilt against
+    its reflectance, in the smoothed first solve) that an undamped step, cut to a length, would
+    follow into another valley; a step longer than :data:`MAX_STEP` is damped, not cut. No step
+    leaves the :data:`REACH` of ``centre``. Returns the
+    solution, its residual, its Jacobian, the accepted step lengths (in multiples of the damped
+    step) and whether the solve stopped at the reach's edge."""
     steps = _steps(len(x) - 6)
     cap = np.array([MAX_STEP[0]] * 3 + [MAX_STEP[1]] * 3 + [MAX_STEP[2]] * (len(x) - 6))
+    reach = np.array([REACH[0]] * 3 + [REACH[1]] * 3)
     r = prob.residual(x)
     cost = float(r @ r)
     jac = prob.jacobian(x)
     taken = []
+    at_edge = False
+    damping = DAMPING[0]
 
     def trial(xa):
         try:
@@ -218,17 +248,30 @@ def _gauss_newton(prob: _Problem, x: np.ndarray, max_iter: int
         return ra, float(ra @ ra)
 
     for _ in range(max_iter):
-        dx = np.linalg.lstsq(jac, -r, rcond=1e-10)[0]
-        longest = float(np.min(cap / np.maximum(np.abs(dx), 1e-12)))
+        jtj, g = jac.T @ jac, jac.T @ r
+        diag = np.maximum(np.diag(jtj), 1e-12 * max(1.0, float(np.max(np.diag(jtj)))))
         best = None
-        a = min(1.0, longest)
-        while a >= 1.0 / 16.0:
+        while damping <= DAMPING[2]:
+            try:
+                dx = np.linalg.solve(jtj + damping * np.diag(diag), -g)
+            except np.linalg.LinAlgError:
+                damping *= DAMPING[1]
+                continue
+            longest = float(np.min(cap / np.maximum(np.abs(dx), 1e-12)))
+            if longest < 1.0 and damping * DAMPING[1] <= DAMPING[2]:
+                damping *= DAMPING[1]  # longer than an iteration may go: damp (no render)
+                continue
+            # the reach: x + a dx within centre +- reach, per pose parameter
+            room = np.where(dx[:6] > 0, centre[:6] + reach - x[:6], x[:6] - (centre[:6] - reach))
+            edge = float(np.min(np.maximum(room, 0.0) / np.maximum(np.abs(dx[:6]), 1e-12)))
+            longest = min(longest, edge)
+            a = min(1.0, longest)
             xa = x + a * dx
             ra, ca = trial(xa)
             if ca < cost:
                 best = (a, xa, ra, ca)
                 break
-            a /= 2.0
+            damping *= DAMPING[1]
         if best is None:
             break
         while 2.0 * best[0] <= min(MAX_STRETCH, longest):
@@ -237,12 +280,22 @@ def _gauss_newton(prob: _Problem, x: np.ndarray, max_iter: int
             if ca >= best[3]:
                 break
             best = (2.0 * best[0], xa, ra, ca)
+        if edge <= min(MAX_STRETCH, longest) and best[0] >= 0.5 * edge:
+            # the cost kept dropping towards the reach's edge: go there, then new regions
+            xe = x + edge * dx
+            re, ce = trial(xe)
+            if ce < best[3]:
+                best = (edge, xe, re, ce)
+            at_edge = True
         a, x, r, cost = best
         taken.append(a)
+        log.debug("step %.3g (damping %.2g): chi2/n %.4g at %s", a, damping, cost / r.size,
+                  np.array2string(x, precision=4))
+        damping = max(DAMPING[0], damping / DAMPING[1] ** 2)
         jac = prob.jacobian(x)
-        if np.all(np.abs(a * dx) <= CONVERGED * np.abs(steps)):
+        if at_edge or np.all(np.abs(a * dx) <= CONVERGED * np.abs(steps)):
             break
-    return x, r, jac, taken
+    return x, r, jac, taken, at_edge
 
 
 def _height_search(prob: _Problem, x: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -291,25 +344,37 @@ def refine_object_twin(
     measured = [measured_phasor(c) for c in captures]
     spp = renderer.settings.spp
     sensors = [v.sensor for v in renderer.views]
-    prob = None
-    r = jac = None
-    chi2_before = None
-    evaluations = 0
+    prob = r = jac = None
+    evaluations = recentres = 0
     line_steps: list[float] = []
-    for rel, n_iter in solves:
+
+    def problem(x: np.ndarray, rel: float) -> _Problem:
         pred = renderer.predict(object_twin_of(x, fitted, fixed, lever))
         sigma = [phasor_sigma(p, c, s, spp, rel)
                  for p, c, s in zip(pred, captures, sensors, strict=True)]
         masks = residual_masks(captures, pred, renderer.regions)
         prob = _Problem(renderer, measured, masks, sigma, fitted, fixed, lever)
         prob.cache[np.round(x, 9).tobytes()] = pred
-        if chi2_before is None:
-            r0 = prob.residual(x)
-            chi2_before = float(r0 @ r0) / max(1, r0.size - x.size)
-            x = _height_search(prob, x, axis)
-        x, r, jac, taken = _gauss_newton(prob, x, n_iter)
-        line_steps.extend(taken)
-        evaluations += prob.evaluations
+        return prob
+
+    centre = x.copy()
+    first = problem(x, solves[0][0])
+    r0 = first.residual(x)
+    chi2_before = float(r0 @ r0) / max(1, r0.size - x.size)
+    x = _height_search(first, x, axis)
+    evaluations += first.evaluations
+    for rel, n_iter in solves:
+        for _attempt in range(MAX_RECENTRES + 1):
+            if _reach_used(x, centre) > RECENTRE_AT:
+                renderer.recentre(object_twin_of(x, fitted, fixed, lever))
+                centre = x.copy()
+                recentres += 1
+            prob = problem(x, rel)
+            x, r, jac, taken, at_edge = _levenberg_marquardt(prob, x, n_iter, centre)
+            line_steps.extend(taken)
+            evaluations += prob.evaluations
+            if not at_edge:
+                break
     assert prob is not None and r is not None and jac is not None
     dof = max(1, r.size - x.size)
     s2 = float(r @ r) / dof
@@ -340,5 +405,5 @@ def refine_object_twin(
         std_rotation_deg=tuple(float(v) for v in std[3:6]),
         std_scale=std_scale, determined=determined, chi2_before=chi2_before,
         chi2_after=s2, n_residuals=int(r.size), evaluations=evaluations,
-        line_steps=tuple(line_steps),
+        line_steps=tuple(line_steps), recentres=recentres,
         predicted=prob.predict(x), correlation=corr)

@@ -13,8 +13,11 @@ silhouette it mixes the object and the background as the pixel does.
 
 What makes a prediction cheap:
 
-- the effect plan (:func:`sim_core.plan.plan_effects`, a probe render) is made once per view, at
-  the starting pose, and kept: the renders of all candidates take the same effects;
+- every view renders every effect (:func:`sim_core.plan.plan_effects` with ``"all"``: the
+  planner's ``"auto"`` judges an effect against one frame's noise, while the fit compares with
+  averaged frames, and its verdict on a marginal effect, the interreflections between panels and
+  body, flips with the reflectances being fitted; a twin without light the frames have biases a
+  panel's scale by a few per cent); the plan is made once per view and kept;
 - only the *region* is re-rendered: the pixels that see a mounted object at the starting pose,
   grown by :data:`MARGIN_PX` (a mount offset within the fit's reach moves a silhouette by a few
   pixels). The rest of the frame is static (the turntable's surroundings; the camera's own light
@@ -51,8 +54,8 @@ from sim_core.sensor import SensorParams
 from sim_core.tracing import RayTracer
 from sim_core.twin_file import ObjectTwinParameters, TwinParameters, with_object_twin
 
-#: how the fit renders: path tracing with one bounce between surfaces where the effect plan asks
-#: for multipath (it decides per view), 64 samples per pixel, a fixed seed
+#: how the fit renders: path tracing with one bounce between surfaces, 64 samples per pixel, a
+#: fixed seed
 FIT_RENDER = RenderSettings(integrator="path", spp=64, max_bounces=2, seed=14)
 #: pixels around the mounted objects (at the starting pose) that are re-rendered and compared
 #: [px]: ~5 mm of offset per pixel at 1 m, plus the optics' blur
@@ -112,23 +115,6 @@ class _View:
     sensor: SensorParams = field(default_factory=SensorParams)
 
 
-def _with_multipath(plan: EffectPlan) -> EffectPlan:
-    """``plan`` with interreflections on (where the render settings allow bounces).
-
-    The plan's own multipath decision compares the indirect light's range bias with a tolerance
-    from the predicted noise; on this kind of scene it is marginal (panel and body reflect into
-    each other at a few per cent) and flips with the reflectances being fitted. A lab (a real one,
-    or the simulated one whose reality decided otherwise) that has the interreflections while the
-    twin leaves them out biases a panel's scale by ~6 % (measured on a round-trip reality), so
-    the fit always renders them."""
-    effects = tuple(dataclasses.replace(e, enabled=True, reason=e.reason + "; the object fit "
-                                        "always renders interreflections")
-                    if e.name == "multipath" and not e.enabled
-                    and "direct light only" not in e.reason else e
-                    for e in plan.effects)
-    return dataclasses.replace(plan, effects=effects)
-
-
 def _splice(static: LightField, part: LightField, pixels: np.ndarray) -> LightField:
     """``static`` with the ``pixels`` (flat) of ``part``; the ground truth is ``part``'s."""
     def put(a, b):
@@ -175,7 +161,8 @@ class TwinRenderer:
         self.settings = settings
         self.renders = 0
         self.pixels_rendered = 0
-        ids = [i for i, o in enumerate(spec.objects) if o.name in mounted]
+        self.margin_px = margin_px
+        self._ids = [i for i, o in enumerate(spec.objects) if o.name in mounted]
         self.views: list[_View] = []
         for cap in captures:
             cspec = capture_spec(spec, cap).model_copy(
@@ -183,19 +170,36 @@ class TwinRenderer:
             scene = self._scene(cspec, cap, start)
             with RayTracer(scene.triangles_m, scene.camera.position_m,
                            settings.threads) as tracer:
-                plan = _with_multipath(plan_effects(scene, settings, tracer=tracer))
+                # Every effect, as the frames have them; the shutter is closed (no ambient).
+                plan = plan_effects(scene, settings, "all", tracer=tracer)
                 run = dataclasses.replace(
-                    settings,
-                    integrator=settings.integrator if plan.enabled("multipath") else "direct",
-                    ambient=plan.enabled("ambient"),
+                    settings, ambient=False,
                     footprint_px=plan.pixel_footprint_px(scene))
-                r = ProgressiveRenderer(scene, run, tracer)
-                r.add_samples(run.spp)
-                static = r.light_field()
-            region = ndimage.binary_dilation(np.isin(static.object_id, ids),
-                                             iterations=margin_px)
+                static, region = self._static(scene, run, tracer)
             self.views.append(_View(cap, cspec, plan, run, static, np.flatnonzero(region),
                                     region, scene.sensor))
+
+    def _static(self, scene: Scene, run: RenderSettings,
+                tracer: RayTracer | None = None) -> tuple[LightField, np.ndarray]:
+        """A view's full render at one candidate, and its region (the mounted objects' pixels
+        grown by the margin)."""
+        r = ProgressiveRenderer(scene, run, tracer)
+        try:
+            r.add_samples(run.spp)
+            static = r.light_field()
+        finally:
+            r.close()  # closes only a tracer it made
+        region = ndimage.binary_dilation(np.isin(static.object_id, self._ids),
+                                         iterations=self.margin_px)
+        return static, region
+
+    def recentre(self, object_twin: ObjectTwinParameters) -> None:
+        """Make every view's static render and region again at ``object_twin`` (the effect plans
+        stay): a candidate far from where the regions were made would move a silhouette out of
+        its region, where neither the render nor the residual sees it."""
+        for v in self.views:
+            v.static, v.region = self._static(self._scene(v.spec, v.capture, object_twin), v.run)
+            v.pixels = np.flatnonzero(v.region)
 
     @property
     def regions(self) -> list[np.ndarray]:
