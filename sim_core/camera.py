@@ -7,6 +7,7 @@ for a 224 x 171 sensor the image centre is (111.5, 85.0).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -158,9 +159,19 @@ def pixel_centre_grid(intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
 
 def z_over_range(intr: Intrinsics) -> np.ndarray:
     """cos(alpha) of every pixel, (H, W): the z component of its pixel-centre ray's unit
-    direction, i.e. ``depth_z / range`` (alpha: angle between the optical axis and the ray)."""
+    direction, i.e. ``depth_z / range`` (alpha: angle between the optical axis and the ray).
+
+    Read-only and cached per intrinsics: every exposure needs it several times, and undistorting
+    the whole grid costs more than the rest of the optics."""
+    return _z_over_range(intr)
+
+
+@functools.lru_cache(maxsize=16)
+def _z_over_range(intr: Intrinsics) -> np.ndarray:
     u, v = pixel_centre_grid(intr)
-    return pixel_to_camera_direction(intr, u, v)[:, 2].reshape(intr.shape)
+    out = pixel_to_camera_direction(intr, u, v)[:, 2].reshape(intr.shape)
+    out.flags.writeable = False
+    return out
 
 
 def range_to_depth_z(range_m: np.ndarray, z_over_range: np.ndarray) -> np.ndarray:

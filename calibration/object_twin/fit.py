@@ -7,12 +7,17 @@
    intrinsics, depth errors removed, edges dropped) and checks each has enough;
 2. registers the merged points to the mounted objects' meshes by point-to-plane ICP from the
    nominal pose (:mod:`calibration.object_twin.pose`), or refuses when they do not overlap;
-3. fits each visible object's reflectance scale at that pose by linear least squares of
-   rendered against measured phasors (:mod:`calibration.object_twin.reflectance`), objects with
-   too few pixels or too little signal reported as undetermined;
-4. refines pose and scales together against the rendered views
-   (:mod:`calibration.object_twin.refine`): the height along the axis, which ICP cannot see on
-   vertical faces, and the uncertainties.
+3. renders the views at that pose (:mod:`calibration.object_twin.render_model`: the effect plan
+   and the static surroundings once per view, then only the pixels around the mounted objects
+   for every candidate), decides which objects' scales the views determine (objects with too
+   few pixels or too little signal are reported as undetermined) and starts their scales at the
+   linear least-squares ratio of measured to rendered phasors
+   (:mod:`calibration.object_twin.reflectance`);
+4. fits pose and scales together by maximum likelihood on the measured raw phasors
+   (:mod:`calibration.object_twin.refine`: weighted by the sensor's noise and the renders' Monte
+   Carlo variance), with the uncertainties. ICP is the start and the overlap check; the
+   rendered phasors settle what ICP's biased ranges cannot (the height along the axis, which
+   only the silhouette shows, and the range biases of mixed pixels, blur and glints).
 
 The result is the object file (:class:`sim_core.twin_file.ObjectTwinFile`) with the report in
 its provenance. BRDF roughness is not fitted: the glossy films' specular lobes (a degree wide)
@@ -39,14 +44,14 @@ from calibration.object_twin.point_cloud import (
     usable_pixels,
 )
 from calibration.object_twin.pose import mount_model, register_mount
-from calibration.object_twin.refine import fit_regions, refine_object_twin
-from calibration.object_twin.reflectance import ROUNDS, object_pixels, scale_ratio
+from calibration.object_twin.refine import refine_object_twin
+from calibration.object_twin.reflectance import object_pixels, scale_ratio
 from calibration.object_twin.render_model import FIT_RENDER, TwinRenderer, measured_phasor
 from calibration.object_twin.views import calibrated_camera, capture_spec, mount_from_camera
 from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError
+from sim_core.geometry import triangle_areas
 from sim_core.json_safe import json_safe
-from sim_core.raw import ValidityThresholds
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import SceneSpec
 from sim_core.twin_file import (
@@ -61,8 +66,6 @@ from sim_core.twin_file import (
 
 #: least usable pixels (signal, not flagged) a view must have
 MIN_VALID_PIXELS = 300
-#: floor of the averaged phasor's noise estimate [DN]
-NOISE_FLOOR_DN = 0.3
 
 
 @dataclass(frozen=True)
@@ -156,9 +159,8 @@ def fit_object(
     reg = register_mount(np.concatenate(points), model, np.asarray(cams))
     t_icp = time.perf_counter() - t0
 
-    # 3. reflectance at the ICP pose ------------------------------------------------------
-    renderer = TwinRenderer(spec, base, calibration, captures, render_settings)
-    measured = [measured_phasor(c) for c in captures]
+    # 3. the twin's prediction at the ICP pose; which objects it determines; starting scales -
+    t1 = time.perf_counter()
     scales = {n: 1.0 for n in model.names}
 
     def twin_at(pose, s):
@@ -166,31 +168,25 @@ def fit_object(
             mount=MountParameters(pose_offset=pose),
             objects={n: ObjectParameters(reflectance_scale=v) for n, v in s.items()})
 
-    predicted = renderer.predict(twin_at(reg.offset, scales))
+    start = twin_at(reg.offset, scales)
+    renderer = TwinRenderer(spec, base, calibration, captures, render_settings, start,
+                            model.names)
+    predicted = renderer.predict(start)
+    measured = [measured_phasor(c) for c in captures]
     scene_names = tuple(o.name for o in spec.objects)
     pixels = object_pixels(model.names, scene_names, predicted, usable)
     fitted = tuple(n for n in model.names if pixels[n].determined)
-    noise = [max(NOISE_FLOOR_DN, float(np.median(c.intensity_std[u])) / np.sqrt(c.n_frames))
-             for c, u in zip(captures, usable, strict=True)]
     weights = [np.ones(c.shape) for c in captures]
-    linear_rounds = []
-    for _ in range(ROUNDS):
-        for n in fitted:
-            scales[n] *= scale_ratio(measured, predicted, pixels[n].masks, weights)
-        linear_rounds.append(dict(scales))
-        predicted = renderer.predict(twin_at(reg.offset, scales))
+    for n in fitted:
+        scales[n] *= scale_ratio(measured, predicted, pixels[n].masks, weights)
+    linear = dict(scales)
+    t_setup = time.perf_counter() - t1
 
-    # 4. pose and scales together against the renders ---------------------------------------
-    flagged = [~c.valid & (c.amplitude >= ValidityThresholds().min_amplitude_dn)
-               for c in captures]
-    mounted_ids = [scene_names.index(n) for n in model.names]
-    regions = fit_regions(flagged, predicted, mounted_ids)
-    tt = spec.turntable
-    axis = (calibration.turntable.axis_direction if calibration is not None
-            and calibration.turntable.axis_direction is not None else tt.axis_direction)
-    refined = refine_object_twin(renderer, measured, regions, noise, reg.offset, scales,
-                                 fitted, np.asarray(axis))
-    final_pred = renderer.predict(twin_at(refined.offset, refined.scales))
+    # 4. pose and scales together: maximum likelihood on the phasors ------------------------
+    areas = triangle_areas(model.triangles_m)
+    centroid = (model.triangles_m.mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
+    refined = refine_object_twin(renderer, captures, reg.offset, centroid, scales, fitted)
+    final_pred = refined.predicted
     objects_report = {}
     for n in model.names:
         px = pixels[n]
@@ -201,7 +197,7 @@ def fit_object(
             entry.update({
                 "reflectance_scale": refined.scales[n],
                 "std": refined.std_scale[n],
-                "linear_estimate": linear_rounds[-1][n] if linear_rounds else 1.0,
+                "linear_estimate": linear[n],
                 "amplitude_ratio_after": k,
                 "determined": refined.determined.get(n, False),
             })
@@ -222,9 +218,12 @@ def fit_object(
                       "a degree wide: they appear in at most a small patch of one view, which "
                       "does not determine the roughness; the presets' roughness is kept"},
         "render": {"integrator": render_settings.integrator, "spp": render_settings.spp,
-                   "multipath": bool(any(p.multipath for p in final_pred)),
+                   "multipath_views": [bool(p.multipath) for p in final_pred],
+                   "region_pixels": [int(r.sum()) for r in renderer.regions],
                    "renders": renderer.renders},
-        "seconds": {"icp": t_icp, "total": time.perf_counter() - t0},
+        "seconds": {"icp": t_icp, "setup": t_setup,
+                    "refine": time.perf_counter() - t1 - t_setup,
+                    "total": time.perf_counter() - t0},
     }, non_finite=None)
     determined_scales = {n: ObjectParameters(reflectance_scale=refined.scales[n])
                          for n in fitted if objects_report[n]["determined"]}

@@ -73,6 +73,13 @@ class SimulatedWorld:
         Render settings of the simulated camera (few spp keep it fast).
     reality : RealityFile, optional
         How the world differs from ``spec``; :func:`default_reality` if not given.
+    effects : {"all", "auto"}
+        Which physical effects the frames have. A world has every effect (``"all"``, the
+        default): the effect planner's ``"auto"`` leaves out what it judges below a frame's noise,
+        and its judgement on a marginal effect (the satellite's interreflections, a few per cent
+        of a panel's light) flips with the reality's reflectances, so a twin fitted to averaged
+        frames would see a world that lacks light any real one has. ``"auto"`` is for speed
+        where that cannot matter.
     """
 
     def __init__(
@@ -81,7 +88,11 @@ class SimulatedWorld:
         base_dir: str | Path,
         settings: RenderSettings | None = None,
         reality: RealityFile | None = None,
+        effects: str = "all",
     ) -> None:
+        if effects not in ("all", "auto"):
+            raise ValueError(f"effects must be 'all' or 'auto', got {effects!r}")
+        self.effects = effects
         self.spec = spec
         self.base_dir = Path(base_dir)
         self.settings = settings or RenderSettings(integrator="path", spp=8, max_bounces=2)
@@ -156,7 +167,7 @@ class SimulatedWorld:
                             solar_suns=suns, twin=reality)
         settings = dataclasses.replace(self.settings, seed=request.seed * 1_000_003
                                        + self._generation)
-        entry = (scene, render_light(scene, settings))
+        entry = (scene, render_light(scene, settings, effects=self.effects))
         self._cache[key] = entry
         while len(self._cache) > CACHE_STATES:
             self._cache.popitem(last=False)

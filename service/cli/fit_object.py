@@ -28,7 +28,7 @@ from service.cli.common import (
 from sim_core.errors import InvalidInputError
 
 #: default turntable angles [deg]: three views, the faces seen from three sides
-DEFAULT_ANGLES = "0,30,60"
+DEFAULT_ANGLES = "-60,-30,0,30,60"
 
 
 def parse_angles(text: str) -> list[float]:

@@ -75,6 +75,8 @@ class PosePlan:
     #: the fitted twin (calibration and fitted object) of a campaign with an object fit: the
     #: pose is also simulated with it, and captured twice for the noise ceiling
     fitted: Twin | None = None
+    #: the effects the simulations render ("auto": the effect planner's choice, or "all")
+    effects: str = "auto"
 
     @property
     def target(self) -> RigState:
@@ -192,6 +194,7 @@ def _submit_one(
         solar_suns=m.rig.irradiance_suns,
         spp=plan.spp,
         seed=unit_seed(plan.seed, plan.pose_index, plan.repeat),
+        effects=plan.effects,
         threads=threads,
         scene_name=plan.scene.name,
         extra={

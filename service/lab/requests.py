@@ -183,6 +183,11 @@ class ObjectFitIn(RequestBody):
         "the fit captures (fewer if the campaign has fewer).")
     frames: Annotated[int, Strict()] = Field(
         16, ge=1, le=256, description="Frames averaged per fit angle.")
+    effects: Literal["all", "auto"] = Field(
+        "all", description="The effects every pose's simulations (nominal and fitted) render: "
+        "'all' (the default: what is left after the fit is then the model's error, not an "
+        "effect the planner judged below one frame's depth noise, such as the interreflections "
+        "that change the grey image) or 'auto' (the effect planner's choice, faster).")
 
 
 class CampaignCreate(RequestBody):

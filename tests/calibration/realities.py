@@ -11,6 +11,8 @@ import numpy as np
 
 from sim_core.camera import CAMERA_PRESETS
 from sim_core.constants import SPEED_OF_LIGHT_M_S
+from sim_core.geometry import rotation_matrix_xyz_deg
+from sim_core.scene_spec import ObjectPose
 from sim_core.twin_file import CalibrationFile, RealityFile, TwinParameters, parse_reality
 
 PRESET = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
@@ -84,3 +86,12 @@ def perfect_calibration(reality: RealityFile) -> CalibrationFile:
     (camera, illumination, turntable, solar simulator) only, never its object keys (mount pose,
     reflectance), which the object fit must estimate from the frames."""
     return CalibrationFile(**{k: getattr(reality, k) for k in TwinParameters.model_fields})
+
+
+def pose_errors(fitted: ObjectPose, truth: ObjectPose) -> tuple[float, float]:
+    """A fitted mount offset's position error [m] and the angle of its rotation error [deg]."""
+    dp = np.linalg.norm(np.subtract(fitted.position_m, truth.position_m))
+    dr = rotation_matrix_xyz_deg(fitted.rotation_deg) @ rotation_matrix_xyz_deg(
+        truth.rotation_deg).T
+    angle = np.degrees(np.arccos(np.clip((np.trace(dr) - 1.0) / 2.0, -1.0, 1.0)))
+    return float(dp), float(angle)

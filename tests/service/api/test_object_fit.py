@@ -20,6 +20,7 @@ POSES = [{"turntable_deg": a, "solar_suns": 1.0} for a in (-30.0, 0.0, 30.0)]
     ({"poses": 0}, "object_fit.poses"),
     ({"frames": 1000}, "object_fit.frames"),
     ({"poses": 3, "colour": "red"}, "object_fit.colour"),
+    ({"effects": "some"}, "object_fit.effects"),
 ])
 def test_bad_object_fit_settings_are_422_naming_the_field(client, value, field):
     res = client.post("/api/v1/campaigns", headers=AUTH,
