@@ -99,8 +99,9 @@ class Server:
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory) -> Iterator[Server]:
-    """One service for the tests of a module (a fresh data directory)."""
-    with Server(tmp_path_factory.mktemp("web-data")) as srv:
+    """One service for the tests of a module (a fresh data directory); its simulated turntable
+    moves at its real speed (20 deg/s), so a move can be stopped."""
+    with Server(tmp_path_factory.mktemp("web-data"), sim_motion="real") as srv:
         yield srv
 
 
@@ -131,6 +132,8 @@ class Page:
 
     # -- navigation and waiting ------------------------------------------------------------------
     def load(self, screen: str = "rig") -> None:
+        """A fresh load of the page (never a same-document jump to another screen)."""
+        self.driver.get("about:blank")
         self.driver.get(f"{self.server.url}/#{screen}")
         self.wait(lambda: self.js("return document.readyState") == "complete")
         self.wait(lambda: self.find("#devices .device") is not None, "the rig panel")

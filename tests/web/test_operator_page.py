@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from tests.service.api.conftest import AUTH
 from tests.web.conftest import DOC_SIZE, SIZES
 
 pytestmark = pytest.mark.timeout(300)
@@ -99,7 +100,8 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     assert all(not page.find(b).is_enabled() for b in ("#cc-start", "#cc-pause", "#cc-resume",
                                                        "#cc-cancel"))
     # the latest pair, the plots (with the four poses), the list with its links
-    page.wait(lambda: "30 deg" in page.text("#cc-latest .pose-title"), "the last pose's images")
+    page.wait(lambda: page.text("#cc-latest .pose-title") == "Pose 4: 30 deg, 1 sun",
+              "the last pose's images")
     assert_images_keep_their_aspect_ratio(page, "#cc-latest .frame-image", 6)
     assert_images_keep_their_aspect_ratio(page, "#cc-plots img", 4)
     cid = server.api.get("/api/v1/campaigns").json()[0]["id"]
@@ -178,3 +180,41 @@ def test_reading_needs_no_token_and_commands_say_they_need_it(server, page_at):
     page.click("#move-btn")
     page.wait(lambda: "needs the token" in page.text("#message"), "the token message")
     page.assert_no_console_errors(allowed=("401",))
+
+
+def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, page):
+    page.load("campaigns")
+    page.enter_token()
+    page.fill("#cf-name", "stopped on the way")
+    page.fill("#cf-angles", "-40:20:20")  # a range: -40, -20, 0, 20
+    page.fill("#cf-suns", "1.0")
+    page.click("#campaign-create")
+    page.wait(lambda: page.text("#cc-progress") == "0 / 4 poses", "the 4-pose campaign")
+    page.click("#cc-start")
+    page.wait(lambda: page.text("#cc-state") == "running", "the campaign to run")
+    page.click("#estop")
+    page.wait(lambda: page.text("#cc-state") == "paused", "the campaign to pause")
+    why = page.wait(lambda: page.find("#cc-why:not([hidden])"), "the explanation")
+    assert "Paused: emergency stop" in why.text and "resume" in why.text.lower()
+    page.shot("campaign-why", doc=True)
+    page.click("#cc-why .why-resume")
+    page.wait(lambda: page.text("#cc-state") == "completed", "the campaign to complete")
+    assert page.text("#cc-progress") == "4 / 4 poses"
+    assert page.find("#cc-why").is_displayed() is False
+    cid = server.api.get("/api/v1/campaigns").json()[0]["id"]
+    rows = server.api.get(f"/api/v1/campaigns/{cid}/results").json()
+    assert [r["turntable_deg"] for r in rows] == [-40, -20, 0, 20]
+
+
+def test_the_calibration_screen_shows_the_active_calibration_and_its_residuals(server, page):
+    cal = {"provenance": {"created_utc": "2026-11-24T09:30:00Z", "rig": "lab-1",
+                          "procedures": {"intrinsics": {"rms_px": 0.21},
+                                         "depth": {"rms_after_mm": 1.8}}}}
+    assert server.api.put("/api/v1/calibration", headers=AUTH, json=cal).status_code == 200
+    page.load("calibration")
+    page.wait(lambda: page.find("#calibration-active .residuals"), "the residuals")
+    text = page.text("#calibration-active")
+    assert "2026-11-24T09:30:00Z" in text and "rms_px" in text and "0.21" in text
+    assert "rms_after_mm" in text and "1.8" in text
+    assert page.find("#calibration-start").is_displayed()
+    page.shot("calibration", doc=True)

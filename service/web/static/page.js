@@ -52,13 +52,21 @@ function problem(res) {
   return d.message || (typeof d.detail === "string" ? d.detail : JSON.stringify(d.detail));
 }
 
+// The message box keeps the last few messages, newest first (an emergency stop's report and the
+// error of the move it interrupted both stay readable).
+const MESSAGES_KEPT = 4;
+
 function say(text, kind = "info") {
   const box = $("#message");
-  box.textContent = text;
+  const line = document.createElement("div");
+  line.className = `line ${kind}`;
+  line.textContent = `${new Date().toLocaleTimeString()}  ${text}`;
+  box.prepend(line);
+  while (box.childElementCount > MESSAGES_KEPT) box.lastElementChild.remove();
   box.className = `message ${kind}`;
   box.hidden = false;
   clearTimeout(say.timer);
-  if (kind !== "error") say.timer = setTimeout(() => { box.hidden = true; }, 6000);
+  if (kind === "info") say.timer = setTimeout(() => { box.hidden = true; }, 8000);
 }
 
 // What the API said about a form's fields, next to each field (its `field` path, else the
@@ -324,8 +332,9 @@ function renderCampaign(status) {
   bar.value = status.poses_done;
   $("#cc-eta").textContent = status.eta_s != null && status.state === "running"
     ? `about ${Math.ceil(status.eta_s)} s left` : "";
-  $("#cc-pose").textContent = status.state === "running" || status.state === "paused"
-    ? describePose(status.current_pose) : "";
+  const when = {running: "now", paused: "next", interrupted: "next"}[status.state];
+  $("#cc-pose").textContent = when && status.current_pose
+    ? `${when}: ${describePose(status.current_pose)}` : "";
   const s = status.state;
   $("#cc-start").disabled = s !== "created";
   $("#cc-pause").disabled = s !== "running";
@@ -359,10 +368,14 @@ async function refreshLive(status) {
     img.src = `${API}/campaigns/${id}/plots/${name}.svg?n=${done}`;
     return img;
   }));
+  // Statuses arrive faster than a pose's images load: only the newest request may fill in.
+  const seq = (refreshLive.seq = (refreshLive.seq || 0) + 1);
+  const latest = () => seq === refreshLive.seq && followed.id === id;
   if (done > 0) {
     const res = await call("GET", `${API}/campaigns/${id}/results?offset=${done - 1}&limit=1`);
-    if (res.ok && res.data.length && followed.id === id) {
-      await fragment(`/ui/poses/${res.data[0].id}`, $("#cc-latest"));
+    if (res.ok && res.data.length && latest()) {
+      const html = await call("GET", `/ui/poses/${res.data[0].id}`);
+      if (html.ok && latest()) $("#cc-latest").innerHTML = html.data;
     }
   } else {
     $("#cc-latest").innerHTML = '<p class="hint">no pose yet</p>';
