@@ -58,9 +58,8 @@ CAMPAIGN_PLOTS = (
                               ("depth", metric("depth", "ssim")))),
     PlotSpec("psnr", "PSNR [dB]", (("grey", metric("grey", "psnr_db")),
                                    ("depth", metric("depth", "psnr_db")))),
-    PlotSpec("depth-mean", "Mean depth [mm]", (("measured", metric("depth", "mean_measured", 1e3)),
-                                               ("simulated",
-                                                metric("depth", "mean_simulated", 1e3)))),
+    PlotSpec("depth-mean", "Mean depth [mm]", (("measured", metric("depth", "mean_measured")),
+                                               ("simulated", metric("depth", "mean_simulated")))),
     PlotSpec("grey-mean", "Mean grey [level]", (("measured", metric("grey", "mean_measured")),
                                                 ("simulated", metric("grey", "mean_simulated")))),
 )
@@ -89,6 +88,7 @@ def plot_svg(spec: PlotSpec, rows: Sequence[Row], width_in: float = 4.4,
         ax.set_title(spec.title, fontsize=10)
         ax.set_xlabel("turntable angle [deg]", fontsize=9)
         ax.tick_params(labelsize=8)
+        ax.ticklabel_format(axis="y", useOffset=False)  # plain values in the title's unit
         ax.grid(True, alpha=0.3)
         drawn = False
         for label, value in spec.series:

@@ -35,24 +35,18 @@ SIZES = [(1280, 800), (1920, 1080)]
 APT = "apt-get install chromium chromium-driver"
 
 
-def _find(*names: str) -> str | None:
-    for name in names:
-        found = shutil.which(name) or (f"/usr/bin/{name}" if Path(f"/usr/bin/{name}").is_file()
-                                       else None)
-        if found:
-            return found
-    return None
-
-
-def chromium_paths() -> tuple[str, str]:
-    """Chromium and its driver, or the test fails saying what is missing and how to get it."""
-    browser = _find("chromium", "chromium-browser")
-    driver = _find("chromedriver")
+def chromium_paths(path: str | None = None) -> tuple[str, str]:
+    """Chromium and its driver on ``path`` (default: ``PATH`` and ``/usr/bin``), or the test
+    fails saying what is missing and how to install it (never a skip: a machine without the
+    browser must not pass the browser tests silently)."""
+    path = path if path is not None else os.pathsep.join((os.environ.get("PATH", ""), "/usr/bin"))
+    browser = shutil.which("chromium", path=path) or shutil.which("chromium-browser", path=path)
+    driver = shutil.which("chromedriver", path=path)
     missing = [n for n, p in (("chromium", browser), ("chromedriver (chromium-driver)", driver))
                if p is None]
     if missing:
-        pytest.fail(f"the browser tests need a headless Chromium: {', '.join(missing)} not found "
-                    f"on PATH or in /usr/bin; install it with `{APT}` (Debian/Ubuntu)",
+        pytest.fail(f"the browser tests need a headless Chromium: {' and '.join(missing)} not "
+                    f"found on {path!r}; install them with `{APT}` (Debian/Ubuntu)",
                     pytrace=False)
     return browser, driver  # type: ignore[return-value]
 

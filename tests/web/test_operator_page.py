@@ -118,6 +118,15 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     page.js("window.scrollTo(0, 0)")
     page.shot("campaign", doc=True)
 
+    # its report: the same panels with colour bars, the plots (matplotlib SVG), self-contained
+    page.driver.get(links["report"])
+    assert_images_keep_their_aspect_ratio(page, ".frame-image", 4 * 6)
+    assert_images_keep_their_aspect_ratio(page, ".colour-bar", 4 * 6)
+    assert len(page.find_all(".plots svg")) == 4
+    assert all(i.get_attribute("src").startswith("data:image/png;base64,")
+               for i in page.find_all("img"))
+    page.shot("report", doc=True)
+
 
 def test_the_emergency_stop_stops_a_running_move(server, page):
     page.load("rig")
