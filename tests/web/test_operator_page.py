@@ -26,6 +26,13 @@ def assert_images_keep_their_aspect_ratio(page, css: str, count: int) -> None:
         assert shown_h == pytest.approx(shown_w * natural_h / natural_w, abs=1.0), sizes
 
 
+def wait_for_latest_pose(page) -> None:
+    """The latest pose's images are those of the last pose done (they load after the status)."""
+    done = int(page.text("#cc-progress").split(" / ")[0])
+    page.wait(lambda: page.text("#cc-latest .pose-title").startswith(f"Pose {done}:"),
+              f"pose {done}'s images")
+
+
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
 def test_the_page_loads_on_the_simulated_rig_and_runs_a_manual_pose(server, page_at, size):
     page = page_at(server, size)
@@ -89,6 +96,7 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     done = int(page.text("#cc-progress").split(" / ")[0])
     assert 1 <= done < 4
     assert page.find("#cc-resume").is_enabled() and not page.find("#cc-pause").is_enabled()
+    wait_for_latest_pose(page)
     page.shot("campaign-paused", doc=True)
 
     page.click("#cc-resume")
@@ -213,6 +221,35 @@ def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, pag
     cid = server.api.get("/api/v1/campaigns").json()[0]["id"]
     rows = server.api.get(f"/api/v1/campaigns/{cid}/results").json()
     assert [r["turntable_deg"] for r in rows] == [-40, -20, 0, 20]
+
+
+def test_a_campaign_paused_by_a_stalled_turntable_offers_to_enable_it_and_resume(server, page):
+    page.load("campaigns")
+    page.enter_token()
+    page.fill("#cf-name", "stall on the way")
+    page.fill("#cf-angles", "-60, -20, 20, 60")
+    page.fill("#cf-suns", "1.0")
+    page.click("#campaign-create")
+    page.wait(lambda: page.text("#cc-progress") == "0 / 4 poses", "the 4-pose campaign")
+    page.click("#cc-start")
+    page.wait(lambda: page.text("#cc-progress") not in ("0 / 4 poses", ""), "a first pose")
+    # the controller's next move stalls (a following error), which leaves it disabled
+    server.rig.sims["turntable"].servers["turntable"].faults.inject("stall:1")
+    page.wait(lambda: page.text("#cc-state") == "paused", "the campaign to pause")
+    why = page.wait(lambda: page.find("#cc-why:not([hidden])"), "the explanation")
+    assert "Paused:" in why.text and "turntable" in why.text.lower()
+    buttons = {b.text: b for b in why.find_elements("css selector", "button")}
+    assert {"Enable the turntable", "Resume"} <= set(buttons), buttons
+    wait_for_latest_pose(page)
+    page.shot("campaign-fault", doc=True)
+
+    buttons["Enable the turntable"].click()
+    page.wait(lambda: "READY" in {d["name"]: d for d in server.api.get("/api/v1/devices").json()[
+        "devices"]}["turntable"]["details"]["status"], "the turntable to be enabled")
+    page.click("#cc-why .why-resume")
+    page.wait(lambda: page.text("#cc-state") == "completed", "the campaign to complete")
+    assert page.text("#cc-progress") == "4 / 4 poses"
+    page.assert_no_console_errors(allowed=("503",))  # the rig panel may meet the fault too
 
 
 def test_the_calibration_screen_shows_the_active_calibration_and_its_residuals(server, page):
