@@ -93,9 +93,16 @@ class Server:
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory) -> Iterator[Server]:
-    """One service for the tests of a module (a fresh data directory); its simulated turntable
-    moves at its real speed (20 deg/s), so a move can be stopped."""
-    with Server(tmp_path_factory.mktemp("web-data"), sim_motion="real") as srv:
+    """One service for the tests of a module (a fresh data directory), instant motions."""
+    with Server(tmp_path_factory.mktemp("web-data")) as srv:
+        yield srv
+
+
+@pytest.fixture(scope="module")
+def moving_server(tmp_path_factory) -> Iterator[Server]:
+    """A service whose simulated turntable moves at its real speed (20 deg/s), so that a move
+    takes seconds and can be stopped."""
+    with Server(tmp_path_factory.mktemp("web-moving"), sim_motion="real") as srv:
         yield srv
 
 

@@ -136,7 +136,10 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     page.shot("report", doc=True)
 
 
-def test_the_emergency_stop_stops_a_running_move(server, page):
+def test_the_emergency_stop_stops_a_running_move(moving_server, page_at):
+    server = moving_server
+    page = page_at(server, DOC_SIZE)
+    page.take_console()
     page.load("rig")
     page.enter_token()
     start = server.api.get("/api/v1/devices/turntable/position").json()["angle_deg"]
@@ -199,6 +202,7 @@ def test_reading_needs_no_token_and_commands_say_they_need_it(server, page_at):
     page.assert_no_console_errors(allowed=("401",))
 
 
+@pytest.mark.slow
 def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, page):
     page.load("campaigns")
     page.enter_token()
@@ -223,6 +227,7 @@ def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, pag
     assert [r["turntable_deg"] for r in rows] == [-40, -20, 0, 20]
 
 
+@pytest.mark.slow
 def test_a_campaign_paused_by_a_stalled_turntable_offers_to_enable_it_and_resume(server, page):
     page.load("campaigns")
     page.enter_token()
