@@ -269,3 +269,20 @@ def test_the_calibration_screen_shows_the_active_calibration_and_its_residuals(s
     assert "rms_after_mm" in text and "1.8" in text
     assert page.find("#calibration-start").is_displayed()
     page.shot("calibration", doc=True)
+
+
+def test_a_calibration_job_started_from_the_page_is_followed_to_its_end(server, page):
+    # At the test service's 1 sample per pixel the camera's frames are too noisy for the board
+    # detector: the job runs its captures, then fails saying why and what to do.
+    page.load("calibration")
+    page.enter_token()
+    page.click("#calibration-start")
+    page.wait(lambda: page.find("#calibration-job").is_displayed(), "the job's progress")
+    page.wait(lambda: page.text("#cj-state") == "failed", "the job to end")
+    assert "steps)" in page.text("#cj-message")
+    error = page.text("#cj-error")
+    job = server.api.get("/api/v1/calibrations").json()[0]
+    assert job["state"] == "failed" and error == job["error"]
+    assert "board was detected" in error and "start a new job" in error
+    assert not page.find("#cj-cancel").is_enabled()
+    page.shot("calibration-job", doc=True)

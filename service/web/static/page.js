@@ -440,7 +440,8 @@ async function refreshCalibration() {
 function renderJob(job) {
   $("#calibration-job").hidden = false;
   $("#cj-state").textContent = job.state;
-  $("#cj-message").textContent = `${job.message} (${job.steps_done} / ${job.steps_total} steps)`;
+  const what = job.message && job.message !== job.state ? `${job.message} ` : "";
+  $("#cj-message").textContent = `${what}(${job.steps_done} / ${job.steps_total} steps)`;
   $("#cj-bar").value = job.progress;
   const err = $("#cj-error");
   err.hidden = !job.error && !job.operator_instruction;
