@@ -27,9 +27,9 @@ DIFFERENCE_CMAP = "RdBu_r"
 #: colour map of grey images (grey levels shown as they are)
 GREY_CMAP = "gray"
 
-# matplotlib's text and font caches are not thread-safe; the service draws colour bars from
-# several request threads.
-_MPL_LOCK = threading.Lock()
+#: held around every matplotlib drawing: its text and font caches are not thread-safe, and the
+#: service draws colour bars and plots from several request threads
+MATPLOTLIB_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ def _colour_bar_png(scale: ColourScale, label: str, width_px: int, height_px: in
     from matplotlib.figure import Figure
 
     dpi = 100
-    with _MPL_LOCK:
+    with MATPLOTLIB_LOCK:
         fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
         FigureCanvasAgg(fig)
         ax = fig.add_axes((0.04, 0.52, 0.92, 0.26))

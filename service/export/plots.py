@@ -10,18 +10,15 @@ from __future__ import annotations
 
 import io
 import math
-import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from service.export.results_table import EXPLAINED_TWINS
+from sim_core.preview import MATPLOTLIB_LOCK
 
 Row = dict[str, Any]
 Value = Callable[[Row], float | None]
-
-# matplotlib's text and font caches are not thread-safe; plots are drawn in request threads.
-_MPL_LOCK = threading.Lock()
 
 
 def _finite(v: Any) -> float | None:
@@ -81,7 +78,8 @@ def plot_svg(spec: PlotSpec, rows: Sequence[Row], width_in: float = 4.4,
     from matplotlib.figure import Figure
 
     x = [float(r["turntable_deg"]) for r in rows]
-    with _MPL_LOCK, matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": spec.name}):
+    svg_text = {"svg.fonttype": "none", "svg.hashsalt": spec.name}  # text as text, stable ids
+    with MATPLOTLIB_LOCK, matplotlib.rc_context(svg_text):
         fig = Figure(figsize=(width_in, height_in), dpi=100, layout="constrained")
         FigureCanvasSVG(fig)
         ax = fig.add_subplot()

@@ -9,20 +9,21 @@ so that each is made in one place. Everything here is read-only and needs no tok
 from __future__ import annotations
 
 import json
-from typing import Annotated, Any
+from typing import Any
 
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
 from service.api.deps import RunnerDep, SessionDep, SessionsDep, SettingsDep, StoreDep
+from service.api.routes.campaigns import CampaignId
 from service.api.routes.poses import PoseId, require_pose
 from service.errors import GoneError, NotFoundError
 from service.export.panels import pose_panels
 from service.export.plots import CAMPAIGN_PLOTS, EXPLAINED_PLOTS
 from service.export.report import verdict_rows
 from service.export.results_table import result_rows
-from service.lab.calibration import active_public
+from service.lab.calibration import active_public, calibration_residuals
 from service.lab.campaigns import campaign_status
 from service.lab.scenes import bundled_scenes
 from service.store import queries
@@ -32,7 +33,6 @@ from sim_core.metrics import TABLE_HEADER
 
 router = APIRouter(include_in_schema=False)
 templates = Jinja2Templates(env=environment())
-CampaignId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$")]
 
 
 @router.get("/", response_class=HTMLResponse)
@@ -99,20 +99,6 @@ def verdict_fragment(request: Request, campaign_id: CampaignId,
                                       {"rows": rows, "medians": medians if rows else None})
 
 
-def residuals(provenance: dict[str, Any]) -> list[tuple[str, str, float]]:
-    """(procedure, name, value) of every residual the calibration's provenance records.
-
-    >>> residuals({"procedures": {"depth": {"rms_after_mm": 1.5, "n": 3}}})
-    [('depth', 'rms_after_mm', 1.5)]
-    """
-    out = []
-    for proc, values in (provenance.get("procedures") or {}).items():
-        for key, v in (values or {}).items() if isinstance(values, dict) else ():
-            if ("rms" in key or "residual" in key) and isinstance(v, int | float):
-                out.append((proc, key, float(v)))
-    return out
-
-
 @router.get("/ui/calibration", response_class=HTMLResponse)
 def calibration_fragment(request: Request, sessions: SessionsDep) -> HTMLResponse:
     """The active calibration: its hash, date, where it came from and its residuals."""
@@ -124,4 +110,4 @@ def calibration_fragment(request: Request, sessions: SessionsDep) -> HTMLRespons
         message = None
     return templates.TemplateResponse(request, "_calibration.html", {
         "active": active, "message": message,
-        "residuals": residuals(active["provenance"]) if active else []})
+        "residuals": calibration_residuals(active["provenance"]) if active else []})
