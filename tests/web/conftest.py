@@ -4,7 +4,7 @@ and ``chromium-driver``, through Selenium; nothing is downloaded).
 
 Every test collects the browser's console and fails on an error it did not expect; screenshots
 go to ``test-artifacts/web/<width>x<height>/`` (git-ignored), and the ones the documentation
-shows to ``docs/images/operator-*.png``.
+shows to ``docs/images/operator-*.png`` when missing or with ``TOFTWIN_DOC_SCREENSHOTS=1``.
 """
 
 from __future__ import annotations
@@ -190,13 +190,17 @@ class Page:
     # -- evidence ------------------------------------------------------------------------------
     def shot(self, name: str, doc: bool = False) -> Path:
         """A screenshot of the window: a test artefact, and (``doc``, at the documentation's
-        size) the documentation's ``docs/images/operator-<name>.png``."""
+        size) the documentation's ``docs/images/operator-<name>.png`` - written when it is
+        missing or when ``TOFTWIN_DOC_SCREENSHOTS=1`` asks for fresh ones, so that an ordinary
+        test run leaves the committed images alone (every run differs in times and ids)."""
         folder = ARTIFACTS / f"{self.size[0]}x{self.size[1]}"
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{name}.png"
         self.driver.save_screenshot(str(path))
-        if doc and self.size == DOC_SIZE:
-            shutil.copyfile(path, DOC_IMAGES / f"operator-{name}.png")
+        doc_path = DOC_IMAGES / f"operator-{name}.png"
+        if doc and self.size == DOC_SIZE and (
+                not doc_path.exists() or os.environ.get("TOFTWIN_DOC_SCREENSHOTS") == "1"):
+            shutil.copyfile(path, doc_path)
         return path
 
     def take_console(self) -> list[dict]:

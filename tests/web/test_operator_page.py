@@ -16,8 +16,8 @@ pytestmark = pytest.mark.timeout(300)
 
 def assert_images_keep_their_aspect_ratio(page, css: str, count: int) -> None:
     """Each image is loaded and shown at its own aspect ratio (within a pixel of rounding)."""
-    sizes = page.wait(lambda: (lambda s: s if len(s) == count and all(x[0] > 0 for x in s)
-                               else None)(page.js(
+    sizes = page.wait(lambda: (lambda s: s if len(s) == count and all(
+        x[0] > 0 and x[4] for x in s) else None)(page.js(
         "return Array.from(document.querySelectorAll(arguments[0])).map(i => [i.naturalWidth,"
         " i.naturalHeight, i.getBoundingClientRect().width, i.getBoundingClientRect().height,"
         " i.complete])", css)), f"{count} images {css} to load")
@@ -31,6 +31,8 @@ def wait_for_latest_pose(page) -> None:
     done = int(page.text("#cc-progress").split(" / ")[0])
     page.wait(lambda: page.text("#cc-latest .pose-title").startswith(f"Pose {done}:"),
               f"pose {done}'s images")
+    assert_images_keep_their_aspect_ratio(page, "#cc-latest .frame-image", 6)
+    assert_images_keep_their_aspect_ratio(page, "#cc-latest .colour-bar", 6)
 
 
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
