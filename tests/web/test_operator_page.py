@@ -26,6 +26,18 @@ def assert_images_keep_their_aspect_ratio(page, css: str, count: int) -> None:
         assert shown_h == pytest.approx(shown_w * natural_h / natural_w, abs=1.0), sizes
 
 
+def fill_campaign_form(page, name: str, angles: str, suns: str = "1.0",
+                       repeats: str = "1") -> None:
+    """A fresh page's campaign screen, the token entered, the form filled and submitted."""
+    page.load("campaigns")
+    page.enter_token()
+    page.fill("#cf-name", name)
+    page.fill("#cf-angles", angles)
+    page.fill("#cf-suns", suns)
+    page.fill("#cf-repeats", repeats)
+    page.click("#campaign-create")
+
+
 def wait_for_latest_pose(page) -> None:
     """The latest pose's images are those of the last pose done (they load after the status)."""
     done = int(page.text("#cc-progress").split(" / ")[0])
@@ -75,14 +87,8 @@ def test_the_page_loads_on_the_simulated_rig_and_runs_a_manual_pose(server, page
 
 
 def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page):
-    page.load("campaigns")
-    page.enter_token()
+    fill_campaign_form(page, "four poses", "-30, -10, 10, 30")
     page.js("window.notReloaded = true")
-    page.fill("#cf-name", "four poses")
-    page.fill("#cf-angles", "-30, -10, 10, 30")
-    page.fill("#cf-suns", "1.0")
-    page.fill("#cf-repeats", "1")
-    page.click("#campaign-create")
     page.wait(lambda: page.text("#cc-state") == "created", "the campaign to be created")
     assert page.text("#cc-progress") == "0 / 4 poses"
     assert not page.find("#cc-pause").is_enabled() and page.find("#cc-start").is_enabled()
@@ -166,12 +172,7 @@ def test_the_emergency_stop_stops_a_running_move(moving_server, page_at):
 
 
 def test_a_bad_form_value_shows_the_apis_message_next_to_the_field(server, page):
-    page.load("campaigns")
-    page.enter_token()
-    page.fill("#cf-name", "bad angle")
-    page.fill("#cf-angles", "0, 400")
-    page.fill("#cf-repeats", "0")
-    page.click("#campaign-create")
+    fill_campaign_form(page, "bad angle", "0, 400", repeats="0")
     angle = page.wait(lambda: page.text('#campaign-form .field-error[data-field="turntable_deg"]'),
                       "the angle's message")
     repeats = page.text('#campaign-form .field-error[data-field="repeats"]')
@@ -206,12 +207,7 @@ def test_reading_needs_no_token_and_commands_say_they_need_it(server, page_at):
 
 @pytest.mark.slow
 def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, page):
-    page.load("campaigns")
-    page.enter_token()
-    page.fill("#cf-name", "stopped on the way")
-    page.fill("#cf-angles", "-40:20:20")  # a range: -40, -20, 0, 20
-    page.fill("#cf-suns", "1.0")
-    page.click("#campaign-create")
+    fill_campaign_form(page, "stopped on the way", "-40:20:20")  # a range: -40, -20, 0, 20
     page.wait(lambda: page.text("#cc-progress") == "0 / 4 poses", "the 4-pose campaign")
     page.click("#cc-start")
     page.wait(lambda: page.text("#cc-state") == "running", "the campaign to run")
@@ -231,12 +227,7 @@ def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, pag
 
 @pytest.mark.slow
 def test_a_campaign_paused_by_a_stalled_turntable_offers_to_enable_it_and_resume(server, page):
-    page.load("campaigns")
-    page.enter_token()
-    page.fill("#cf-name", "stall on the way")
-    page.fill("#cf-angles", "-60, -20, 20, 60")
-    page.fill("#cf-suns", "1.0")
-    page.click("#campaign-create")
+    fill_campaign_form(page, "stall on the way", "-60, -20, 20, 60")
     page.wait(lambda: page.text("#cc-progress") == "0 / 4 poses", "the 4-pose campaign")
     page.click("#cc-start")
     page.wait(lambda: page.text("#cc-progress") not in ("0 / 4 poses", ""), "a first pose")
