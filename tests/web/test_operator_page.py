@@ -171,6 +171,21 @@ def test_the_emergency_stop_stops_a_running_move(moving_server, page_at):
     page.assert_no_console_errors(allowed=("503",))
 
 
+def test_a_device_that_does_not_answer_is_shown_with_its_error_and_the_fix(server, page):
+    faults = server.rig.sims["turntable"].servers["turntable"].faults
+    page.load("rig")
+    faults.inject("no-reply")  # the controller goes deaf
+    try:
+        card = page.wait(lambda: page.find('#devices .device.bad[data-device="turntable"]'),
+                         "the turntable's card to turn red")
+        assert "DeviceTimeoutError" in card.text and "check its cable and power" in card.text
+        page.shot("device-error", doc=True)
+    finally:
+        faults.clear()
+    page.wait(lambda: page.find('#devices .device.ok[data-device="turntable"]'),
+              "the turntable back to normal")
+
+
 def test_a_bad_form_value_shows_the_apis_message_next_to_the_field(server, page):
     fill_campaign_form(page, "bad angle", "0, 400", repeats="0")
     angle = page.wait(lambda: page.text('#campaign-form .field-error[data-field="turntable_deg"]'),

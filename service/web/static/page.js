@@ -183,7 +183,13 @@ function deviceCard(d) {
   if (!d.ok) {
     const err = document.createElement("div");
     err.className = "why";
-    err.textContent = `${d.error} ${fixFor(d.error)}`;
+    const fix = document.createElement("b");
+    fix.className = "fix";
+    fix.textContent = fixFor(d.error);
+    const said = document.createElement("div");
+    said.className = "hint";
+    said.textContent = d.error;
+    err.append(fix, said);
     el.appendChild(err);
   }
   return el;
@@ -395,9 +401,21 @@ async function follow(id) {
   listen(id);
 }
 
+// A stream the service refused (too many open, or it restarted) is closed for good by the
+// browser: open a new one a little later while the campaign is still the one followed.
+function reopenOnError(source, reopen, isCurrent) {
+  source.addEventListener("error", () => {
+    if (source.readyState === EventSource.CLOSED && isCurrent()) {
+      say("Live updates were interrupted; reconnecting.", "warn");
+      setTimeout(() => { if (isCurrent()) reopen(); }, 3000);
+    }
+  });
+}
+
 function listen(id) {
   const source = new EventSource(`${API}/campaigns/${id}/events`);
   followed.source = source;
+  reopenOnError(source, () => listen(id), () => followed.id === id && followed.source === source);
   source.addEventListener("status", (event) => {
     if (followed.id !== id) return;
     const status = JSON.parse(event.data);
@@ -459,6 +477,8 @@ function followJob(id) {
   calibration.id = id;
   const source = new EventSource(`${API}/calibrations/${id}/events`);
   calibration.source = source;
+  reopenOnError(source, () => followJob(id),
+                () => calibration.id === id && calibration.source === source);
   source.addEventListener("status", (event) => {
     const job = JSON.parse(event.data);
     renderJob(job);
