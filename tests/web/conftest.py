@@ -93,8 +93,9 @@ class Server:
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory) -> Iterator[Server]:
-    """One service for the tests of a module (a fresh data directory), instant motions."""
-    with Server(tmp_path_factory.mktemp("web-data")) as srv:
+    """One service for the tests of a module (a fresh data directory), instant motions, one
+    pose in flight at a time (a pause lands at most one pose after it was asked for)."""
+    with Server(tmp_path_factory.mktemp("web-data"), pipeline_depth=1) as srv:
         yield srv
 
 
