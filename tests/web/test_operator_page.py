@@ -249,11 +249,12 @@ def test_a_paused_campaign_says_why_and_resumes_from_its_explanation(server, pag
 def test_a_campaign_paused_by_a_stalled_turntable_offers_to_enable_it_and_resume(server, page):
     fill_campaign_form(page, "stall on the way", "-60, -20, 20, 60")
     page.wait(lambda: page.text("#cc-progress") == "0 / 4 poses", "the 4-pose campaign")
+    # the third move of the campaign stalls (a following error) and leaves the controller
+    # disabled: the campaign pauses after two poses
+    server.rig.sims["turntable"].servers["turntable"].faults.inject("stall:1@2")
     page.click("#cc-start")
-    page.wait(lambda: page.text("#cc-progress") not in ("0 / 4 poses", ""), "a first pose")
-    # the controller's next move stalls (a following error), which leaves it disabled
-    server.rig.sims["turntable"].servers["turntable"].faults.inject("stall:1")
     page.wait(lambda: page.text("#cc-state") == "paused", "the campaign to pause")
+    assert page.text("#cc-progress") == "2 / 4 poses"
     why = page.wait(lambda: page.find("#cc-why:not([hidden])"), "the explanation")
     assert "Paused:" in why.text and "turntable" in why.text.lower()
     buttons = {b.text: b for b in why.find_elements("css selector", "button")}
