@@ -136,7 +136,7 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     assert server.api.get(links["CSV"]).text.count("\n") == 5  # header and four rows
     page.js("document.querySelector('#cc-live').scrollIntoView()")
     page.shot("campaign-live", doc=True)
-    page.js("window.scrollTo(0, 0)")
+    page.js("document.querySelector('#campaign-list').scrollIntoView({block: 'end'})")
     page.shot("campaign", doc=True)
 
     # its report: the same panels with colour bars, the plots (matplotlib SVG), self-contained
