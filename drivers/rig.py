@@ -351,6 +351,7 @@ class Rig:
         use_case: str = "MODE_5_45FPS_500",
         instant: bool = True,
         time_scale: float = 1.0,
+        turntable_instant: bool | None = None,
         transport: str = "pty",
         turntable_faults: Iterable[str] = (),
         solar_faults: Iterable[str] = (),
@@ -373,6 +374,10 @@ class Rig:
             simulators run in (scaled) real time.
         time_scale : float
             Simulated seconds per wall-clock second for the serial simulators.
+        turntable_instant : bool or None
+            The turntable's own ``instant`` (None: ``instant``): ``False`` with an instant rig
+            gives a stage that moves at its speed (20 deg/s) while the lamp and camera stay
+            instant, so that a move can be watched and stopped.
         transport : {"pty", "tcp"}
             Where the serial simulators are served.
         turntable_faults, solar_faults, camera_faults : iterable of str
@@ -382,11 +387,12 @@ class Rig:
         """
         started: list[Callable[[], None]] = []
         try:
+            tt_instant = instant if turntable_instant is None else turntable_instant
             tt_sim = start_simulator(
                 "turntable",
                 turntable_faults,
                 transport=transport,
-                instant=instant,
+                instant=tt_instant,
                 time_scale=time_scale,
             )
             started.append(tt_sim.stop)
@@ -406,11 +412,12 @@ class Rig:
                 state_provider=_physical_state(tt_sim, solar_sim),
             )
             fast = instant or time_scale > 1
+            tt_fast = tt_instant or time_scale > 1
             turntable = Turntable(
                 tt_sim.ports[0],
-                settle_s=0.0 if fast else 0.2,
-                poll_interval_s=0.005 if fast else 0.05,
-                stall_timeout_s=0.5 if fast else 2.0,
+                settle_s=0.0 if tt_fast else 0.2,
+                poll_interval_s=0.005 if tt_fast else 0.05,
+                stall_timeout_s=0.5 if tt_fast else 2.0,
                 settings=dataclasses.replace(
                     SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
                 ),

@@ -53,6 +53,10 @@ class Settings(BaseSettings):
         debugging) or ``dask://HOST:PORT`` (an existing Dask scheduler).
     workers : int
         Processes (or threads) of a local executor.
+    sim_motion : {"instant", "real"}
+        The simulated turntable: ``instant`` (moves finish at once, the default) or ``real``
+        (it moves at its speed, 20 deg/s, so a move can be watched and stopped). Only with
+        ``simulated``.
     reality : Path or None
         The simulated lab's reality file (:mod:`sim_core.twin_file`): how its world differs from
         the nominal scene. None: the default reality (:func:`drivers.sim.world.default_reality`).
@@ -105,6 +109,7 @@ class Settings(BaseSettings):
     sse_max_s: float = Field(3600.0, gt=0.0)
     sse_max_streams: int = Field(100, ge=1, le=10000)
     faults: list[str] = Field(default_factory=list)
+    sim_motion: Literal["instant", "real"] = "instant"
     reality: Path | None = None
     min_free_bytes: int = Field(1_000_000_000, ge=0)
 
@@ -113,6 +118,9 @@ class Settings(BaseSettings):
         if self.faults and not self.simulated:
             raise ValueError("faults: arming device faults needs the simulated rig "
                              "(TOFTWIN_SIMULATED=true, serve --simulated)")
+        if self.sim_motion != "instant" and not self.simulated:
+            raise ValueError("sim_motion: the simulated turntable's motion needs the simulated "
+                             "rig (TOFTWIN_SIMULATED=true, serve --simulated)")
         if self.reality is not None and not self.simulated:
             raise ValueError("reality: a reality file describes the simulated lab's world; it "
                              "needs the simulated rig (TOFTWIN_SIMULATED=true, serve --simulated)")

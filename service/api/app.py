@@ -1,5 +1,7 @@
 """The FastAPI application: ``create_app(settings)``.
 
+The operator page is at ``/`` (:mod:`service.api.routes.page`, its assets under ``/static``).
+
 Routes live under ``/api/v1`` (one router per resource in :mod:`service.api.routes`); the OpenAPI
 document is at ``/api/v1/openapi.json`` and the interactive docs at ``/api/v1/docs``.
 Errors map to HTTP as: invalid input (:class:`InvalidInputError`, request validation) 422 with
@@ -18,6 +20,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
 
 from drivers.errors import DeviceError
 from service.api.deps import StreamSlots
@@ -27,6 +30,7 @@ from service.api.routes import (
     campaigns,
     devices,
     frames,
+    page,
     poses,
     simulate,
 )
@@ -35,6 +39,7 @@ from service.errors import ServiceError
 from service.lab.lab import open_lab
 from service.lab.scenes import bundled_scenes
 from service.settings import Settings
+from service.web import STATIC_DIR
 from sim_core.errors import InvalidInputError
 from sim_core.frame_io import package_version
 from sim_core.json_safe import json_safe
@@ -62,13 +67,14 @@ async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResp
         msg = str(e.get("msg", "")).removeprefix("Value error, ")
         e["msg"] = msg
         e.pop("url", None)
-        messages.append(f"{_field(e.get('loc', ()))}: {msg}")
+        e["field"] = _field(e.get("loc", ()))
+        messages.append(f"{e['field']}: {msg}")
     return JSONResponse(status_code=422, content={"detail": errors, "message": "; ".join(messages)})
 
 
 async def _invalid_input(_: Request, exc: InvalidInputError) -> JSONResponse:
     detail = [{"loc": ["body", *exc.field.replace("[", ".").replace("]", "").split(".")],
-               "msg": str(exc), "type": "invalid_input"}]
+               "msg": str(exc), "type": "invalid_input", "field": exc.field}]
     return JSONResponse(status_code=422, content={"detail": detail, "message": str(exc)})
 
 
@@ -122,4 +128,7 @@ def create_app(settings: Settings) -> FastAPI:
     for module in (devices, simulate, poses, frames, campaigns, calibration, calibrations):
         api.include_router(module.router)
     app.include_router(api)
+    # The operator page (``/``, its fragments under ``/ui``) and its assets.
+    app.include_router(page.router)
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     return app

@@ -112,6 +112,7 @@ class CampaignPublic(BaseModel):
 class ResultPublic(BaseModel):
     """One row of a campaign's results (a pose and repeat)."""
 
+    id: int = Field(description="The result's id: GET /api/v1/poses/{id}, its image panels.")
     pose_index: int
     repeat: int
     turntable_deg: float

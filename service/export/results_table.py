@@ -38,7 +38,8 @@ def result_dict(r: PoseResultRow) -> dict[str, Any]:
     metrics = json.loads(r.metrics_json)
     metrics.pop("table", None)
     return {
-        "pose_index": r.pose_index, "repeat": r.repeat, "turntable_deg": r.turntable_deg,
+        "id": r.id, "pose_index": r.pose_index, "repeat": r.repeat,
+        "turntable_deg": r.turntable_deg,
         "solar_suns": r.solar_suns, "metrics": metrics,
         "measured_frame_id": r.measured_frame_id,
         "simulated_frame_id": r.simulated_frame_id, "fitted_frame_id": r.fitted_frame_id,

@@ -143,3 +143,21 @@ def calibration_public(row: CalibrationActivationRow) -> dict[str, Any]:
     provenance = data.pop("provenance")
     return {"calibration_hash": row.calibration_hash, "calibration": data,
             "provenance": provenance, "source": row.source, "activated_at": row.activated_at}
+
+
+def calibration_residuals(provenance: dict[str, Any]) -> list[tuple[str, str, float]]:
+    """(procedure, name, value) of every residual a calibration's provenance records: the
+    numbers of ``provenance.procedures`` whose name says RMS or residual.
+
+    >>> calibration_residuals({"procedures": {"depth": {"rms_after_mm": 1.5, "n": 3}}})
+    [('depth', 'rms_after_mm', 1.5)]
+    """
+    out = []
+    for procedure, values in (provenance.get("procedures") or {}).items():
+        if not isinstance(values, dict):
+            continue
+        for key, v in values.items():
+            if ("rms" in key or "residual" in key) and isinstance(v, int | float) \
+                    and not isinstance(v, bool):
+                out.append((procedure, key, float(v)))
+    return out

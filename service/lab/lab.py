@@ -103,6 +103,7 @@ def open_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, Any]:
             device, _, spec = text.strip().partition(":")
             armed[device].append(spec)
         return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed,
+                             turntable_instant=settings.sim_motion == "instant",
                              turntable_faults=armed["turntable"],
                              solar_faults=armed["solar-simulator"],
                              camera_faults=armed["camera"]), source

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from service.export.report import pose_panels
+from service.export.panels import pose_panels
+from service.export.report import inline_panels
 from service.lab.comparison import compare
 from service.store.frame_files import FrameStore, new_frame_id
 from sim_core import frame_io
@@ -59,9 +60,9 @@ def test_every_grey_image_of_a_frame_is_its_grey_png(stored):
     np.testing.assert_array_equal(
         grey_8bit(simulated.image.amplitude, report.grey_full_scale_simulated), s_png)
     # the campaign report's panels
-    panels = dict(pose_panels(store, mid, sid))
-    np.testing.assert_array_equal(_data_uri(panels["grey measured"])[..., 0], m_png)
-    np.testing.assert_array_equal(_data_uri(panels["grey simulated"])[..., 0], s_png)
+    panels = {p["name"]: p for p in inline_panels(pose_panels(store, mid, sid))}
+    np.testing.assert_array_equal(_data_uri(panels["grey-measured"]["src"])[..., 0], m_png)
+    np.testing.assert_array_equal(_data_uri(panels["grey-simulated"]["src"])[..., 0], s_png)
     # toftwin preview (grey on the left, magnified by 1)
     left = np.array(side_by_side(mf, scale=1))[:, : m_png.shape[1], 0]
     np.testing.assert_array_equal(left, m_png)

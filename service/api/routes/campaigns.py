@@ -26,6 +26,7 @@ from service.api.deps import (
 )
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.export.bluesky import iter_campaign_documents
+from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
 from service.export.results_table import result_dict, result_rows, results_csv
 from service.lab.campaigns import (
@@ -197,6 +198,21 @@ def results(
 def report(campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep) -> HTMLResponse:
     """An HTML page: metrics over the poses, image panels measured / simulated / difference."""
     return HTMLResponse(campaign_report(sessions, store, campaign_id))
+
+
+@router.get("/{campaign_id}/plots/{name}.svg", response_class=Response, responses={
+    200: {"content": {"image/svg+xml": {}}, "description": "An SVG plot"}, **errors(404)})
+def plot(
+    campaign_id: CampaignId,
+    name: Annotated[Literal[tuple(PLOTS)], Path(description="Which plot.")],  # type: ignore[valid-type]
+    sessions: SessionsDep,
+) -> Response:
+    """A metric over the poses so far (first repeats), as in the report: ``ssim``, ``psnr``,
+    ``depth-mean``, ``grey-mean``; with an object fit ``explained-depth-rmse`` and
+    ``explained-grey-psnr`` (nominal twin, fitted twin, noise ceiling)."""
+    rows = [r for r in result_rows(sessions, campaign_id) if r["repeat"] == 0]
+    return Response(plot_svg(PLOTS[name], rows), media_type="image/svg+xml",
+                    headers={"Cache-Control": "no-store"})
 
 
 @router.get("/{campaign_id}/documents", responses=errors(404))

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import json
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Path
+from fastapi.responses import Response
 
 from service.api.deps import (
     ExecutorDep,
@@ -19,12 +20,17 @@ from service.api.deps import (
 )
 from service.api.schemas import PosePublic
 from service.errors import NotFoundError
+from service.export.panels import PANEL_NAMES, png_bytes, pose_panels
 from service.lab.poses import run_single_pose
 from service.lab.requests import PoseCreate
 from service.store import queries
 from service.store.tables import PoseResultRow
+from sim_core.preview import colour_bar_png
 
 router = APIRouter(prefix="/poses", tags=["poses"])
+PoseId = Annotated[int, Path(ge=1, le=2**62, description="A pose result's id.")]
+PanelName = Annotated[Literal[PANEL_NAMES], Path(description="Which image of the pose.")]  # type: ignore[valid-type]
+PNG = {200: {"content": {"image/png": {}}, "description": "PNG image"}, **errors(404, 410)}
 
 
 @router.post("", response_model=PosePublic, status_code=201, responses=errors(401, 409, 503, 507))
@@ -39,12 +45,39 @@ def pose(
 
 
 @router.get("/{pose_id}", response_model=PosePublic, responses=errors(404))
-def get_pose(pose_id: Annotated[int, Path(ge=1, le=2**62)], session: SessionDep) -> dict:
+def get_pose(pose_id: PoseId, session: SessionDep) -> dict:
     """A stored pose comparison (ad hoc or of a campaign)."""
+    return pose_public(require_pose(session, pose_id))
+
+
+@router.get("/{pose_id}/panels/{name}.png", response_class=Response, responses=PNG)
+def panel_image(pose_id: PoseId, name: PanelName, session: SessionDep,
+                store: StoreDep) -> Response:
+    """One of the pose's six images (grey and depth: measured, simulated, difference) in
+    colour, pixel for pixel; its colour bar is ``colour-bar.png`` beside it."""
+    return Response(png_bytes(_panel(session, store, pose_id, name).rgb), media_type="image/png")
+
+
+@router.get("/{pose_id}/panels/{name}/colour-bar.png", response_class=Response, responses=PNG)
+def panel_colour_bar(pose_id: PoseId, name: PanelName, session: SessionDep,
+                     store: StoreDep) -> Response:
+    """The colour bar of one of the pose's images: its colour map, range and unit."""
+    panel = _panel(session, store, pose_id, name)
+    return Response(colour_bar_png(panel.scale, panel.label), media_type="image/png")
+
+
+def _panel(session, store, pose_id: int, name: str):
+    row = require_pose(session, pose_id)
+    panels = pose_panels(store, row.measured_frame_id, row.simulated_frame_id)
+    return panels[PANEL_NAMES.index(name)]
+
+
+def require_pose(session, pose_id: int) -> PoseResultRow:
+    """The result row ``pose_id``, else 404."""
     row = queries.get_result(session, pose_id)
     if row is None:
         raise NotFoundError(f"no pose {pose_id}")
-    return pose_public(row)
+    return row
 
 
 def pose_public(row: PoseResultRow) -> dict:

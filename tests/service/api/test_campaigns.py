@@ -47,7 +47,10 @@ def test_a_campaign_runs_to_completion_with_every_metric_stored(client):
 
     html = client.get(f"/api/v1/campaigns/{cid}/report")
     assert html.headers["content-type"].startswith("text/html")
-    assert html.text.count("<svg") == 4 and html.text.count("data:image/png;base64,") == 5 * 6
+    # four plots; per pose six images, each with its colour bar (all inline)
+    assert html.text.count("<svg") == 4 and html.text.count('class="frame-image"') == 5 * 6
+    assert html.text.count('class="colour-bar"') == 5 * 6
+    assert html.text.count("data:image/png;base64,") == 5 * 6 * 2
 
     # the campaign's events end with the final state
     with client.stream("GET", f"/api/v1/campaigns/{cid}/events") as stream:

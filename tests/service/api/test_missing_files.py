@@ -25,7 +25,9 @@ def test_reads_of_a_lost_frame_answer_410_naming_it_and_the_report_shows_the_gap
     report = client.get(f"/api/v1/campaigns/{cid}/report")
     assert report.status_code == 200
     assert f"No images: frame {lost}" in report.text
-    assert report.text.count("<img") == 6  # the other pose keeps its six panels
+    # the other pose keeps its six panels (an image and its colour bar each)
+    assert report.text.count('class="frame-image"') == 6
+    assert report.text.count("<img") == 12
     # the other pose's frames are untouched
     assert client.get(f"/api/v1/frames/{rows[1]['measured_frame_id']}/arrays").status_code == 200
     assert client.get(f"/api/v1/campaigns/{cid}/results", headers=AUTH).status_code == 200
