@@ -57,11 +57,12 @@ def check_parameter(field: str, value: object, lo: float, hi: float, *, model: s
 class MicrofacetMixture(Material):
     """Sampling shared by diffuse + Beckmann microfacet models.
 
-    ``sample_local`` picks the specular lobe with probability ``p_spec = ks / (ks + kd)``
-    (``u[:, 2] < p_spec``) and the diffuse lobe with ``p_diff = kd / (ks + kd)``; both are 0
-    when ``ks = kd = 0`` (a black surface: every sample has weight 0). ``p_diff`` is computed
-    directly, not as ``1 - p_spec``, so that a tiny ``kd`` next to ``ks = 1`` keeps a positive
-    density wherever its lobe is positive.
+    ``sample_local`` picks the specular lobe with probability ``p_spec`` (``u[:, 2] < p_spec``)
+    and the diffuse lobe with ``p_diff``, in proportion to each lobe's albedo at ``wo``: ``kd``
+    for the diffuse lobe, ``ks F(θo)`` for the specular one (``F`` at the mirror direction),
+    with ``p_spec`` at least ``kernels.P_SPEC_MIN`` when both lobes are present; a model with
+    one lobe samples only that one, and both are 0 when ``ks = kd = 0`` (a black surface: every
+    sample has weight 0). See ``kernels.lobe_probabilities``.
 
     - diffuse lobe: cosine-weighted hemisphere, density ``cos θi / π``;
     - specular lobe: half vector ``h`` from ``D(h) cos θh`` (Beckmann, width ``alpha``),
@@ -71,25 +72,11 @@ class MicrofacetMixture(Material):
     directions above the horizon and 0 otherwise; specular samples that land below the horizon
     are returned as invalid (``pdf = weight = 0``), so ``pdf_local`` integrates to the
     probability of a valid sample. The kernels are ``kernels.mixture_pdf`` and the microfacet
-    branch of ``kernels.sample_brdf``; ``alpha`` and the lobe probabilities go into
-    ``kernel_params()``.
+    branch of ``kernels.sample_brdf``; ``alpha``, ``ks``, ``kd`` and the model's Fresnel
+    parameters go into ``kernel_params()``.
     """
 
     @property
     @abstractmethod
     def alpha(self) -> float:
         """Beckmann width ``α`` of the specular lobe."""
-
-    @property
-    @abstractmethod
-    def lobe_weights(self) -> tuple[float, float]:
-        """``(ks, kd)``, the weights of the specular and the diffuse lobe."""
-
-    @property
-    def lobe_probabilities(self) -> tuple[float, float]:
-        """``(p_spec, p_diff) = (ks, kd) / (ks + kd)``, or ``(0, 0)`` if ``ks = kd = 0``."""
-        ks, kd = self.lobe_weights
-        total = ks + kd
-        if total <= 0.0:  # black surface: 0/0 otherwise
-            return 0.0, 0.0
-        return ks / total, kd / total
