@@ -141,12 +141,12 @@ def cook_torrance_params(
 
 def fixed_lobes(params: np.ndarray, p_spec: float) -> np.ndarray:
     """A copy of a microfacet parameter vector whose sampler picks the specular lobe with the
-    fixed probability ``p_spec`` in (0, 1) for every ``wo`` (the diffuse one with ``1 - p_spec``)
-    instead of by the lobes' albedos: the naive mixture that variance is compared against
-    (issue 16). The BRDF itself is unchanged.
+    fixed probability ``p_spec`` in [:data:`P_SPEC_MIN`, 1) for every ``wo`` (the diffuse one
+    with ``1 - p_spec``) instead of by the lobes' albedos: the naive mixture that variance is
+    compared against (issue 16). The BRDF itself is unchanged.
     """
-    if not 0.0 < p_spec < 1.0:
-        raise ValueError(f"p_spec = {p_spec!r} is outside (0, 1)")
+    if not P_SPEC_MIN <= p_spec < 1.0:
+        raise ValueError(f"p_spec = {p_spec!r} is outside [{P_SPEC_MIN}, 1)")
     p = np.array(params, dtype=np.float64)
     p[_W_SPEC], p[_W_DIFF], p[_FRESNEL_LOBES] = p_spec, 1.0 - p_spec, 0.0
     return p

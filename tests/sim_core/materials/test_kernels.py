@@ -110,7 +110,7 @@ def test_parameter_vectors_carry_the_documented_values() -> None:
     q = kn.fixed_lobes(c.kernel_params(), 0.5)
     np.testing.assert_array_equal(q[[1, 2, 7]], [0.5, 0.5, 0.0])
     np.testing.assert_array_equal(np.delete(q, [1, 2, 7]), np.delete(c.kernel_params(), [1, 2, 7]))
-    for bad in (0.0, 1.0, -0.1, float("nan")):
+    for bad in (0.0, 0.04, 1.0, -0.1, float("nan")):
         with pytest.raises(ValueError, match="outside"):
             kn.fixed_lobes(c.kernel_params(), bad)
 
