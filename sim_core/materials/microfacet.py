@@ -18,13 +18,18 @@ from __future__ import annotations
 import math
 import numbers
 from abc import abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
 
 from sim_core.errors import InvalidInputError
 from sim_core.materials.base import Material, finish_sample
-from sim_core.materials.kernels import U_MAX
+from sim_core.materials.kernels import P_SPEC_MIN, U_MAX, fixed_lobes
 
 __all__ = [
     "U_MAX",
+    "FixedLobeMixture",
     "MicrofacetMixture",
     "check_parameter",
     "finish_sample",
@@ -80,3 +85,48 @@ class MicrofacetMixture(Material):
     @abstractmethod
     def alpha(self) -> float:
         """Beckmann width ``α`` of the specular lobe."""
+
+
+@dataclass(frozen=True)
+class FixedLobeMixture(Material):
+    """The BRDF of a microfacet model, sampled by a *fixed* choice of its lobes.
+
+    The specular (Beckmann) lobe with probability ``p_spec`` for every ``wo``, the diffuse
+    (cosine) one with ``1 - p_spec``, the pdf the exact mixture, no Fresnel factor in the
+    choice (:func:`sim_core.materials.kernels.fixed_lobes`). ``p_spec = 0.5`` is the naive
+    estimator issue 16 compares the renderer's variance against; ``ks / (ks + kd)`` is the
+    renderer's former lobe choice. Same kernel and values as ``base`` (only the sampling
+    differs), so a scene with it renders the same image with another noise. A reference for
+    variance measurements, not a material of scene files.
+
+    Parameters
+    ----------
+    base : MicrofacetMixture
+        The model whose BRDF is sampled.
+    p_spec : float, default 0.5
+        Probability of the specular lobe, in [``kernels.P_SPEC_MIN``, 1).
+    """
+
+    base: MicrofacetMixture
+    p_spec: float = 0.5
+
+    name: ClassVar[str] = "fixed-lobe-mixture"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.base, MicrofacetMixture):
+            raise InvalidInputError(
+                "base", f"base = {self.base!r} is not a microfacet model (its lobes are fixed)")
+        p = check_parameter("p_spec", self.p_spec, P_SPEC_MIN, math.nextafter(1.0, 0.0),
+                            model=self.name)
+        object.__setattr__(self, "p_spec", p)
+
+    @property
+    def kernel_kind(self) -> int:
+        return self.base.kernel_kind
+
+    def kernel_params(self) -> np.ndarray:
+        return fixed_lobes(self.base.kernel_params(), self.p_spec)
+
+    @property
+    def albedo_bound(self) -> float:
+        return self.base.albedo_bound

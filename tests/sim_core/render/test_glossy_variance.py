@@ -4,7 +4,8 @@ The renderer samples a microfacet material's two lobes in proportion to their al
 view direction and ends no path by Russian roulette within 3 bounces. Its per-sample range
 noise on the glossy floor of ``examples/corner_glossy.yaml`` must be no worse than that of the
 naive estimator an independent renderer used: a fixed 50/50 mixture of Beckmann half-vector
-and cosine sampling of the same BRDF, without roulette (:class:`NaiveMixture`, below), and
+and cosine sampling of the same BRDF, without roulette
+(:class:`~sim_core.materials.microfacet.FixedLobeMixture`), and
 clearly lower where the lobe is sharp. Variance per sample at equal spp is what is compared:
 it does not depend on the machine. Both renders use the same seed, so their paths share their
 random numbers and the ratio of their noises is reproducible to about 1 % (seeds 1-4: 0.741 to
@@ -20,7 +21,7 @@ import pytest
 
 from sim_core.adaptive import range_standard_error_m
 from sim_core.materials.base import Material
-from sim_core.materials.kernels import fixed_lobes
+from sim_core.materials.microfacet import FixedLobeMixture
 from sim_core.materials.presets import make_material, material_preset
 from sim_core.render import RenderSettings, render
 from sim_core.scene import Scene
@@ -30,26 +31,6 @@ SPP = 256
 BOUNCES = 3
 #: roulette from a bounce the paths never reach: the reference ends no path at random
 NO_ROULETTE = BOUNCES + 1
-
-
-@dataclasses.dataclass(frozen=True)
-class NaiveMixture(Material):
-    """The BRDF of ``base`` (same kernel, same parameters) sampled by a fixed 50/50 choice of
-    its Beckmann and cosine lobes (:func:`sim_core.materials.kernels.fixed_lobes`), with the
-    exact mixture pdf: the reference estimator of issue 16."""
-
-    base: Material
-
-    @property
-    def kernel_kind(self) -> int:
-        return self.base.kernel_kind
-
-    def kernel_params(self) -> np.ndarray:
-        return fixed_lobes(self.base.kernel_params(), 0.5)
-
-    @property
-    def albedo_bound(self) -> float:
-        return self.base.albedo_bound
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +86,7 @@ def test_range_noise_per_sample_is_no_worse_than_a_naive_5050_mixture(
     ours_floor, ours_walls = _per_sample_range_noise_mm(
         _with_floor(glossy_corner, floor), RenderSettings().russian_roulette_from_bounce)
     ref_floor, ref_walls = _per_sample_range_noise_mm(
-        _with_floor(glossy_corner, NaiveMixture(floor)), NO_ROULETTE)
+        _with_floor(glossy_corner, FixedLobeMixture(floor)), NO_ROULETTE)
     assert ours_floor <= max_ratio * ref_floor, (ours_floor, ref_floor)
     # the walls (Lambertian) see the floor only from their paths' second vertex on
     assert ours_walls <= 1.02 * ref_walls, (ours_walls, ref_walls)
@@ -117,13 +98,8 @@ def test_the_former_sampling_was_the_noisier_one(glossy_corner):
     # mixture by far: 1.9x its noise here, as on the full-size frame (8.5 against 4.4 mm at
     # 1024 spp).
     tile = material_preset("black-glossy-tile")
-
-    @dataclasses.dataclass(frozen=True)
-    class KsKdLobes(NaiveMixture):
-        def kernel_params(self) -> np.ndarray:
-            return fixed_lobes(self.base.kernel_params(), 0.25 / (0.25 + 0.07))
-
-    old_floor, _ = _per_sample_range_noise_mm(_with_floor(glossy_corner, KsKdLobes(tile)), 3)
-    ref_floor, _ = _per_sample_range_noise_mm(_with_floor(glossy_corner, NaiveMixture(tile)),
+    former = FixedLobeMixture(tile, p_spec=0.25 / (0.25 + 0.07))
+    old_floor, _ = _per_sample_range_noise_mm(_with_floor(glossy_corner, former), 3)
+    ref_floor, _ = _per_sample_range_noise_mm(_with_floor(glossy_corner, FixedLobeMixture(tile)),
                                               NO_ROULETTE)
     assert old_floor > 1.5 * ref_floor, (old_floor, ref_floor)
