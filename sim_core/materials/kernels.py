@@ -496,8 +496,10 @@ def lobe_probabilities(kind, p, woz):
     31 then follows ``f cos θi`` across both lobes, as in pbrt's and Mitsuba's rough plastic):
     the diffuse lobe reflects ``kd``, the specular one about ``ks F(θo)``, its Fresnel factor
     at the mirror direction (:func:`mirror_fresnel`; for the narrow lobes of the presets
-    within 6 % of the lobe's albedo up to θo = 70°, within a factor 2.5 even for α = 0.5 at
-    grazing view). With ``w = (w_spec, w_diff)`` from the parameter vector (``(ks, kd)``, or
+    within 8 % of the lobe's albedo up to θo = 70°; for rough lobes (α 0.5 to 1) and grazing
+    views an overestimate by up to 4x, ``docs/performance.md``). An estimate is all the choice
+    needs: any probabilities give an unbiased estimator, only its variance depends on them.
+    With ``w = (w_spec, w_diff)`` from the parameter vector (``(ks, kd)``, or
     fixed probabilities without the Fresnel factor, :func:`fixed_lobes`):
     ``p_spec = w_spec F / (w_spec F + w_diff)``, at least :data:`P_SPEC_MIN` when both lobes
     are present, ``p_diff = 1 - p_spec``; a model with one lobe samples only that one, a black
@@ -506,8 +508,9 @@ def lobe_probabilities(kind, p, woz):
     a tiny ``kd`` although that lobe's value is positive.
 
     Choosing by ``ks / (ks + kd)`` instead sent 78 % of the black glossy tile's samples into a
-    lobe that reflects ~1 % (F = 0.035 at normal view) against its diffuse 7 %: 3.7x the range
-    variance of a 50/50 mixture on the glossy corner (issue 16, ``docs/performance.md``).
+    lobe that reflects ~1 % (F = 0.035 at normal view) against its diffuse 7 %: 2.7x the range
+    variance of a 50/50 mixture on the glossy corner's floor, 5x that of this choice (issue 16,
+    ``docs/performance.md``).
     """
     w_spec, w_diff = p[_W_SPEC], p[_W_DIFF]
     if not w_spec > 0.0:
