@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sim_core.scene_spec import SceneSpec
+from sim_core.scene_spec import RUSSIAN_ROULETTE_FROM_BOUNCE, SceneSpec
 
 #: One render at a time per process: every render in this process - jobs on a threaded executor
 #: or a multi-threaded Dask worker, and the simulated camera's frames
@@ -72,7 +72,7 @@ class SimulationJob:
     spp: int
     max_bounces: int
     seed: int
-    russian_roulette_from_bounce: int = 3
+    russian_roulette_from_bounce: int = RUSSIAN_ROULETTE_FROM_BOUNCE
     threads: int | None = None
     effects: str = "auto"
     ideal: bool = False

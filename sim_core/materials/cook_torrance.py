@@ -77,9 +77,10 @@ class CookTorrance(MicrofacetMixture):
     Sampling
     --------
     Mixture of cosine-hemisphere sampling (diffuse) and Beckmann half-vector sampling
-    (specular), the specular lobe chosen with probability ``ks / (ks + kd)``; the pdf is the
-    exact mixture (see :class:`~sim_core.materials.microfacet.MicrofacetMixture`). The Fresnel
-    factor is not importance-sampled.
+    (specular), each lobe chosen in proportion to its albedo at ``wo`` (``kd`` against
+    ``ks F(θo)``); the pdf is the exact mixture (see
+    :class:`~sim_core.materials.microfacet.MicrofacetMixture`). The Fresnel factor is not
+    importance-sampled within the specular lobe.
 
     Reciprocity
     -----------
@@ -131,16 +132,11 @@ class CookTorrance(MicrofacetMixture):
         return self.m
 
     @property
-    def lobe_weights(self) -> tuple[float, float]:
-        return self.ks, self.kd
-
-    @property
     def albedo_bound(self) -> float:
         """``kd + ks``: the V-cavity specular lobe reflects at most a fraction 1 (``F <= 1``)."""
         return min(self.kd + self.ks, 1.0)
 
     def kernel_params(self) -> np.ndarray:
-        p_spec, p_diff = self.lobe_probabilities
         return cook_torrance_params(
-            self.alpha, p_spec, p_diff, self.kd, self.ks, self.n2, self.fresnel_angle == "half"
+            self.alpha, self.kd, self.ks, self.n2, self.fresnel_angle == "half"
         )

@@ -54,9 +54,13 @@ caller's loop instead of behind a call (Lambertian batch evaluation 3x faster).
 Parameter layouts
 -----------------
 - Lambertian: ``[albedo, albedo/π]``.
-- Seed microfacet: ``[α, p_spec, p_diff, kd/π, ks, F0, n]``.
-- Cook–Torrance: ``[α, p_spec, p_diff, kd/π, ks, n2, half]`` with ``half`` 1.0 for
-  ``fresnel_angle="half"`` and 0.0 for ``"incidence"``.
+- Seed microfacet: ``[α, w_spec, w_diff, kd/π, ks, F0, n, fresnel_lobes]``.
+- Cook–Torrance: ``[α, w_spec, w_diff, kd/π, ks, n2, half, fresnel_lobes]`` with ``half`` 1.0
+  for ``fresnel_angle="half"`` and 0.0 for ``"incidence"``.
+- Both microfacet models: ``w_spec``, ``w_diff`` are the weights of the lobe choice and
+  ``fresnel_lobes`` 1.0 scales ``w_spec`` by the Fresnel factor at ``wo``'s mirror direction
+  (see :func:`lobe_probabilities`; the models use ``w = (ks, kd)`` with the factor, the
+  albedo of each lobe, and :func:`fixed_lobes` makes a fixed-probability mixture of them).
 - Hapke: ``[w, b0, h, b, √(1 - w), w/(4π), b0 h]`` (``b`` = ``phase_b``).
 - Tabulated: header ``[n_i, n_r, n_φ, p_cos, L]`` (grid sizes, probability of cosine
   sampling, total length), then the blocks of :func:`tabulated_layout`: the node angles θi,
@@ -91,13 +95,18 @@ U_MAX = float(np.nextafter(1.0, 0.0))
 
 # Parameter indices (see "Parameter layouts" in the module docstring).
 _ALBEDO_OVER_PI = 1  # Lambertian
-_ALPHA, _P_SPEC, _P_DIFF, _KD_OVER_PI, _KS = 0, 1, 2, 3, 4
+_ALPHA, _W_SPEC, _W_DIFF, _KD_OVER_PI, _KS = 0, 1, 2, 3, 4
 _F0, _EXPONENT = 5, 6  # seed microfacet
 _N2, _FRESNEL_HALF = 5, 6  # Cook–Torrance
+_FRESNEL_LOBES = 7  # both microfacet models: 1.0 weighs the specular lobe by F at the mirror
 _H, _PHASE_B, _GAMMA, _NORM, _B0_H = 2, 3, 4, 5, 6  # Hapke (w and b0 are folded into these)
 _TAB_NI, _TAB_NR, _TAB_NP, _TAB_P_COS, _TAB_LENGTH = 0, 1, 2, 3, 4  # tabulated header
 #: largest grid axis the tabulated kernels accept (keeps every block offset an exact int64)
 TAB_MAX_AXIS = 100_000
+#: smallest probability of the specular lobe of a microfacet mixture that has both lobes (see
+#: :func:`lobe_probabilities`): the lobe's albedo estimate F(wo) ks can be 0 where its value
+#: is not (Schlick's F with F0 = 0 at normal view), and a lobe never sampled is a biased one
+P_SPEC_MIN = 0.05
 
 
 # -------------------------------------------------------------------------------------------
@@ -115,17 +124,32 @@ def lambertian_params(albedo: float) -> np.ndarray:
 
 
 def seed_microfacet_params(
-    alpha: float, p_spec: float, p_diff: float, kd: float, ks: float, f0: float, exponent: float
+    alpha: float, kd: float, ks: float, f0: float, exponent: float
 ) -> np.ndarray:
-    """Parameter vector of the seed paper's microfacet model (Beckmann width ``alpha``)."""
-    return _vector(alpha, p_spec, p_diff, kd / math.pi, ks, f0, exponent)
+    """Parameter vector of the seed paper's microfacet model (Beckmann width ``alpha``); lobes
+    chosen by their albedo at ``wo`` (:func:`lobe_probabilities`)."""
+    return _vector(alpha, ks, kd, kd / math.pi, ks, f0, exponent, 1.0)
 
 
 def cook_torrance_params(
-    alpha: float, p_spec: float, p_diff: float, kd: float, ks: float, n2: float, half: bool
+    alpha: float, kd: float, ks: float, n2: float, half: bool
 ) -> np.ndarray:
-    """Parameter vector of Cook–Torrance; ``half`` selects ``F(θ_half)`` over ``F(θi)``."""
-    return _vector(alpha, p_spec, p_diff, kd / math.pi, ks, n2, 1.0 if half else 0.0)
+    """Parameter vector of Cook–Torrance; ``half`` selects ``F(θ_half)`` over ``F(θi)``; lobes
+    chosen by their albedo at ``wo`` (:func:`lobe_probabilities`)."""
+    return _vector(alpha, ks, kd, kd / math.pi, ks, n2, 1.0 if half else 0.0, 1.0)
+
+
+def fixed_lobes(params: np.ndarray, p_spec: float) -> np.ndarray:
+    """A copy of a microfacet parameter vector whose sampler picks the specular lobe with the
+    fixed probability ``p_spec`` in [:data:`P_SPEC_MIN`, 1) for every ``wo`` (the diffuse one
+    with ``1 - p_spec``) instead of by the lobes' albedos: the naive mixture that variance is
+    compared against (issue 16). The BRDF itself is unchanged.
+    """
+    if not P_SPEC_MIN <= p_spec < 1.0:
+        raise ValueError(f"p_spec = {p_spec!r} is outside [{P_SPEC_MIN}, 1)")
+    p = np.array(params, dtype=np.float64)
+    p[_W_SPEC], p[_W_DIFF], p[_FRESNEL_LOBES] = p_spec, 1.0 - p_spec, 0.0
+    return p
 
 
 def hapke_params(w: float, b0: float, h: float, phase_b: float) -> np.ndarray:
@@ -450,14 +474,79 @@ def cook_torrance_eval(p, wix, wiy, wiz, wox, woy, woz):
 
 
 @njit(cache=True, error_model="numpy")
-def mixture_pdf(p, wix, wiy, wiz, wox, woy, woz):
-    """``p_spec pdf_Beckmann + p_diff cos θi / π`` for both directions above the horizon."""
+def mirror_fresnel(kind, p, woz):
+    """The model's Fresnel factor for ``wi`` the mirror direction of ``wo`` (``h`` the normal):
+    ``F(θo)``, dielectric (Cook–Torrance) or Schlick-type (seed microfacet, eq. 10), in [0, 1].
+
+    At the mirror direction ``θi = θo`` and ``γ = θo``, so this is the lobe's Fresnel factor
+    at its peak whichever angle the model evaluates ``F`` at.
+    """
+    c = clamp(woz, 0.0, 1.0)  # below the horizon nothing is sampled; F of a valid cosine
+    if kind == KIND_COOK_TORRANCE:
+        return fresnel_dielectric(c, p[_N2])
+    return fresnel_schlick_power(c, p[_F0], p[_EXPONENT])
+
+
+@njit(cache=True, error_model="numpy")
+def lobe_probabilities(kind, p, woz):
+    """``(p_spec, p_diff)``: the probabilities with which a microfacet model samples its
+    specular (Beckmann) and its diffuse (cosine) lobe for the view direction ``wo``.
+
+    Proportional to each lobe's directional albedo at ``wo`` (the seed paper's ``p_ω`` of eq.
+    31 then follows ``f cos θi`` across both lobes, as in pbrt's and Mitsuba's rough plastic):
+    the diffuse lobe reflects ``kd``, the specular one about ``ks F(θo)``, its Fresnel factor
+    at the mirror direction (:func:`mirror_fresnel`; for the narrow lobes of the presets
+    within 8 % of the lobe's albedo up to θo = 70°; for rough lobes (α 0.5 to 1) and grazing
+    views an overestimate by up to 4x, ``docs/performance.md``). An estimate is all the choice
+    needs: any probabilities give an unbiased estimator, only its variance depends on them.
+    With ``w = (w_spec, w_diff)`` from the parameter vector (``(ks, kd)``, or
+    fixed probabilities without the Fresnel factor, :func:`fixed_lobes`):
+    ``p_spec = w_spec F / (w_spec F + w_diff)``, at least :data:`P_SPEC_MIN` when both lobes
+    are present, ``p_diff = 1 - p_spec``; a model with one lobe samples only that one, a black
+    one neither (``(0, 0)``: every sample is invalid). ``p_diff`` is computed as
+    ``w_diff / (w_spec F + w_diff)``, not as ``1 - p_spec``, which would round to 0 next to
+    a tiny ``kd`` although that lobe's value is positive.
+
+    Choosing by ``ks / (ks + kd)`` instead sent 78 % of the black glossy tile's samples into a
+    lobe that reflects ~1 % (F = 0.035 at normal view) against its diffuse 7 %: 2.7x the range
+    variance of a 50/50 mixture on the glossy corner's floor, 5x that of this choice (issue 16,
+    ``docs/performance.md``).
+    """
+    w_spec, w_diff = p[_W_SPEC], p[_W_DIFF]
+    if not w_spec > 0.0:
+        return 0.0, (1.0 if w_diff > 0.0 else 0.0)
+    if not w_diff > 0.0:
+        return 1.0, 0.0
+    if p[_FRESNEL_LOBES] != 0.0:
+        w_spec = w_spec * mirror_fresnel(kind, p, woz)
+    total = w_spec + w_diff  # >= w_diff > 0
+    p_spec = w_spec / total
+    if p_spec < P_SPEC_MIN:
+        return P_SPEC_MIN, 1.0 - P_SPEC_MIN
+    return p_spec, w_diff / total
+
+
+@njit(cache=True, error_model="numpy")
+def lobe_mixture_pdf(p, p_spec, p_diff, wix, wiy, wiz, wox, woy, woz):
+    """``p_spec pdf_Beckmann + p_diff cos θi / π`` [1/sr] for both directions above the
+    horizon, 0 otherwise: the density of the one-sample mixture of the two lobes (Veach's
+    one-sample balance heuristic, so each sample is weighted by the whole mixture's pdf)."""
     if not _both_above(wiz, woz):
         return 0.0
-    pdf = p[_P_DIFF] * cosine_hemisphere_pdf(wiz)
-    if p[_P_SPEC] > 0.0:
-        pdf = pdf + p[_P_SPEC] * beckmann_pdf_wi(wix, wiy, wiz, wox, woy, woz, p[_ALPHA])
+    pdf = p_diff * cosine_hemisphere_pdf(wiz)
+    if p_spec > 0.0:
+        pdf = pdf + p_spec * beckmann_pdf_wi(wix, wiy, wiz, wox, woy, woz, p[_ALPHA])
     return pdf
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_pdf(kind, p, wix, wiy, wiz, wox, woy, woz):
+    """Density [1/sr] with which a microfacet model ``kind`` samples ``wi`` for ``wo``:
+    :func:`lobe_mixture_pdf` with the :func:`lobe_probabilities` of ``wo``."""
+    if not _both_above(wiz, woz):
+        return 0.0
+    p_spec, p_diff = lobe_probabilities(kind, p, woz)
+    return lobe_mixture_pdf(p, p_spec, p_diff, wix, wiy, wiz, wox, woy, woz)
 
 
 @njit(cache=True, error_model="numpy")
@@ -760,7 +849,7 @@ def pdf_brdf_row(kind, p, table, row, wix, wiy, wiz, wox, woy, woz):
     """Solid-angle density of ``sample_brdf_row`` returning wi for wo; 0 for an unknown
     ``kind``. Arguments as :func:`eval_brdf_row`."""
     if kind in (KIND_SEED_MICROFACET, KIND_COOK_TORRANCE):
-        return mixture_pdf(p, wix, wiy, wiz, wox, woy, woz)
+        return mixture_pdf(kind, p, wix, wiy, wiz, wox, woy, woz)
     if kind in (KIND_LAMBERTIAN, KIND_HAPKE):
         return cosine_pdf(wiz, woz)
     if kind == KIND_TABULATED:
@@ -773,21 +862,28 @@ def sample_brdf_row(kind, p, table, row, wox, woy, woz, u0, u1, u2):
     """Importance-sample wi; returns (wi_x, wi_y, wi_z, pdf, weight = f cos / pdf).
 
     Microfacet models pick the Beckmann lobe (``wi = reflect(wo, h)``) when ``u2 < p_spec`` and
-    the cosine lobe otherwise; Lambertian and Hapke sample the cosine lobe; a tabulated
-    material samples its table (:func:`tabulated_sample_direction`). ``pdf`` is
-    :func:`pdf_brdf_row` at the sampled direction (so invalid samples, e.g. a reflection below
-    the horizon, get ``pdf = weight = 0``). An unknown ``kind`` gives invalid samples.
-    Arguments as :func:`eval_brdf_row`.
+    the cosine lobe otherwise (:func:`lobe_probabilities`); Lambertian and Hapke sample the
+    cosine lobe; a tabulated material samples its table (:func:`tabulated_sample_direction`).
+    ``pdf`` is :func:`pdf_brdf_row` at the sampled direction (so invalid samples, e.g. a
+    reflection below the horizon, get ``pdf = weight = 0``), for microfacet models with the
+    lobe probabilities computed once. An unknown ``kind`` gives invalid samples. Arguments as
+    :func:`eval_brdf_row`.
     """
-    microfacet = kind in (KIND_SEED_MICROFACET, KIND_COOK_TORRANCE)
-    if microfacet and u2 < p[_P_SPEC]:
-        hx, hy, hz = sample_beckmann_normal(u0, u1, p[_ALPHA])
-        x, y, z = reflect(wox, woy, woz, hx, hy, hz)
-    elif kind == KIND_TABULATED:
-        x, y, z = tabulated_sample_in(table, row, wox, woy, woz, u0, u1, u2)
+    if kind in (KIND_SEED_MICROFACET, KIND_COOK_TORRANCE):
+        p_spec, p_diff = lobe_probabilities(kind, p, woz)
+        if u2 < p_spec:
+            hx, hy, hz = sample_beckmann_normal(u0, u1, p[_ALPHA])
+            x, y, z = reflect(wox, woy, woz, hx, hy, hz)
+        else:
+            x, y, z = sample_cosine_hemisphere(u0, u1)
+        # == mixture_pdf(kind, p, x, y, z, wo): the same operations on the same inputs
+        pdf = lobe_mixture_pdf(p, p_spec, p_diff, x, y, z, wox, woy, woz)
     else:
-        x, y, z = sample_cosine_hemisphere(u0, u1)
-    pdf = pdf_brdf_row(kind, p, table, row, x, y, z, wox, woy, woz)
+        if kind == KIND_TABULATED:
+            x, y, z = tabulated_sample_in(table, row, wox, woy, woz, u0, u1, u2)
+        else:
+            x, y, z = sample_cosine_hemisphere(u0, u1)
+        pdf = pdf_brdf_row(kind, p, table, row, x, y, z, wox, woy, woz)
     if not pdf > 0.0:
         return x, y, z, pdf, 0.0
     f = eval_brdf_row(kind, p, table, row, x, y, z, wox, woy, woz)

@@ -18,13 +18,18 @@ from __future__ import annotations
 import math
 import numbers
 from abc import abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
 
 from sim_core.errors import InvalidInputError
 from sim_core.materials.base import Material, finish_sample
-from sim_core.materials.kernels import U_MAX
+from sim_core.materials.kernels import P_SPEC_MIN, U_MAX, fixed_lobes
 
 __all__ = [
     "U_MAX",
+    "FixedLobeMixture",
     "MicrofacetMixture",
     "check_parameter",
     "finish_sample",
@@ -57,11 +62,12 @@ def check_parameter(field: str, value: object, lo: float, hi: float, *, model: s
 class MicrofacetMixture(Material):
     """Sampling shared by diffuse + Beckmann microfacet models.
 
-    ``sample_local`` picks the specular lobe with probability ``p_spec = ks / (ks + kd)``
-    (``u[:, 2] < p_spec``) and the diffuse lobe with ``p_diff = kd / (ks + kd)``; both are 0
-    when ``ks = kd = 0`` (a black surface: every sample has weight 0). ``p_diff`` is computed
-    directly, not as ``1 - p_spec``, so that a tiny ``kd`` next to ``ks = 1`` keeps a positive
-    density wherever its lobe is positive.
+    ``sample_local`` picks the specular lobe with probability ``p_spec`` (``u[:, 2] < p_spec``)
+    and the diffuse lobe with ``p_diff``, in proportion to each lobe's albedo at ``wo``: ``kd``
+    for the diffuse lobe, ``ks F(θo)`` for the specular one (``F`` at the mirror direction),
+    with ``p_spec`` at least ``kernels.P_SPEC_MIN`` when both lobes are present; a model with
+    one lobe samples only that one, and both are 0 when ``ks = kd = 0`` (a black surface: every
+    sample has weight 0). See ``kernels.lobe_probabilities``.
 
     - diffuse lobe: cosine-weighted hemisphere, density ``cos θi / π``;
     - specular lobe: half vector ``h`` from ``D(h) cos θh`` (Beckmann, width ``alpha``),
@@ -71,8 +77,8 @@ class MicrofacetMixture(Material):
     directions above the horizon and 0 otherwise; specular samples that land below the horizon
     are returned as invalid (``pdf = weight = 0``), so ``pdf_local`` integrates to the
     probability of a valid sample. The kernels are ``kernels.mixture_pdf`` and the microfacet
-    branch of ``kernels.sample_brdf``; ``alpha`` and the lobe probabilities go into
-    ``kernel_params()``.
+    branch of ``kernels.sample_brdf``; ``alpha``, ``ks``, ``kd`` and the model's Fresnel
+    parameters go into ``kernel_params()``.
     """
 
     @property
@@ -80,16 +86,47 @@ class MicrofacetMixture(Material):
     def alpha(self) -> float:
         """Beckmann width ``α`` of the specular lobe."""
 
-    @property
-    @abstractmethod
-    def lobe_weights(self) -> tuple[float, float]:
-        """``(ks, kd)``, the weights of the specular and the diffuse lobe."""
+
+@dataclass(frozen=True)
+class FixedLobeMixture(Material):
+    """The BRDF of a microfacet model, sampled by a *fixed* choice of its lobes.
+
+    The specular (Beckmann) lobe with probability ``p_spec`` for every ``wo``, the diffuse
+    (cosine) one with ``1 - p_spec``, the pdf the exact mixture, no Fresnel factor in the
+    choice (:func:`sim_core.materials.kernels.fixed_lobes`). ``p_spec = 0.5`` is the naive
+    estimator issue 16 compares the renderer's variance against; ``ks / (ks + kd)`` is the
+    renderer's former lobe choice. Same kernel and values as ``base`` (only the sampling
+    differs), so a scene with it renders the same image with another noise. A reference for
+    variance measurements, not a material of scene files.
+
+    Parameters
+    ----------
+    base : MicrofacetMixture
+        The model whose BRDF is sampled.
+    p_spec : float, default 0.5
+        Probability of the specular lobe, in [``kernels.P_SPEC_MIN``, 1).
+    """
+
+    base: MicrofacetMixture
+    p_spec: float = 0.5
+
+    name: ClassVar[str] = "fixed-lobe-mixture"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.base, MicrofacetMixture):
+            raise InvalidInputError(
+                "base", f"base = {self.base!r} is not a microfacet model (its lobes are fixed)")
+        p = check_parameter("p_spec", self.p_spec, P_SPEC_MIN, math.nextafter(1.0, 0.0),
+                            model=self.name)
+        object.__setattr__(self, "p_spec", p)
 
     @property
-    def lobe_probabilities(self) -> tuple[float, float]:
-        """``(p_spec, p_diff) = (ks, kd) / (ks + kd)``, or ``(0, 0)`` if ``ks = kd = 0``."""
-        ks, kd = self.lobe_weights
-        total = ks + kd
-        if total <= 0.0:  # black surface: 0/0 otherwise
-            return 0.0, 0.0
-        return ks / total, kd / total
+    def kernel_kind(self) -> int:
+        return self.base.kernel_kind
+
+    def kernel_params(self) -> np.ndarray:
+        return fixed_lobes(self.base.kernel_params(), self.p_spec)
+
+    @property
+    def albedo_bound(self) -> float:
+        return self.base.albedo_bound

@@ -73,8 +73,9 @@ class SeedMicrofacet(MicrofacetMixture):
     Sampling
     --------
     Mixture of cosine-hemisphere sampling (diffuse) and Beckmann half-vector sampling
-    (specular), the specular lobe chosen with probability ``ks / (ks + kd)``; the pdf is the
-    exact mixture (see :class:`~sim_core.materials.microfacet.MicrofacetMixture`).
+    (specular), each lobe chosen in proportion to its albedo at ``wo`` (``kd`` against
+    ``ks F(θo)``); the pdf is the exact mixture (see
+    :class:`~sim_core.materials.microfacet.MicrofacetMixture`).
 
     Reciprocity
     -----------
@@ -119,16 +120,11 @@ class SeedMicrofacet(MicrofacetMixture):
         return math.sqrt(2.0 * self.sigma)
 
     @property
-    def lobe_weights(self) -> tuple[float, float]:
-        return self.ks, self.kd
-
-    @property
     def albedo_bound(self) -> float:
         """``ks + kd``: the V-cavity specular lobe reflects at most a fraction 1 (``F <= 1``)."""
         return min(self.ks + self.kd, 1.0)
 
     def kernel_params(self) -> np.ndarray:
-        p_spec, p_diff = self.lobe_probabilities
         return seed_microfacet_params(
-            self.alpha, p_spec, p_diff, self.kd, self.ks, self.f0, self.fresnel_exponent
+            self.alpha, self.kd, self.ks, self.f0, self.fresnel_exponent
         )

@@ -68,6 +68,7 @@ from sim_core.render.kernels import (
 )
 from sim_core.render.lightfield import LightField
 from sim_core.scene import Scene
+from sim_core.scene_spec import RUSSIAN_ROULETTE_FROM_BOUNCE
 from sim_core.tracing import RayTracer
 
 #: camera rays per chunk: large enough that Embree's per-call overhead (~2 us) and the Python
@@ -97,7 +98,8 @@ class RenderSettings:
         Surface interactions on a path from the light to the camera; 1 = direct only.
     seed : int
     russian_roulette_from_bounce : int
-        First bounce index at which paths may be terminated at random.
+        First bounce index at which paths may be terminated at random (default
+        :data:`sim_core.scene_spec.RUSSIAN_ROULETTE_FROM_BOUNCE`: none within 3 bounces).
     threads : int or None
         Worker threads of the render (default: all cores); each traces whole chunks, Embree
         queries and kernels alike. Never changes the result.
@@ -116,7 +118,7 @@ class RenderSettings:
     spp: int = 16
     max_bounces: int = 3
     seed: int = 0
-    russian_roulette_from_bounce: int = 3
+    russian_roulette_from_bounce: int = RUSSIAN_ROULETTE_FROM_BOUNCE
     threads: int | None = None
     ambient: bool = True
     jitter: bool = True

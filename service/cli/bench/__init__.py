@@ -37,11 +37,19 @@ def bench_render(
 def bench_accuracy(
     out: Annotated[Path | None, typer.Option("--out", help="Directory for CSV, PNG, JSON.")] = None,
     quick: Annotated[bool, typer.Option("--quick", help="Reduced sweep (minutes).")] = False,
+    scene: Annotated[
+        list[str] | None,
+        typer.Option(help="Example scene (examples/NAME.yaml) to sweep, repeatable "
+                          "(default: plane, corner, corner_glossy, satellite_ground_test)."),
+    ] = None,
 ) -> None:
     """Accuracy against time: error of every setting against a high-quality reference."""
-    from service.cli.bench.accuracy import run_accuracy_benchmark
+    from service.cli.bench.accuracy import SCENES, run_accuracy_benchmark
 
-    run_accuracy_benchmark(out, quick, console)
+    try:
+        run_accuracy_benchmark(out, quick, console, tuple(scene) if scene else SCENES)
+    except InvalidInputError as exc:
+        fail_invalid(exc)
 
 
 @bench_app.command("mitsuba")

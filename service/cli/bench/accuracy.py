@@ -27,6 +27,7 @@ from rich.console import Console
 from rich.table import Table
 
 from service.settings import EXAMPLES_DIR
+from sim_core.errors import InvalidInputError
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
 from sim_core.scene import build_scene
@@ -34,7 +35,8 @@ from sim_core.scene_spec import load_scene_spec
 from sim_core.tof import ambiguity_range_m
 from sim_core.tracing import RayTracer
 
-SCENES = ("plane", "corner", "satellite_ground_test")
+#: the example scenes of the sweep (``examples/NAME.yaml``); ``--scene`` picks some of them
+SCENES = ("plane", "corner", "corner_glossy", "satellite_ground_test")
 FULL = {"spp": (1, 4, 16, 64, 256, 1024), "bounces": (1, 2, 3, 5), "reference_spp": 4096}
 QUICK = {"spp": (1, 4, 16, 64), "bounces": (1, 2, 3), "reference_spp": 1024}
 REFERENCE_BOUNCES = 5
@@ -90,6 +92,11 @@ def run_accuracy_benchmark(
     sweep: dict | None = None,
 ) -> list[Row]:
     cfg = dict(sweep or (QUICK if quick else FULL))
+    unknown = [n for n in scenes if not (EXAMPLES_DIR / f"{n}.yaml").is_file()]
+    if unknown:
+        raise InvalidInputError(
+            "scene", f"no example scene {', '.join(map(repr, unknown))} in {EXAMPLES_DIR}; "
+            f"allowed: {', '.join(SCENES)} or any other examples/NAME.yaml")
     rows: list[Row] = []
     for name in scenes:
         path = EXAMPLES_DIR / f"{name}.yaml"

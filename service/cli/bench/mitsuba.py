@@ -34,7 +34,8 @@ What is matched
 - integrator: ``path`` with ``max_depth = bounces + 1`` (Mitsuba counts the camera vertex) and
   ``rr_depth = russian_roulette_from_bounce - 1``: both then apply Russian roulette at the same
   vertices with the same survival probability for this scene (min(throughput, 0.95) vs.
-  min(1, max(0.05, throughput))), i.e. only when continuing to a third bounce.
+  min(1, max(0.05, throughput))), i.e. with the default (5) only when continuing to a fifth
+  bounce: never within the benchmark's 1-3 bounces.
 
 What differs
 ------------

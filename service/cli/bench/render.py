@@ -27,7 +27,9 @@ from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from sim_core.tracing import RayTracer
 
-DEFAULT_SCENES = ("plane.yaml", "corner.yaml", "satellite_ground_test.yaml")
+DEFAULT_SCENES = (
+    "plane.yaml", "corner.yaml", "corner_glossy.yaml", "satellite_ground_test.yaml",
+)
 
 
 def default_scene_paths() -> list[Path]:

@@ -9,8 +9,10 @@ import pytest
 
 from sim_core.errors import InvalidInputError
 from sim_core.materials import CookTorrance, material_preset
+from sim_core.materials.kernels import fresnel_dielectric, lobe_probabilities
 
 from .harness import (
+    albedo_quadrature,
     check_albedo_at_most_one,
     check_albedo_consistency,
     check_chi2,
@@ -139,6 +141,27 @@ def test_index_matched_surface_reflects_only_diffusely() -> None:
     wi = spherical(np.radians([0.0, 30.0, 89.0]), 0.0)
     wo = spherical(np.radians([0.0, 30.0, 89.0]), np.pi)
     np.testing.assert_allclose(mat.eval_local(wi, wo), 0.4 / math.pi, rtol=1e-12)
+
+
+def test_the_glossy_tile_samples_its_dim_specular_lobe_in_proportion_to_its_albedo() -> None:
+    # Normal view: F = ((n2 - 1) / (n2 + 1))^2 = 0.035, so the lobe reflects ks F = 0.0087
+    # against kd = 0.07 and gets 11 % of the samples (ks / (ks + kd) would give it 78 %).
+    tile = material_preset("black-glossy-tile")
+    f0 = ((1.46 - 1.0) / (1.46 + 1.0)) ** 2
+    p_spec, p_diff = lobe_probabilities(tile.kernel_kind, tile.kernel_params(), 1.0)
+    assert p_spec == pytest.approx(0.25 * f0 / (0.25 * f0 + 0.07), rel=1e-12)
+    assert p_spec == pytest.approx(0.111, abs=1e-3)
+    assert p_diff == pytest.approx(1.0 - p_spec, rel=1e-12)
+    # At grazing view the lobe reflects more (F -> 1) and gets more of the samples.
+    grazing, _ = lobe_probabilities(tile.kernel_kind, tile.kernel_params(), math.cos(1.5))
+    assert grazing > 0.5
+    # Measured: the lobe's albedo (quadrature) agrees with ks F(θo) within 8 % up to 70°.
+    spec = CookTorrance(kd=0.0, ks=0.25, m=0.06, n2=1.46)
+    for theta in (0.0, 40.0, 70.0):
+        wo = direction_deg(theta)
+        a_spec = albedo_quadrature(spec, wo)
+        estimate = 0.25 * fresnel_dielectric(math.cos(math.radians(theta)), 1.46)
+        assert estimate == pytest.approx(a_spec, rel=0.08)
 
 
 MATERIALS = [

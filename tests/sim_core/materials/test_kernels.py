@@ -93,19 +93,26 @@ def test_parameter_vectors_carry_the_documented_values() -> None:
     )
     s = SeedMicrofacet(ks=0.6, kd=0.2, fresnel_exponent=5.0, sigma=0.02, f0=0.1)
     np.testing.assert_array_equal(
-        s.kernel_params(), [s.alpha, 0.6 / 0.8, 0.2 / 0.8, 0.2 / math.pi, 0.6, 0.1, 5.0, 0.0]
+        s.kernel_params(), [s.alpha, 0.6, 0.2, 0.2 / math.pi, 0.6, 0.1, 5.0, 1.0]
     )
     for angle, flag in (("incidence", 0.0), ("half", 1.0)):
         c = CookTorrance(kd=0.3, ks=0.5, m=0.2, n2=1.5, fresnel_angle=angle)
         np.testing.assert_array_equal(
-            c.kernel_params(), [0.2, 0.5 / 0.8, 0.3 / 0.8, 0.3 / math.pi, 0.5, 1.5, flag, 0.0]
+            c.kernel_params(), [0.2, 0.5, 0.3, 0.3 / math.pi, 0.5, 1.5, flag, 1.0]
         )
     h = Hapke(w=0.36, b0=1.5, h=0.2, phase_b=-0.4)
     np.testing.assert_array_equal(
         h.kernel_params(), [0.36, 1.5, 0.2, -0.4, 0.8, 0.36 / (4 * math.pi), 1.5 * 0.2, 0.0]
     )
-    # A black microfacet surface has no lobe to pick: both probabilities 0.
+    # A black microfacet surface has no lobe to pick: both weights 0.
     assert SeedMicrofacet(ks=0.0, kd=0.0).kernel_params()[1:3].tolist() == [0.0, 0.0]
+    # The naive mixture of issue 16: fixed probabilities, no Fresnel factor, same BRDF.
+    q = kn.fixed_lobes(c.kernel_params(), 0.5)
+    np.testing.assert_array_equal(q[[1, 2, 7]], [0.5, 0.5, 0.0])
+    np.testing.assert_array_equal(np.delete(q, [1, 2, 7]), np.delete(c.kernel_params(), [1, 2, 7]))
+    for bad in (0.0, 0.04, 1.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="outside"):
+            kn.fixed_lobes(c.kernel_params(), bad)
 
 
 def test_parameter_vector_of_a_wrong_shape_is_rejected() -> None:

@@ -15,6 +15,7 @@ import pytest
 from scipy import integrate, stats
 
 from sim_core.errors import InvalidInputError
+from sim_core.materials import CookTorrance, Lambertian, material_preset
 from sim_core.materials.kernels import (
     U_MAX,
     beckmann_d,
@@ -25,9 +26,9 @@ from sim_core.materials.kernels import (
     sample_cosine_hemisphere,
     vcavity_g,
 )
-from sim_core.materials.microfacet import check_parameter
+from sim_core.materials.microfacet import FixedLobeMixture, check_parameter
 
-from .harness import spherical
+from .harness import check_albedo_consistency, check_chi2, direction_deg, spherical
 
 
 def vec(kernel, *args):
@@ -199,3 +200,32 @@ def test_check_parameter_accepts_bounds_and_numpy_scalars() -> None:
     assert check_parameter("x", 0, 0.0, 1.0, model="m") == 0.0
     assert check_parameter("x", np.float32(1.0), 0.0, 1.0, model="m") == 1.0
     assert isinstance(check_parameter("x", np.int64(1), 0.0, 2.0, model="m"), float)
+
+
+# -------------------------------------------------------------------------------------------
+# The fixed-lobe reference sampler (issue 16)
+# -------------------------------------------------------------------------------------------
+def test_fixed_lobe_mixture_has_the_brdf_of_its_base_and_a_consistent_sampler() -> None:
+    tile = material_preset("black-glossy-tile")
+    naive = FixedLobeMixture(tile)
+    wi, wo = spherical(np.radians([5.0, 40.0, 70.0]), 0.0), spherical(np.radians(40.0), np.pi)
+    wo = np.repeat(wo, 3, axis=0)
+    np.testing.assert_array_equal(naive.eval_local(wi, wo), tile.eval_local(wi, wo))
+    assert naive.kernel_kind == tile.kernel_kind and naive.albedo_bound == tile.albedo_bound
+    # half the samples in each lobe, whatever the Fresnel factor: the pdf says so
+    cos_i = wi[:, 2]
+    beckmann = CookTorrance(kd=0.0, ks=0.25, m=0.06, n2=1.46).pdf_local(wi, wo)
+    np.testing.assert_allclose(naive.pdf_local(wi, wo), 0.5 * beckmann + 0.5 * cos_i / math.pi,
+                               rtol=1e-12)
+    check_chi2(naive, direction_deg(40.0, 75.0), seed=11)
+    check_albedo_consistency(naive, direction_deg(40.0, 75.0), n_samples=100_000, seed=12)
+
+
+def test_fixed_lobe_mixture_refuses_a_model_without_lobes_and_a_starved_lobe() -> None:
+    with pytest.raises(InvalidInputError) as excinfo:
+        FixedLobeMixture(Lambertian(0.5))  # type: ignore[arg-type]
+    assert excinfo.value.field == "base"
+    with pytest.raises(InvalidInputError, match=r"p_spec = 0.01 is outside \[0.05, 1\]"):
+        FixedLobeMixture(material_preset("black-glossy-tile"), p_spec=0.01)
+    with pytest.raises(InvalidInputError, match=r"p_spec = 1\.0 is outside"):
+        FixedLobeMixture(material_preset("black-glossy-tile"), p_spec=1.0)

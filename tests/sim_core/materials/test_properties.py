@@ -11,10 +11,12 @@ import functools
 import math
 
 import numpy as np
+import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from sim_core.materials import CookTorrance, Hapke, Lambertian, Material, SeedMicrofacet
+from sim_core.materials import kernels as kn
 from sim_core.materials.hapke import hapke_max_w
 from sim_core.materials.microfacet import U_MAX
 
@@ -301,3 +303,66 @@ def test_normals_at_the_horizon_give_finite_nonnegative_results(
         material.sample(wo_arr, normals, uniforms(rng, n)).weight,
     ):
         assert np.all(np.isfinite(values)) and np.all(values >= 0.0)
+
+
+# -------------------------------------------------------------------------------------------
+# Lobe choice of the microfacet models (issue 16)
+# -------------------------------------------------------------------------------------------
+def microfacets() -> st.SearchStrategy[SeedMicrofacet | CookTorrance]:
+    return st.one_of(seed_microfacets(), cook_torrances())
+
+
+#: view cosines at the edges: the SPECIAL_Z, below the horizon, and rounding just past +-1
+EDGE_WOZ = [*SPECIAL_Z, -1e-300, -0.5, -1.0, 1.0 + 2e-16, -1.0 - 2e-16]
+
+
+@FAST
+@given(material=microfacets(), woz=st.one_of(st.sampled_from(EDGE_WOZ), st.floats(-1.0, 1.0)))
+def test_lobe_probabilities_are_a_distribution_over_the_lobes_present(
+    material: SeedMicrofacet | CookTorrance, woz: float
+) -> None:
+    p_spec, p_diff = kn.lobe_probabilities(material.kernel_kind, material.kernel_params(), woz)
+    assert math.isfinite(p_spec) and math.isfinite(p_diff)
+    assert 0.0 <= p_spec <= 1.0 and 0.0 <= p_diff <= 1.0
+    # a lobe is sampled exactly when it is present (ks = 0 or kd = 0: never; black: neither)
+    assert (p_spec > 0.0) == (material.ks > 0.0)
+    assert (p_diff > 0.0) == (material.kd > 0.0)
+    if material.ks > 0.0 or material.kd > 0.0:
+        assert p_spec + p_diff == pytest.approx(1.0, abs=1e-15)
+    if material.ks > 0.0 and material.kd > 0.0:
+        # never starved: a specular albedo estimate of 0 (F0 = 0 at normal view, n2 = 1) must
+        # not leave a lobe with positive values unsampled
+        assert p_spec >= kn.P_SPEC_MIN
+
+
+@FAST
+@given(material=microfacets(), woz=st.one_of(st.sampled_from(SPECIAL_Z), st.floats(0.0, 1.0)))
+def test_lobes_are_chosen_in_proportion_to_their_albedo_at_wo(
+    material: SeedMicrofacet | CookTorrance, woz: float
+) -> None:
+    kind, p = material.kernel_kind, material.kernel_params()
+    fresnel = kn.mirror_fresnel(kind, p, woz)
+    assert 0.0 <= fresnel <= 1.0
+    assume(material.ks > 0.0 and material.kd > 0.0)
+    p_spec, p_diff = kn.lobe_probabilities(kind, p, woz)
+    a_spec, a_diff = material.ks * fresnel, material.kd
+    if a_spec >= kn.P_SPEC_MIN / (1.0 - kn.P_SPEC_MIN) * a_diff * (1.0 + 1e-9):
+        assert p_spec * a_diff == pytest.approx(p_diff * a_spec, rel=1e-12)
+    else:
+        assert (p_spec, p_diff) == (kn.P_SPEC_MIN, 1.0 - kn.P_SPEC_MIN)
+
+
+@FAST
+@given(material=microfacets(), p_fixed=bounded(kn.P_SPEC_MIN, kn.U_MAX, 0.5),
+       woz=st.one_of(st.sampled_from(SPECIAL_Z), st.floats(0.0, 1.0)))
+def test_fixed_lobes_keep_their_probabilities_and_the_brdf(
+    material: SeedMicrofacet | CookTorrance, p_fixed: float, woz: float
+) -> None:
+    kind, p = material.kernel_kind, material.kernel_params()
+    q = kn.fixed_lobes(p, p_fixed)
+    p_spec, p_diff = kn.lobe_probabilities(kind, q, woz)
+    assert p_spec == p_fixed
+    assert p_diff == pytest.approx(1.0 - p_fixed, rel=1e-12, abs=1e-16)
+    wi = np.array([[0.3, 0.1, math.sqrt(0.9)], [0.0, 0.0, 1.0]])
+    wo = np.array([_unit(woz, 2.0)] * 2)
+    np.testing.assert_array_equal(kn.eval_batch(kind, q, wi, wo), material.eval_local(wi, wo))
