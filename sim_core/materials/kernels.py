@@ -766,6 +766,11 @@ def tabulated_sample_direction(table, row, wox, woy, woz, u0, u1, u2):
     sign = 1.0 if side < 0.5 else -1.0
     rho = math.hypot(wox, woy)
     co, so = (wox / rho, woy / rho) if rho > 0.0 else (1.0, 0.0)  # zenith wo: azimuth 0
+    if 0.0 < rho < 1e-300:
+        # subnormal components keep a few bits: their ratios to rho are no longer a unit
+        # vector (found by hypothesis: wo 5e-324 rad from the zenith gave |wi| = 1.41)
+        n = math.hypot(co, so)  # >= ~0.7: one of the two ratios is at least 1/sqrt(2)
+        co, so = co / n, so / n
     sd, cd = sincos_turns(dphi * (0.5 / math.pi))
     sd = sign * sd
     # azimuth of wi = azimuth of wo ± Δφ

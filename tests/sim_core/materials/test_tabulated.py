@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from numba import njit
 
@@ -219,7 +219,7 @@ def test_kernel_sample_pdf_is_pdf_brdf_and_matches_the_batch_api() -> None:
 # -------------------------------------------------------------------------------------------
 # Edges, as properties
 # -------------------------------------------------------------------------------------------
-EDGE_THETA = [0.0, 1e-300, 1e-9, math.radians(80.0), math.radians(89.999), math.pi / 2,
+EDGE_THETA = [0.0, 5e-324, 1e-300, 1e-9, math.radians(80.0), math.radians(89.999), math.pi / 2,
               math.pi / 2 + 1e-12, 2.5]
 theta = st.one_of(st.sampled_from(EDGE_THETA), st.floats(0.0, math.pi))
 phi = st.one_of(st.sampled_from([0.0, math.pi]), st.floats(0.0, 2 * math.pi))
@@ -244,6 +244,8 @@ def test_values_and_densities_are_finite_and_zero_below_the_horizon(
 
 @settings(max_examples=300, deadline=None)
 @given(st.sampled_from(list(CASES)), theta, phi, unit, unit, unit)
+# wo 5e-324 rad off the zenith: its subnormal x and y once made a wi of length 1.41
+@example("diffuse", 5e-324, 1.0, 1.0, 0.0, 1.0)
 def test_samples_are_valid_with_their_exact_density(case, to, po, u0, u1, u2) -> None:
     mat = material_of(case)
     wo = spherical(to, po)
