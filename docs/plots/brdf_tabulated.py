@@ -21,7 +21,7 @@ import numpy as np
 
 from sim_core.materials import Tabulated, material_preset
 from sim_core.materials.goniometer import GoniometerTable
-from sim_core.materials.idw import configuration_directions
+from sim_core.materials.idw import configuration_directions, goniometer_measurement
 
 #: the incidence angle of the plots [deg] (the paper's Fig. 4: 30 deg)
 INCIDENCE_DEG = 30.0
@@ -38,14 +38,8 @@ DEFAULT_OUTPUT = Path(__file__).resolve().parents[1] / "images" / "brdf-tabulate
 
 def goniometer_table(preset: str, step_deg: float) -> GoniometerTable:
     """``preset`` sampled on (θi, θr, Δφ) steps, without the goniometer's blind spots."""
-    z = np.arange(0.0, MAX_ZENITH_DEG + 1e-9, step_deg)
-    ti, tr, ph = np.meshgrid(z, z, np.arange(0.0, 180.0 + 1e-9, step_deg), indexing="ij")
-    ti, tr, ph = ti.ravel(), tr.ravel(), ph.ravel()
-    wi, wo = configuration_directions(ti, tr, ph)
-    beta = np.degrees(np.arccos(np.clip(np.sum(wi * wo, axis=1), -1.0, 1.0)))
-    keep = beta > RETRO_GAP_DEG
-    f = material_preset(preset).eval_local(wi, wo)
-    return GoniometerTable(ti[keep], tr[keep], ph[keep], f[keep], source=preset)
+    return goniometer_measurement(material_preset(preset), step_deg, retro_gap_deg=RETRO_GAP_DEG,
+                                  max_zenith_deg=MAX_ZENITH_DEG, source=preset)
 
 
 def plane_of_incidence(table: GoniometerTable) -> tuple[np.ndarray, np.ndarray]:

@@ -58,6 +58,7 @@ __all__ = [
     "angle_between",
     "canonical_pairs",
     "configuration_directions",
+    "goniometer_measurement",
     "idw_interpolate",
     "pair_distance_rad",
 ]
@@ -124,6 +125,22 @@ def configuration_directions(
     wi = np.stack([np.sin(ti), np.zeros_like(ti), np.cos(ti)], axis=1)
     wo = np.stack([np.sin(tr) * np.cos(ph), np.sin(tr) * np.sin(ph), np.cos(tr)], axis=1)
     return wi, wo
+
+
+def goniometer_measurement(material, step_deg: float, *, retro_gap_deg: float = 10.0,
+                           max_zenith_deg: float = 80.0, source: str = "") -> GoniometerTable:
+    """A material as a goniometer measures it: ``material.eval_local`` on a (θi, θr, Δφ) grid
+    of ``step_deg`` up to ``max_zenith_deg``, without the configurations within
+    ``retro_gap_deg`` of retro-reflection (where the detector would shade the light): the
+    blind spots the interpolation (eqs. 16-17) has to fill."""
+    z = np.arange(0.0, max_zenith_deg + 1e-9, step_deg)
+    ti, tr, ph = np.meshgrid(z, z, np.arange(0.0, 180.0 + 1e-9, step_deg), indexing="ij")
+    ti, tr, ph = ti.ravel(), tr.ravel(), ph.ravel()
+    wi, wo = configuration_directions(ti, tr, ph)
+    beta = np.degrees(np.arccos(np.clip(np.sum(wi * wo, axis=1), -1.0, 1.0)))
+    keep = beta > retro_gap_deg
+    f = material.eval_local(wi, wo)
+    return GoniometerTable(ti[keep], tr[keep], ph[keep], f[keep], source=source)
 
 
 def pair_distance_rad(

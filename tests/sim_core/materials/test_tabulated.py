@@ -10,6 +10,7 @@ one (``white-matte-tile`` at the paper's 5-deg steps for diffuse materials) and 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -23,7 +24,11 @@ from sim_core.errors import InvalidInputError, SceneError
 from sim_core.materials import Lambertian, Tabulated, make_material, material_preset
 from sim_core.materials import kernels as kn
 from sim_core.materials.goniometer import GoniometerTable
-from sim_core.materials.idw import configuration_directions, idw_interpolate
+from sim_core.materials.idw import (
+    configuration_directions,
+    goniometer_measurement,
+    idw_interpolate,
+)
 from sim_core.materials.tabulated import ALBEDO_TOLERANCE
 from sim_core.materials.tabulated_grid import MAX_GRID_NODES
 from sim_core.render import RenderSettings, render
@@ -47,15 +52,11 @@ HEADER = "incidence_zenith_deg,reflection_zenith_deg,azimuth_difference_deg,brdf
 
 def goniometer_table(name: str, step_deg: float, retro_gap_deg: float = 10.0,
                      max_zenith_deg: float = 80.0, scale: float = 1.0) -> GoniometerTable:
-    """The preset ``name`` as a goniometer would measure it (see the module docstring)."""
-    z = np.arange(0.0, max_zenith_deg + 1e-9, step_deg)
-    ti, tr, ph = np.meshgrid(z, z, np.arange(0.0, 180.0 + 1e-9, step_deg), indexing="ij")
-    ti, tr, ph = ti.ravel(), tr.ravel(), ph.ravel()
-    wi, wo = configuration_directions(ti, tr, ph)
-    beta = np.degrees(np.arccos(np.clip(np.sum(wi * wo, axis=1), -1.0, 1.0)))
-    keep = beta > retro_gap_deg
-    f = material_preset(name).eval_local(wi, wo) * scale
-    return GoniometerTable(ti[keep], tr[keep], ph[keep], f[keep], source=f"{name}@{step_deg}deg")
+    """The preset ``name`` as a goniometer would measure it (see the module docstring), its
+    values times ``scale``."""
+    t = goniometer_measurement(material_preset(name), step_deg, retro_gap_deg=retro_gap_deg,
+                               max_zenith_deg=max_zenith_deg, source=f"{name}@{step_deg}deg")
+    return dataclasses.replace(t, brdf_per_sr=t.brdf_per_sr * scale)
 
 
 #: (preset, goniometer step [deg]) of the two test materials
