@@ -218,7 +218,7 @@ def fit_object(
                       "a degree wide: they appear in at most a small patch of one view, which "
                       "does not determine the roughness; the presets' roughness is kept"},
         "render": {"integrator": render_settings.integrator, "spp": render_settings.spp,
-                   "multipath_views": [bool(p.multipath) for p in final_pred],
+                   "effects": "all",
                    "region_pixels": [int(r.sum()) for r in renderer.regions],
                    "renders": renderer.renders},
         "seconds": {"icp": t_icp, "setup": t_setup,

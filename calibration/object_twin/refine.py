@@ -348,28 +348,35 @@ def refine_object_twin(
     evaluations = recentres = 0
     line_steps: list[float] = []
 
-    def problem(x: np.ndarray, rel: float) -> _Problem:
-        pred = renderer.predict(object_twin_of(x, fitted, fixed, lever))
+    def problem(x: np.ndarray, rel: float, previous: _Problem | None) -> _Problem:
+        """The problem with weights made at ``x``; ``previous`` (None after new regions) may
+        hold the prediction at ``x`` already."""
+        key = np.round(x, 9).tobytes()
+        pred = previous.cache.get(key) if previous is not None else None
+        if pred is None:
+            pred = renderer.predict(object_twin_of(x, fitted, fixed, lever))
         sigma = [phasor_sigma(p, c, s, spp, rel)
                  for p, c, s in zip(pred, captures, sensors, strict=True)]
         masks = residual_masks(captures, pred, renderer.regions)
         prob = _Problem(renderer, measured, masks, sigma, fitted, fixed, lever)
-        prob.cache[np.round(x, 9).tobytes()] = pred
+        prob.cache[key] = pred
         return prob
 
     centre = x.copy()
-    first = problem(x, solves[0][0])
+    first = problem(x, solves[0][0], None)
     r0 = first.residual(x)
     chi2_before = float(r0 @ r0) / max(1, r0.size - x.size)
     x = _height_search(first, x, axis)
     evaluations += first.evaluations
+    prob = first
     for rel, n_iter in solves:
         for _attempt in range(MAX_RECENTRES + 1):
             if _reach_used(x, centre) > RECENTRE_AT:
                 renderer.recentre(object_twin_of(x, fitted, fixed, lever))
                 centre = x.copy()
                 recentres += 1
-            prob = problem(x, rel)
+                prob = None  # its predictions are of the old regions
+            prob = problem(x, rel, prob)
             x, r, jac, taken, at_edge = _levenberg_marquardt(prob, x, n_iter, centre)
             line_steps.extend(taken)
             evaluations += prob.evaluations

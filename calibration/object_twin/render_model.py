@@ -86,8 +86,6 @@ class PredictedView:
         Index into the scene's objects of what each pixel centre sees (-1: nothing).
     saturated : (H, W) bool
         Pixels the sensor model saturates (or holds at its SBI limit).
-    multipath : bool
-        Whether the effect plan rendered interreflections.
     """
 
     phasor: np.ndarray = field(repr=False)
@@ -95,7 +93,6 @@ class PredictedView:
     taps: np.ndarray = field(repr=False)
     object_id: np.ndarray = field(repr=False)
     saturated: np.ndarray = field(repr=False)
-    multipath: bool = False
 
     @property
     def amplitude(self) -> np.ndarray:
@@ -206,10 +203,6 @@ class TwinRenderer:
         """Each view's re-rendered pixels, (H, W) bool."""
         return [v.region for v in self.views]
 
-    @property
-    def multipath(self) -> bool:
-        return any(v.plan.enabled("multipath") for v in self.views)
-
     def _scene(self, cspec: SceneSpec, cap: AveragedCapture,
                object_twin: ObjectTwinParameters) -> Scene:
         return build_scene(cspec, self.base_dir, turntable_deg=cap.turntable_angle_deg,
@@ -233,8 +226,7 @@ class TwinRenderer:
             out.append(PredictedView(
                 phasor=phasor, mc_var=_mc_var_dn(lf, phasor, v.region),
                 taps=np.asarray(raw.taps, dtype=np.float64), object_id=lf.object_id,
-                saturated=raw.saturated | raw.sbi_limit,
-                multipath=v.plan.enabled("multipath")))
+                saturated=raw.saturated | raw.sbi_limit))
             self.renders += 1
             self.pixels_rendered += int(v.pixels.size)
         return out
