@@ -88,6 +88,11 @@ class Settings(BaseSettings):
     job_timeout_s: float = Field(600.0, gt=0.0)
 
     camera_spp: int = Field(8, ge=1, le=4096)
+    #: the simulated camera renders its world with at least ``camera_spp`` samples and more
+    #: where the Monte Carlo error is above this fraction of its sensor's noise (the lab's
+    #: "reality" then has little render noise frozen into it, as a real scene has none);
+    #: None: ``camera_spp`` everywhere
+    camera_noise_fraction: float | None = Field(None, gt=0.0, le=2.0)
     camera_integrator: Literal["direct", "path"] = "path"
     camera_seed: int = Field(0, ge=0, le=2**31 - 1)
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from sim_core import frame_io
-from sim_core.adaptive import AdaptiveReport, render_adaptive
+from sim_core.adaptive import INITIAL_SPP, MAX_SPP, AdaptiveReport, render_adaptive
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.optics import apply_mtf
 from sim_core.plan import EffectPlan, plan_effects
@@ -95,8 +95,15 @@ def render_light(
     progress=None,
     target_range_error_mm: float | None = None,
     time_budget_s: float | None = None,
+    target_noise_fraction: float | None = None,
 ) -> RenderedLight:
-    """Plan the effects and render the light field (the first stages of :func:`simulate`)."""
+    """Plan the effects and render the light field (the first stages of :func:`simulate`).
+
+    With ``target_noise_fraction`` every pixel gets ``settings.spp`` samples and those whose
+    Monte Carlo error is still above that fraction of the sensor's noise get more
+    (:func:`sim_core.adaptive.noise_fraction`); with ``target_range_error_mm`` or
+    ``time_budget_s`` the render starts from :data:`sim_core.adaptive.INITIAL_SPP`.
+    """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     own_tracer = tracer is None
@@ -115,11 +122,15 @@ def render_light(
             footprint_px=plan.pixel_footprint_px(scene),
         )
         adaptive = None
-        if target_range_error_mm is None and time_budget_s is None:
+        if target_range_error_mm is None and time_budget_s is None and (
+                target_noise_fraction is None):
             result = render(scene, run, tracer=tracer, progress=progress)
         else:
             target_m = None if target_range_error_mm is None else target_range_error_mm * 1e-3
-            result, adaptive = render_adaptive(scene, run, target_m, time_budget_s, tracer)
+            initial = INITIAL_SPP if target_noise_fraction is None else max(settings.spp, 1)
+            result, adaptive = render_adaptive(
+                scene, run, target_m, time_budget_s, tracer, initial_spp=initial,
+                max_spp=max(MAX_SPP, initial), target_noise_fraction=target_noise_fraction)
     finally:
         if own_tracer:
             tracer.close()
@@ -210,17 +221,19 @@ def simulate(
     target_range_error_mm: float | None = None,
     time_budget_s: float | None = None,
     noise_rng: np.random.Generator | None = None,
+    target_noise_fraction: float | None = None,
 ) -> SimulatedFrame:
     """Simulate one frame of ``scene``; see the module docstring for the stages.
 
     :func:`render_light` then :func:`expose_light`. With ``target_range_error_mm`` and/or
     ``time_budget_s`` the render samples adaptively (:mod:`sim_core.adaptive`) instead of taking
-    ``settings.spp`` samples everywhere. ``noise_rng`` replaces the sensor-noise generator
-    derived from ``settings.seed`` (the camera simulator draws each frame's noise from its own
-    seed and frame number).
+    ``settings.spp`` samples everywhere (``target_noise_fraction``: at least ``settings.spp``,
+    more where the Monte Carlo error is above that fraction of the sensor's noise).
+    ``noise_rng`` replaces the sensor-noise generator derived from ``settings.seed`` (the camera
+    simulator draws each frame's noise from its own seed and frame number).
     """
     rendered = render_light(scene, settings, effects, ideal, tolerance_mm, tracer, progress,
-                            target_range_error_mm, time_budget_s)
+                            target_range_error_mm, time_budget_s, target_noise_fraction)
     return expose_light(scene, rendered, ideal, noise_rng)
 
 

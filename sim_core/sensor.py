@@ -226,16 +226,16 @@ def expose(
     )
 
 
-def predicted_range_std_m(
-    e: PixelElectrons, sensor: SensorParams, frequency_hz: float, k: int = 0
-) -> np.ndarray:
-    """Shot- and read-noise-limited standard deviation of range [m], per pixel.
+def predicted_phase_std_rad(e: PixelElectrons, sensor: SensorParams, k: int = 0) -> np.ndarray:
+    """Shot- and read-noise-limited standard deviation of the phase [rad], per pixel; it is
+    also the relative standard deviation of the amplitude (the noise is the same along and
+    across the phasor).
 
     Each C_i = A_i - B_i has variance N_tot + 2 sigma_r^2 (+ 2 n_delta with SBI active), with
     N_tot = N_dc + N_amb + N_dark the electrons of one exposure; the phasor
     Z = (C0 - C2) - 1j (C3 - C1) has magnitude 2 D |N_f| and per-component variance twice
-    that. The phase error is then sigma_phi = sqrt(var(C) / 2) / (D |N_f|) and the range error
-    c / (4 pi f) * sigma_phi (seed eq. 7). Infinite where there is no modulated signal.
+    that. So sigma_phi = sqrt(var(C) / 2) / (D |N_f|) (seed eq. 7 before the range factor).
+    Infinite where there is no modulated signal.
     """
     n_tot = e.active + e.ambient + e.dark
     var_c = n_tot + 2.0 * sensor.read_noise_e**2
@@ -244,7 +244,18 @@ def predicted_range_std_m(
         half = 0.5 * n_tot + 0.5 * sensor.demodulation_contrast * np.abs(e.phasor[k])
         var_c = var_c + 2.0 * np.maximum(half - sensor.sbi_start_e, 0.0)
     signal = sensor.demodulation_contrast * np.abs(e.phasor[k])
-    with np.errstate(divide="ignore"):
-        sigma_phi = np.where(signal > 0.0, np.sqrt(0.5 * var_c) / np.where(signal > 0, signal, 1),
-                             np.inf)
+    # A subnormal signal's quotient overflows to inf: no measurable modulation, as for 0.
+    with np.errstate(divide="ignore", over="ignore"):
+        return np.where(signal > 0.0, np.sqrt(0.5 * var_c) / np.where(signal > 0, signal, 1),
+                        np.inf)
+
+
+def predicted_range_std_m(
+    e: PixelElectrons, sensor: SensorParams, frequency_hz: float, k: int = 0
+) -> np.ndarray:
+    """Shot- and read-noise-limited standard deviation of range [m], per pixel:
+    c / (4 pi f) times :func:`predicted_phase_std_rad` (seed eq. 7). Infinite where there is no
+    modulated signal.
+    """
+    sigma_phi = predicted_phase_std_rad(e, sensor, k)
     return SPEED_OF_LIGHT_M_S / (4.0 * np.pi * frequency_hz) * sigma_phi

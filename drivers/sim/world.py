@@ -80,6 +80,11 @@ class SimulatedWorld:
         of a panel's light) flips with the reality's reflectances, so a twin fitted to averaged
         frames would see a world that lacks light any real one has. ``"auto"`` is for speed
         where that cannot matter.
+    noise_fraction : float, optional
+        Render at least ``settings.spp`` samples and more where the Monte Carlo error is above
+        this fraction of the sensor's noise (:func:`sim_core.adaptive.noise_fraction`): a real
+        scene has no render noise, and what a render leaves in the world's light is frozen
+        into every capture of it (a twin can never match it). None: ``spp`` everywhere.
     """
 
     def __init__(
@@ -89,10 +94,12 @@ class SimulatedWorld:
         settings: RenderSettings | None = None,
         reality: RealityFile | None = None,
         effects: str = "all",
+        noise_fraction: float | None = None,
     ) -> None:
         if effects not in ("all", "auto"):
             raise ValueError(f"effects must be 'all' or 'auto', got {effects!r}")
         self.effects = effects
+        self.noise_fraction = noise_fraction
         self.spec = spec
         self.base_dir = Path(base_dir)
         self.settings = settings or RenderSettings(integrator="path", spp=8, max_bounces=2)
@@ -167,7 +174,8 @@ class SimulatedWorld:
                             solar_suns=suns, twin=reality)
         settings = dataclasses.replace(self.settings, seed=request.seed * 1_000_003
                                        + self._generation)
-        entry = (scene, render_light(scene, settings, effects=self.effects))
+        entry = (scene, render_light(scene, settings, effects=self.effects,
+                                     target_noise_fraction=self.noise_fraction))
         self._cache[key] = entry
         while len(self._cache) > CACHE_STATES:
             self._cache.popitem(last=False)

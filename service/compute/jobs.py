@@ -51,6 +51,10 @@ class SimulationJob:
     threads : int or None
         Render threads on the worker (None: all its cores).
     effects : "auto" or "all"
+    noise_fraction : float or None
+        Render at least ``spp`` samples and more where the Monte Carlo error is above this
+        fraction of the sensor's noise (:func:`sim_core.adaptive.noise_fraction`); None: ``spp``
+        everywhere.
     ideal : bool
         Ideal sensor (no noise, SBI, ADC).
     scene_name : str
@@ -81,6 +85,7 @@ class SimulationJob:
     twin: dict[str, Any] | None = None
     #: contents of the goniometer tables of tabulated materials, keyed by ``params.table``
     tables: dict[str, bytes] = field(default_factory=dict)
+    noise_fraction: float | None = None
 
 
 def _material_specs(spec: SceneSpec):
@@ -108,6 +113,7 @@ def make_job(
     scene_name: str = "",
     extra: dict[str, Any] | None = None,
     twin: dict[str, Any] | None = None,
+    noise_fraction: float | None = None,
 ) -> SimulationJob:
     """A job for ``spec`` posed at the given rig state, with its mesh files packed in."""
     from sim_core.scene import inline_material_files
@@ -142,6 +148,7 @@ def make_job(
         scene_name=scene_name,
         extra=dict(extra or {}),
         twin=twin,
+        noise_fraction=noise_fraction,
     )
 
 
@@ -240,7 +247,8 @@ def run_job(job: SimulationJob) -> SimulationResult:
         threads=job.threads,
     )
     with RENDER_LOCK:
-        frame = simulate(built, settings, effects=job.effects, ideal=job.ideal)
+        frame = simulate(built, settings, effects=job.effects, ideal=job.ideal,
+                         target_noise_fraction=job.noise_fraction)
     worker = f"{socket.gethostname()}:{os.getpid()}"
     frame.extra.update({"kind": "simulated", **job.extra, "worker": worker})
     t0 = time.perf_counter()

@@ -92,6 +92,7 @@ def open_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, Any]:
             RenderSettings(integrator=settings.camera_integrator, spp=settings.camera_spp,
                            max_bounces=2),
             reality=None if settings.reality is None else load_reality(settings.reality),
+            noise_fraction=settings.camera_noise_fraction,
         )
 
         def frame_source(request):

@@ -77,6 +77,9 @@ class PosePlan:
     fitted: Twin | None = None
     #: the effects the simulations render ("auto": the effect planner's choice, or "all")
     effects: str = "auto"
+    #: Monte Carlo error target of the simulations, as a fraction of the sensor's noise
+    #: (:func:`sim_core.adaptive.noise_fraction`); None: ``spp`` everywhere
+    noise_fraction: float | None = None
 
     @property
     def target(self) -> RigState:
@@ -195,6 +198,7 @@ def _submit_one(
         spp=plan.spp,
         seed=unit_seed(plan.seed, plan.pose_index, plan.repeat),
         effects=plan.effects,
+        noise_fraction=plan.noise_fraction,
         threads=threads,
         scene_name=plan.scene.name,
         extra={

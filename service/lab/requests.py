@@ -188,6 +188,17 @@ class ObjectFitIn(RequestBody):
         "'all' (the default: what is left after the fit is then the model's error, not an "
         "effect the planner judged below one frame's depth noise, such as the interreflections "
         "that change the grey image) or 'auto' (the effect planner's choice, faster).")
+    noise_fraction: Annotated[
+        float, Strict(),
+        Field(description="Every pose's simulations (nominal and fitted) take the campaign's "
+              "samples per pixel and more where their Monte Carlo error is above this "
+              "fraction of the camera's own noise (glints, edges), 0.05 to 2; null: the "
+              "campaign's spp everywhere. A twin at fraction k has (1 + k^2) times the "
+              "noise variance of a capture: 0.35 keeps the fitted twin within 0.5 dB of the "
+              "noise ceiling when the fit is right.",
+              json_schema_extra={"minimum": 0.05, "maximum": 2}),
+        AfterValidator(_in_range(0.05, 2.0, "")),
+    ] | None = 0.35
 
 
 class CampaignCreate(RequestBody):

@@ -231,9 +231,10 @@ class CampaignRunner:
         scene = SceneSource.from_json(camp.scene_json, camp.scene_base_dir, camp.scene_name)
         mask = MaskSpec.model_validate_json(camp.mask_json)
         twin = Twin.of(calibration_from_json(camp.calibration_json))  # pinned at creation
-        fitted, effects = None, "auto"
+        fitted, effects, noise_fraction = None, "auto", None
         if camp.object_fit_json is not None:
-            effects = ObjectFitIn.model_validate_json(camp.object_fit_json).effects
+            fit_in = ObjectFitIn.model_validate_json(camp.object_fit_json)
+            effects, noise_fraction = fit_in.effects, fit_in.noise_fraction
             object_twin_json = camp.object_twin_json
             if object_twin_json is None:  # not fitted yet (or the last try did not finish)
                 object_twin_json, stopped = self._object_fit(run, camp, scene, twin, poses)
@@ -256,7 +257,7 @@ class CampaignRunner:
                     break
                 plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,
                                 camp.spp, run.campaign_id, pose.pose_index, repeat, twin,
-                                fitted, effects)
+                                fitted, effects, noise_fraction)
                 run.current = {"pose_index": pose.pose_index, "repeat": repeat,
                                "turntable_deg": pose.turntable_deg,
                                "solar_suns": pose.solar_suns}

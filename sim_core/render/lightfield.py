@@ -64,21 +64,28 @@ class LightField:
     def shape(self) -> tuple[int, int]:
         return self.dc_active.shape
 
-    def phasor_standard_error(self) -> np.ndarray:
-        """Standard error of the phasor estimate perpendicular to its mean, (n_f, H, W).
+    def phasor_standard_error(self, along: str = "perpendicular") -> np.ndarray:
+        """Standard error of the phasor estimate perpendicular to its mean (``along=
+        "perpendicular"``) or along it (``"parallel"``), (n_f, H, W).
 
-        This is the component that moves the phase: for a mean phasor m = |m| e^{i phi}, the
-        phase error is about this value divided by |m|.
+        The perpendicular component moves the phase: for a mean phasor m = |m| e^{i phi}, the
+        phase error is about this value divided by |m|. The parallel one moves the amplitude
+        (the grey image): its relative error is that value divided by |m|.
         """
+        if along not in ("perpendicular", "parallel"):
+            raise ValueError(f"along must be 'perpendicular' or 'parallel', got {along!r}")
         mean = self.phasor
         mag = np.abs(mean)
         # Unit vector along the mean; where the mean is 0 any direction is as good (use re).
         safe = np.where(mag > 0.0, mag, 1.0)
         cr = np.where(mag > 0.0, mean.real / safe, 1.0)
         ci = np.where(mag > 0.0, mean.imag / safe, 0.0)
+        if along == "perpendicular":  # the direction (-ci, cr)
+            ur, ui = -ci, cr
+        else:
+            ur, ui = cr, ci
         var_re, var_im, cov = self.phasor_cov[:, 0], self.phasor_cov[:, 1], self.phasor_cov[:, 2]
-        # Perpendicular direction (-ci, cr): var = ci^2 var_re + cr^2 var_im - 2 cr ci cov.
-        var_perp = ci * ci * var_re + cr * cr * var_im - 2.0 * cr * ci * cov
+        var_u = ur * ur * var_re + ui * ui * var_im + 2.0 * ur * ui * cov
         # Unsampled pixels (0 samples) have no estimate: report an infinite error.
         n = self.samples_per_pixel
-        return np.where(n > 0, np.sqrt(np.maximum(var_perp, 0.0) / np.maximum(n, 1)), np.inf)
+        return np.where(n > 0, np.sqrt(np.maximum(var_u, 0.0) / np.maximum(n, 1)), np.inf)

@@ -21,6 +21,9 @@ POSES = [{"turntable_deg": a, "solar_suns": 1.0} for a in (-30.0, 0.0, 30.0)]
     ({"frames": 1000}, "object_fit.frames"),
     ({"poses": 3, "colour": "red"}, "object_fit.colour"),
     ({"effects": "some"}, "object_fit.effects"),
+    ({"noise_fraction": 0.0}, "object_fit.noise_fraction"),
+    ({"noise_fraction": 2.5}, "object_fit.noise_fraction"),
+    ({"noise_fraction": "half"}, "object_fit.noise_fraction"),
 ])
 def test_bad_object_fit_settings_are_422_naming_the_field(client, value, field):
     res = client.post("/api/v1/campaigns", headers=AUTH,
@@ -61,7 +64,11 @@ def test_a_campaign_fits_the_object_then_explains_every_pose(make_client, tmp_pa
         ex = r["metrics"]["explained"]
         assert set(ex) >= {"nominal", "fitted", "ceiling", "explained"}, ex
         assert r["fitted_frame_id"] and r["fitted_frame_id"] != r["simulated_frame_id"]
-        assert client.get(f"/api/v1/frames/{r['fitted_frame_id']}").status_code == 200
+        # both twins render to the default noise fraction (more samples on glints)
+        for fid in (r["fitted_frame_id"], r["simulated_frame_id"]):
+            meta = client.get(f"/api/v1/frames/{fid}").json()["metadata"]
+            assert meta["adaptive"]["target_noise_fraction"] == 0.35, meta.get("adaptive")
+            assert meta["adaptive"]["spp_min"] >= 16
         # the fitted twin is closer to the measurement than the nominal one
         assert ex["fitted"]["grey_psnr_db"] > ex["nominal"]["grey_psnr_db"]
     table = list(csv.DictReader(io.StringIO(
