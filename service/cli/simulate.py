@@ -49,6 +49,12 @@ def simulate(
         float | None,
         typer.Option("--time-budget-s", help="Best accuracy within this many seconds."),
     ] = None,
+    noise_fraction: Annotated[
+        float | None,
+        typer.Option("--noise-fraction",
+                     help="At least --spp samples, more where the Monte Carlo error (depth and "
+                     "grey) is above this fraction of the sensor's own noise (0.05 to 2)."),
+    ] = None,
     calibration: Annotated[
         Path | None,
         typer.Option("--calibration", help="Calibration file to apply (docs/calibration.md); "
@@ -81,6 +87,8 @@ def simulate(
             raise InvalidInputError(
                 "--effect-tolerance-mm", f"{effect_tolerance_mm} is outside (0, 10000] mm"
             )
+        if noise_fraction is not None and not 0.05 <= noise_fraction <= 2.0:
+            raise InvalidInputError("--noise-fraction", f"{noise_fraction} is outside [0.05, 2]")
         twin = None if calibration is None else load_calibration(calibration)
         built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg, twin=twin)
     except InvalidInputError as exc:
@@ -96,6 +104,7 @@ def simulate(
                 progress=lambda done, total: progress.update(task, completed=done),
                 target_range_error_mm=target_range_error_mm,
                 time_budget_s=time_budget_s,
+                target_noise_fraction=noise_fraction,
             )
     except InvalidInputError as exc:
         fail_invalid(exc)
@@ -109,6 +118,8 @@ def simulate(
             f"(p95 {a.achieved_range_error_p95_mm:.3g} mm) over {a.pixels_that_matter} pixels, "
             f"{a.spp_min}-{a.spp_max} spp (mean {a.spp_mean:.0f}), {a.rounds} rounds, "
             f"{a.seconds:.2f} s"
+            + ("" if a.achieved_noise_fraction is None else
+               f"; Monte Carlo error <= {a.achieved_noise_fraction:.2f} of the sensor's noise")
         )
     save_frame(out, frame, scene_name=spec.name)
     t = frame.timings_s

@@ -195,3 +195,23 @@ def test_simulate_applies_a_calibration_file(tmp_path):
     assert res.exit_code == 2
     assert "calibration.camera.depth.phase_offset_rad[0]" in " ".join(res.output.split())
     assert not (tmp_path / "c").exists()
+
+
+def test_noise_fraction_records_its_target_and_what_it_reached(tmp_path):
+    """The plane (direct light, 1 spp) rendered to a fraction of the sensor's noise: frame.json
+    records the target and the spp spent; a value out of range is exit 2 naming the option."""
+    out = tmp_path / "out"
+    res = run("simulate", EXAMPLES / "plane.yaml", "--out", out, "--spp", 1,
+              "--noise-fraction", 0.5, "-q")
+    assert res.exit_code == 0, res.output
+    adaptive = json.loads((out / "frame.json").read_text())["adaptive"]
+    assert adaptive["target_noise_fraction"] == 0.5
+    assert adaptive["achieved_noise_fraction"] <= 0.5
+    assert adaptive["spp_min"] >= 1 and adaptive["fraction_meeting_target"] == 1.0
+    assert "of the sensor's noise" in res.output
+    for bad in (0.0, 3.0):
+        res = run("simulate", EXAMPLES / "plane.yaml", "--out", tmp_path / "bad", "-q",
+                  "--noise-fraction", bad)
+        assert res.exit_code == 2
+        assert "--noise-fraction" in res.output
+        assert not (tmp_path / "bad").exists()
