@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim_core import embree_binding
 from sim_core.camera import pixel_centre_grid
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.materials.kernels import N_PARAMS
@@ -381,6 +382,8 @@ class _Context:
         self.scene = scene
         self.settings = settings
         self.tracer = tracer
+        #: (camera, bounce, shadow) packet widths of the tracer's binding backend
+        self.widths = np.array(tracer.widths, dtype=np.int64)
         self.origin = np.asarray(origin, dtype=np.float64)
         self.freqs = np.asarray(scene.camera.modulation_frequencies_hz, dtype=np.float64)
         self.n_f = self.freqs.size
@@ -478,6 +481,13 @@ class _StageClock:
         self.seconds[stage] += now - self._t
         self._t = now
 
+    def split(self, seconds: dict[str, float]) -> None:
+        """Charge the time since the previous lap as measured inside a compiled call: the
+        given seconds to their stages, the remainder (the call's own overhead) to none."""
+        for stage, s in seconds.items():
+            self.seconds[stage] += float(s)
+        self._t = time.perf_counter()
+
     def skip(self) -> None:
         """Charge the time since the previous lap to no stage (it counts as "other")."""
         self._t = time.perf_counter()
@@ -517,6 +527,34 @@ def _trace_chunk(
     out = SampleValues(np.zeros(m), np.zeros(m), np.zeros((ctx.n_f, m)), np.zeros((ctx.n_f, m)))
     paths = Paths(np.zeros_like(d), d, np.arange(m, dtype=np.int64), keys, np.zeros(m), np.ones(m))
     clock.skip()  # numpy buffers: "other"
+    if tracer.kernel_scene is not None:
+        _bounces_compiled(ctx, paths, out, clock)
+    else:
+        _bounces_from_python(ctx, paths, out, clock)
+    acc.add(pixels, out)
+    clock.lap("accumulation")
+
+
+def _bounces_compiled(ctx: _Context, paths: Paths, out: SampleValues, clock: _StageClock) -> None:
+    """The bounce loop of a chunk in one compiled call (:func:`kernels.trace_paths`), Embree
+    queried in packets through our binding: no Python between bounces."""
+    st, tracer = ctx.settings, ctx.tracer
+    counters = np.zeros(4)
+    kernels.trace_paths(
+        tracer.kernel_scene, ctx.widths, embree_binding.packet_buffer(), paths,
+        st.effective_bounces, ctx.tables, ctx.light, ctx.ambient, ctx.origin,
+        st.russian_roulette_from_bounce, ctx.turns_per_m, out, counters,
+    )
+    tracer.count(int(counters[0]), float(counters[1]))
+    clock.split({"embree": counters[1], "shading": counters[2], "accumulation": counters[3]})
+
+
+def _bounces_from_python(
+    ctx: _Context, paths: Paths, out: SampleValues, clock: _StageClock
+) -> None:
+    """The bounce loop of a chunk on the embreex backend: the steps of
+    :func:`kernels.trace_paths`, with embreex's queries between the kernels."""
+    st, tracer = ctx.settings, ctx.tracer
     n_bounces = st.effective_bounces
     for b in range(1, n_bounces + 1):
         tfar, prim = tracer.intersect_here(paths.o, paths.d)
@@ -532,5 +570,3 @@ def _trace_chunk(
         clock.lap("accumulation")
         if paths.o.shape[0] == 0:
             break
-    acc.add(pixels, out)
-    clock.lap("accumulation")
