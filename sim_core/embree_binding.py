@@ -360,6 +360,49 @@ def _fill_lane(f, u, w, j, o, d, i, tfar):
     u[19 * w + j] = 0xFFFFFFFF  # instID[0]
 
 
+INTERSECT = 0
+OCCLUDED = 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _query(kind, width, scene, ptr):
+    """One Embree call on the packet at ``ptr`` (its valid mask at word ``_VALID_WORD``)."""
+    vptr = ptr + 4 * _VALID_WORD
+    if kind == INTERSECT:
+        if width == 1:
+            _intersect1(scene, ptr, 0)
+        elif width == 4:
+            _intersect4(vptr, scene, ptr, 0)
+        elif width == 8:
+            _intersect8(vptr, scene, ptr, 0)
+        else:
+            _intersect16(vptr, scene, ptr, 0)
+    elif width == 1:
+        _occluded1(scene, ptr, 0)
+    elif width == 4:
+        _occluded4(vptr, scene, ptr, 0)
+    elif width == 8:
+        _occluded8(vptr, scene, ptr, 0)
+    else:
+        _occluded16(vptr, scene, ptr, 0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _load_packet(buf, w, o, d, t_in, a):
+    """Rays ``a .. a + n - 1`` of (o, d) with ``tfar`` from ``t_in`` into the width-``w``
+    packet in ``buf``, the other lanes marked invalid; returns ``n``."""
+    f = buf.view(np.float32)
+    valid = buf[_VALID_WORD: _VALID_WORD + 16].view(np.int32)
+    n = min(w, o.shape[0] - a)
+    for j in range(w):
+        if j < n:
+            _fill_lane(f, buf, w, j, o, d, a + j, t_in[a + j])
+            valid[j] = -1
+        else:
+            valid[j] = 0
+    return n
+
+
 @njit(**_SERIAL)
 def intersect(scene, o, d, width, buf, tfar, prim, counters):
     """Closest hits of rays ``o + t d`` (float32 (m, 3), render frame), ``width`` at a time.
@@ -370,30 +413,15 @@ def intersect(scene, o, d, width, buf, tfar, prim, counters):
     """
     t0 = now_s()
     m = o.shape[0]
-    u = buf
     f = buf.view(np.float32)
-    valid = buf[_VALID_WORD: _VALID_WORD + 16].view(np.int32)
     ptr = buf.ctypes.data
-    vptr = ptr + 4 * _VALID_WORD
+    tfar[:] = TFAR_CLOSEST
     for a in range(0, m, width):
-        n = min(width, m - a)
-        for j in range(width):
-            if j < n:
-                _fill_lane(f, u, width, j, o, d, a + j, TFAR_CLOSEST)
-                valid[j] = -1
-            else:
-                valid[j] = 0
-        if width == 1:
-            _intersect1(scene, ptr, 0)
-        elif width == 4:
-            _intersect4(vptr, scene, ptr, 0)
-        elif width == 8:
-            _intersect8(vptr, scene, ptr, 0)
-        else:
-            _intersect16(vptr, scene, ptr, 0)
+        n = _load_packet(buf, width, o, d, tfar, a)
+        _query(INTERSECT, width, scene, ptr)
         for j in range(n):
             tfar[a + j] = f[8 * width + j]
-            p = u[17 * width + j]
+            p = buf[17 * width + j]
             prim[a + j] = -1 if p == 0xFFFFFFFF else np.int32(p)
     counters[0] += m
     counters[1] += now_s() - t0
@@ -409,27 +437,11 @@ def occluded(scene, o, d, tmax, width, buf, out, counters):
     """
     t0 = now_s()
     m = o.shape[0]
-    u = buf
     f = buf.view(np.float32)
-    valid = buf[_VALID_WORD: _VALID_WORD + 16].view(np.int32)
     ptr = buf.ctypes.data
-    vptr = ptr + 4 * _VALID_WORD
     for a in range(0, m, width):
-        n = min(width, m - a)
-        for j in range(width):
-            if j < n:
-                _fill_lane(f, u, width, j, o, d, a + j, tmax[a + j])
-                valid[j] = -1
-            else:
-                valid[j] = 0
-        if width == 1:
-            _occluded1(scene, ptr, 0)
-        elif width == 4:
-            _occluded4(vptr, scene, ptr, 0)
-        elif width == 8:
-            _occluded8(vptr, scene, ptr, 0)
-        else:
-            _occluded16(vptr, scene, ptr, 0)
+        n = _load_packet(buf, width, o, d, tmax, a)
+        _query(OCCLUDED, width, scene, ptr)
         for j in range(n):
             out[a + j] = 0 if f[8 * width + j] < 0.0 else -1
     counters[0] += m

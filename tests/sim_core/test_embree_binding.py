@@ -171,6 +171,20 @@ def test_the_library_is_the_one_embreex_loaded():
         assert path in eb._loaded_embree_paths()
 
 
+def _twice_with_one_cache(code: str, cache_dir: Path) -> list[tuple[int, int, float]]:
+    """Run ``code`` (printing cache hits, misses and seconds) in two fresh processes that share
+    a new numba cache directory; their (hits, misses, seconds)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir), "PYTHONPATH": str(ROOT)}
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env,
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        hits, misses, seconds = proc.stdout.split()
+        runs.append((int(hits), int(misses), float(seconds)))
+    return runs
+
+
 _CACHE_PROBE = textwrap.dedent("""
     import time
     t0 = time.perf_counter()
@@ -193,15 +207,7 @@ _CACHE_PROBE = textwrap.dedent("""
 def test_a_second_process_loads_the_compiled_queries_from_numba_s_cache(tmp_path):
     if not _binding_or_fallback():
         return
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
-    runs = []
-    for _ in range(2):
-        proc = subprocess.run([sys.executable, "-c", _CACHE_PROBE], cwd=ROOT, env=env,
-                              capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, proc.stderr
-        hits, misses, seconds = proc.stdout.split()
-        runs.append((int(hits), int(misses), float(seconds)))
-    (h1, m1, s1), (h2, m2, s2) = runs
+    (h1, m1, s1), (h2, m2, s2) = _twice_with_one_cache(_CACHE_PROBE, tmp_path)
     assert h1 == 0 and m1 == 2  # compiled (the external functions do not prevent caching)
     assert h2 == 2 and m2 == 0  # loaded, no recompilation
     assert s2 < s1
@@ -221,14 +227,7 @@ def test_a_second_process_renders_its_first_frame_without_compiling(tmp_path):
         st = kernels.trace_paths.stats
         print(st.cache_hits.total(), st.cache_misses.total(), time.perf_counter() - t0)
     """)
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
-    runs = []
-    for _ in range(2):
-        proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env,
-                              capture_output=True, text=True, timeout=600)
-        assert proc.returncode == 0, proc.stderr
-        hits, misses, seconds = proc.stdout.split()
-        runs.append((int(hits), int(misses), float(seconds)))
+    runs = _twice_with_one_cache(code, tmp_path)
     (h1, m1, s1), (h2, m2, s2) = runs
     assert (h1, m1) == (0, 1) and (h2, m2) == (1, 0)
     assert s2 < 0.5 * s1, runs
