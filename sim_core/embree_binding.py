@@ -115,10 +115,12 @@ def find_library() -> str:
         from embreex import rtcore_scene  # noqa: F401  (loads libembree4 into the process)
     except ImportError as exc:
         raise EmbreeBindingError(f"embreex is not importable: {exc}") from exc
-    loaded = _loaded_embree_paths()
-    if loaded:
-        return loaded[0]
     pkg = Path(embreex.__file__).resolve().parent
+    loaded = _loaded_embree_paths()
+    # embreex's own copy first, should another libembree4 be mapped too
+    ours = [p for p in loaded if Path(p).resolve().is_relative_to(pkg.parent)]
+    if ours or loaded:
+        return (ours or loaded)[0]
     for folder in (pkg.parent / "embreex.libs", pkg / ".dylibs", pkg):
         found = sorted(glob.glob(str(folder / "libembree4*")))
         if found:
