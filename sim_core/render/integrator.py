@@ -1,7 +1,7 @@
 """Path tracing for an AMCW ToF camera (seed section 2.3.1, eqs. 17-31).
 
 Rays are traced in batches (chunks of pixels and sample passes, see "Work split"), every bounce
-of a batch in one Embree call. Each path carries its total length L from the light source
+of a batch in one Embree query. Each path carries its total length L from the light source
 through all bounces to the pixel; a path's contribution ``w`` (radiance, W m^-2 sr^-1) adds to
 the DC image and ``w * exp(-1j * 2*pi*f*L / c)`` to each modulation frequency's phasor (eqs.
 17, 31). Ambient light adds to DC only.
@@ -29,8 +29,11 @@ A request for ``n`` samples of some pixels becomes tasks, one block of pixels ea
 passes, about ``CHUNK_RAYS`` camera rays, one after the other on one thread: each chunk from
 start to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays), then
 its samples into the per-pixel sums. A block of pixels belongs to one task, so no two threads
-write the same pixel. Each chunk is wavefront-style inside (one Embree call per bounce for all
-its rays) and small enough to stay in cache; there is no barrier between stages.
+write the same pixel. Each chunk is wavefront-style inside (one Embree query per bounce for all
+its rays) and small enough to stay in cache; there is no barrier between stages. With our
+Embree binding (the tracer's default backend) a chunk's whole bounce loop is one compiled call
+(:func:`sim_core.render.kernels.trace_paths`, Embree queried in ray packets); with embreex (the
+fallback) the same steps run from Python (:func:`_bounces_from_python`).
 
 Determinism
 -----------
