@@ -303,10 +303,10 @@ def _choose_backend(requested: str) -> tuple[str, str | None]:
         raise ValueError(f"backend must be one of {BACKENDS}, got {requested!r}")
     if requested == "embreex":
         return "embreex", "embreex requested"
-    if embree_binding.AVAILABLE:
-        return "binding", None
-    if requested == "binding":
-        raise embree_binding.EmbreeBindingError(
-            f"the Embree binding is unavailable: {embree_binding.UNAVAILABLE_REASON}"
-        )
-    return "embreex", f"binding unavailable: {embree_binding.UNAVAILABLE_REASON}"
+    try:
+        embree_binding.device()  # raises where the library did not load or has no device
+    except embree_binding.EmbreeBindingError as exc:
+        if requested == "binding":
+            raise
+        return "embreex", f"binding unavailable: {exc}"
+    return "binding", None

@@ -231,3 +231,19 @@ def test_a_second_process_renders_its_first_frame_without_compiling(tmp_path):
     (h1, m1, s1), (h2, m2, s2) = runs
     assert (h1, m1) == (0, 1) and (h2, m2) == (1, 0)
     assert s2 < 0.5 * s1, runs
+
+
+def test_a_binding_that_cannot_load_falls_back_to_embreex_and_says_why(monkeypatch):
+    """As on a machine where the library is not found: auto falls back, "binding" refuses."""
+    monkeypatch.setattr(eb, "_LIB", None)
+    monkeypatch.setattr(eb, "_DEVICE", None)
+    monkeypatch.setattr(eb, "UNAVAILABLE_REASON", "EmbreeBindingError: no libembree4 found")
+    monkeypatch.delenv(BACKEND_ENV, raising=False)
+    scene = small_example("corner", width=16)
+    with RayTracer(scene.triangles_m, scene.camera.position_m, threads=1) as t:
+        assert t.backend == "embreex" and t.kernel_scene is None
+        assert "no libembree4 found" in t.fallback_reason
+        lf = render(scene, RenderSettings(spp=2, seed=1), t).light_field
+    assert np.isfinite(lf.dc_active).all() and lf.dc_active.max() > 0.0
+    with pytest.raises(eb.EmbreeBindingError, match="no libembree4 found"):
+        RayTracer(scene.triangles_m, scene.camera.position_m, threads=1, backend="binding")
