@@ -41,6 +41,29 @@ def bounded(name: str, value: int, lo: int, hi: int) -> int:
     return value
 
 
+def int_list(name: str, texts: list[str], lo: int, hi: int) -> list[int]:
+    """Integers of an option given as comma-separated lists, repeatable, each in [lo, hi].
+
+    >>> int_list("--spp", ["16,64", "256"], 1, 65536)
+    [16, 64, 256]
+    >>> int_list("--spp", ["16,x"], 1, 65536)
+    Traceback (most recent call last):
+    ...
+    sim_core.errors.InvalidInputError: --spp: 'x' is not an integer; give e.g. 16,64,256
+    """
+    out = []
+    for text in texts:
+        for part in text.split(","):
+            try:
+                v = int(part.strip())
+            except ValueError:
+                raise InvalidInputError(
+                    name, f"'{part.strip()}' is not an integer; give e.g. 16,64,256"
+                ) from None
+            out.append(bounded(name, v, lo, hi))
+    return out
+
+
 def choice(name: str, value: str, allowed: tuple[str, ...]) -> str:
     """``value`` if it is one of ``allowed``, else an input error naming the option."""
     if value not in allowed:

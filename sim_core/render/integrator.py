@@ -1,7 +1,7 @@
 """Path tracing for an AMCW ToF camera (seed section 2.3.1, eqs. 17-31).
 
 Rays are traced in batches (chunks of pixels and sample passes, see "Work split"), every bounce
-of a batch in one Embree call. Each path carries its total length L from the light source
+of a batch in one Embree query. Each path carries its total length L from the light source
 through all bounces to the pixel; a path's contribution ``w`` (radiance, W m^-2 sr^-1) adds to
 the DC image and ``w * exp(-1j * 2*pi*f*L / c)`` to each modulation frequency's phasor (eqs.
 17, 31). Ambient light adds to DC only.
@@ -29,8 +29,11 @@ A request for ``n`` samples of some pixels becomes tasks, one block of pixels ea
 passes, about ``CHUNK_RAYS`` camera rays, one after the other on one thread: each chunk from
 start to finish (camera rays, then per bounce: Embree, the fused kernel, the shadow rays), then
 its samples into the per-pixel sums. A block of pixels belongs to one task, so no two threads
-write the same pixel. Each chunk is wavefront-style inside (one Embree call per bounce for all
-its rays) and small enough to stay in cache; there is no barrier between stages.
+write the same pixel. Each chunk is wavefront-style inside (one Embree query per bounce for all
+its rays) and small enough to stay in cache; there is no barrier between stages. With our
+Embree binding (the tracer's default backend) a chunk's whole bounce loop is one compiled call
+(:func:`sim_core.render.kernels.trace_paths`, Embree queried in ray packets); with embreex (the
+fallback) the same steps run from Python (:func:`_bounces_from_python`).
 
 Determinism
 -----------
@@ -51,6 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim_core import embree_binding
 from sim_core.camera import pixel_centre_grid
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.materials.kernels import N_PARAMS
@@ -381,6 +385,8 @@ class _Context:
         self.scene = scene
         self.settings = settings
         self.tracer = tracer
+        #: (camera, bounce, shadow) packet widths of the tracer's binding backend
+        self.widths = np.array(tracer.widths, dtype=np.int64)
         self.origin = np.asarray(origin, dtype=np.float64)
         self.freqs = np.asarray(scene.camera.modulation_frequencies_hz, dtype=np.float64)
         self.n_f = self.freqs.size
@@ -478,6 +484,13 @@ class _StageClock:
         self.seconds[stage] += now - self._t
         self._t = now
 
+    def split(self, seconds: dict[str, float]) -> None:
+        """Charge the time since the previous lap as measured inside a compiled call: the
+        given seconds to their stages, the remainder (the call's own overhead) to none."""
+        for stage, s in seconds.items():
+            self.seconds[stage] += float(s)
+        self._t = time.perf_counter()
+
     def skip(self) -> None:
         """Charge the time since the previous lap to no stage (it counts as "other")."""
         self._t = time.perf_counter()
@@ -517,6 +530,34 @@ def _trace_chunk(
     out = SampleValues(np.zeros(m), np.zeros(m), np.zeros((ctx.n_f, m)), np.zeros((ctx.n_f, m)))
     paths = Paths(np.zeros_like(d), d, np.arange(m, dtype=np.int64), keys, np.zeros(m), np.ones(m))
     clock.skip()  # numpy buffers: "other"
+    if tracer.kernel_scene is not None:
+        _bounces_compiled(ctx, paths, out, clock)
+    else:
+        _bounces_from_python(ctx, paths, out, clock)
+    acc.add(pixels, out)
+    clock.lap("accumulation")
+
+
+def _bounces_compiled(ctx: _Context, paths: Paths, out: SampleValues, clock: _StageClock) -> None:
+    """The bounce loop of a chunk in one compiled call (:func:`kernels.trace_paths`), Embree
+    queried in packets through our binding: no Python between bounces."""
+    st, tracer = ctx.settings, ctx.tracer
+    counters = np.zeros(4)
+    kernels.trace_paths(
+        tracer.kernel_scene, ctx.widths, embree_binding.packet_buffer(), paths,
+        st.effective_bounces, ctx.tables, ctx.light, ctx.ambient, ctx.origin,
+        st.russian_roulette_from_bounce, ctx.turns_per_m, out, counters,
+    )
+    tracer.count(int(counters[0]), float(counters[1]))
+    clock.split({"embree": counters[1], "shading": counters[2], "accumulation": counters[3]})
+
+
+def _bounces_from_python(
+    ctx: _Context, paths: Paths, out: SampleValues, clock: _StageClock
+) -> None:
+    """The bounce loop of a chunk on the embreex backend: the steps of
+    :func:`kernels.trace_paths`, with embreex's queries between the kernels."""
+    st, tracer = ctx.settings, ctx.tracer
     n_bounces = st.effective_bounces
     for b in range(1, n_bounces + 1):
         tfar, prim = tracer.intersect_here(paths.o, paths.d)
@@ -532,5 +573,3 @@ def _trace_chunk(
         clock.lap("accumulation")
         if paths.o.shape[0] == 0:
             break
-    acc.add(pixels, out)
-    clock.lap("accumulation")

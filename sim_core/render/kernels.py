@@ -3,7 +3,10 @@
 The integrator traces a frame as many independent *chunks* (a block of pixels, a few sample
 passes), each on one worker thread from start to finish: camera rays (:func:`primary_rays`),
 then per bounce one Embree query, one call of :func:`bounce`, one occlusion query and one call
-of :func:`add_shadowed`, and finally :func:`accumulate_chunk` into the per-pixel sums. These
+of :func:`add_shadowed`, and finally :func:`accumulate_chunk` into the per-pixel sums. With our
+Embree binding (:mod:`sim_core.embree_binding`) the whole bounce loop is one compiled call,
+:func:`trace_paths`, which queries Embree itself in ray packets; with embreex (the fallback)
+the integrator runs the same steps from Python. These
 kernels are therefore serial and ``nogil``: two threads run them side by side with Embree,
 without numba's thread pool (whose workers, parked or spinning, competed with Embree's callers:
 measured ~30 % slower Embree queries), without a barrier after every stage, and on chunks small
@@ -28,6 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 import sim_core.camera as _camera
+import sim_core.embree_binding as _embree
 import sim_core.materials.kernels as _material_kernels
 import sim_core.numba_runtime  # noqa: F401  (camera_rays is a parallel kernel)
 import sim_core.render.rng as _rng
@@ -50,7 +54,7 @@ def _drop_stale_cache() -> None:
     """
     cache = Path(__file__).with_name("__pycache__")
     digest = hashlib.sha256()
-    for mod in (_material_kernels, _rng, _camera):
+    for mod in (_material_kernels, _rng, _camera, _embree):
         digest.update(Path(mod.__file__).read_bytes())
     stamp = cache / "kernels.deps.sha256"
     want = digest.hexdigest()
@@ -550,3 +554,39 @@ def accumulate_chunk(pixels, samples, sums):
                 ss_re[k, q] += re * re
                 ss_im[k, q] += im * im
                 s_reim[k, q] += re * im
+
+
+@njit(**_SERIAL)
+def trace_paths(scene, widths, buf, paths, n_bounces, tables, light, ambient, render_origin,
+                rr_from_bounce, turns_per_m, out, counters):
+    """A chunk's whole bounce loop in one call: the steps the integrator runs from Python on the
+    embreex backend, here with Embree queried through :mod:`sim_core.embree_binding`.
+
+    Per bounce ``b`` = 1 .. ``n_bounces``: closest hits of ``paths`` (packets of ``widths[0]``
+    rays for the camera rays of bounce 1, ``widths[1]`` for bounce rays), :func:`bounce`,
+    occlusion of its shadow rays (packets of ``widths[2]``), :func:`add_shadowed` into ``out``.
+    ``scene`` is the binding's scene handle, ``buf`` a
+    :func:`sim_core.embree_binding.packet_buffer`. The answers are the embreex backend's, bit
+    for bit, so the result is too.
+
+    ``counters`` (float64 (4,)) accumulates: rays traced, seconds in Embree, seconds in
+    :func:`bounce`, seconds in :func:`add_shadowed` (the integrator's stage clocks).
+    """
+    for b in range(1, n_bounces + 1):
+        m = paths.o.shape[0]
+        tfar = np.empty(m, dtype=np.float32)
+        prim = np.empty(m, dtype=np.int32)
+        _embree.intersect(scene, paths.o, paths.d, widths[0] if b == 1 else widths[1], buf,
+                          tfar, prim, counters)
+        t0 = _embree.now_s()
+        shadow, paths = bounce(paths, tfar, prim, tables, light, ambient, render_origin, b,
+                               rr_from_bounce, b < n_bounces)
+        counters[2] += _embree.now_s() - t0
+        occluded = np.empty(shadow.o.shape[0], dtype=np.int32)
+        _embree.occluded(scene, shadow.o, shadow.d, shadow.t_max, widths[2], buf, occluded,
+                         counters)
+        t0 = _embree.now_s()
+        add_shadowed(occluded, shadow, turns_per_m, out)
+        counters[3] += _embree.now_s() - t0
+        if paths.o.shape[0] == 0:
+            break

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from service.cli.common import bounded, console, err_console, fail_invalid
+from service.cli.common import bounded, console, err_console, fail_invalid, int_list
 from sim_core.errors import InvalidInputError
 
 bench_app = typer.Typer(help="Benchmarks that print figures.", no_args_is_help=True)
@@ -55,15 +56,40 @@ def bench_accuracy(
 @bench_app.command("mitsuba")
 def bench_mitsuba(
     quick: Annotated[bool, typer.Option("--quick", help="Tiny sweep (seconds).")] = False,
+    spp: Annotated[
+        list[str] | None,
+        typer.Option(help="Samples per pixel of the speed table, comma-separated (16,64,256)."),
+    ] = None,
+    bounces: Annotated[
+        list[str] | None,
+        typer.Option(help="Bounce counts of the speed table, comma-separated (1,2,3)."),
+    ] = None,
+    convergence: Annotated[
+        bool,
+        typer.Option(help="Also the high-spp reference check and the time to 2 % DC error."),
+    ] = True,
+    json_out: Annotated[
+        Path | None, typer.Option("--json", help="Write every figure to this JSON file.")
+    ] = None,
 ) -> None:
     """Our renderer against Mitsuba 3 on the corner: time ratio, image agreement, time to 2 %."""
     from service.cli.bench.mitsuba import run_mitsuba_comparison
 
     try:
-        run_mitsuba_comparison(console, quick=quick)
+        spps = int_list("--spp", spp or ["16,64,256"], 1, 65536)
+        bounce_counts = int_list("--bounces", bounces or ["1,2,3"], 1, 64)
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    try:
+        res = run_mitsuba_comparison(
+            console, spps=spps, bounces=bounce_counts, quick=quick, convergence=convergence
+        )
     except RuntimeError as exc:
         err_console.print(f"[bold red]error:[/] {exc}")
         raise typer.Exit(code=1) from None
+    if json_out is not None:
+        json_out.write_text(json.dumps(res, indent=2, default=float))
+        console.print(f"figures written to {json_out}")
 
 
 @bench_app.command("ground-test")

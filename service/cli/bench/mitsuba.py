@@ -458,6 +458,7 @@ def run_mitsuba_comparison(
     target_rel_rmse: float | None = None,
     reference_spp: int | None = None,
     repeats: int | None = None,
+    convergence: bool = True,
 ) -> dict:
     """Render ``corner`` in our renderer and in Mitsuba 3; print and return the comparison.
 
@@ -470,12 +471,17 @@ def run_mitsuba_comparison(
         Smoke run: spp capped at 4, bounces at 2, one repeat, a 64-spp reference, a sweep over
         1-8 spp and a 10 % target (the default is a 2048-spp reference, 16-512 spp, 2 %).
     target_rel_rmse, reference_spp, repeats : optional overrides of those choices.
+    convergence : bool
+        Whether to run parts 2 and 3 (the high-spp reference check and the time to the target
+        error); without them the run is the speed table alone and ``reference`` and
+        ``time_to_error`` are None.
 
     Returns
     -------
     dict with ``rows`` (one per spp and bounce count), ``reference`` (the high-spp check),
     ``time_to_error`` (sweeps and the interpolated times) and the setup (versions, threads,
-    camera check).
+    camera check, our tracer's backend and packet widths). Each row has ``spp``, ``bounces``,
+    ``ours_s``, ``mitsuba_s`` and ``ratio_ours_over_mitsuba`` (best of the repeats, warm).
 
     Raises
     ------
@@ -502,6 +508,8 @@ def run_mitsuba_comparison(
             "variant": MITSUBA_VARIANT,
             "libllvm": llvm_path,
             "threads_ours": ours.tracer.threads,
+            "tracer_backend": ours.tracer.backend,
+            "packet_widths_camera_bounce_shadow": ours.tracer.widths,
             "threads_mitsuba": int(dr.thread_count()),
             "camera_mismatch_deg": cam_deg,
             "repeats": plan.repeats,
@@ -512,11 +520,16 @@ def run_mitsuba_comparison(
             f"{intr.height_px} px, light {scene.light.power_w:g} W | Mitsuba "
             f"{setup['mitsuba_version']} ({MITSUBA_VARIANT}, Dr.Jit {setup['drjit_version']}, "
             f"{setup['threads_mitsuba']} threads, libLLVM {llvm_path or 'found by Dr.Jit'}) | "
-            f"ours {setup['threads_ours']} threads | camera rays differ by <= {cam_deg:.1e} deg"
+            f"ours {setup['threads_ours']} threads, Embree via {ours.tracer.backend} | camera "
+            f"rays differ by <= {cam_deg:.1e} deg"
         )
         rows = _speed_and_agreement(console, ours, theirs, plan)
-        reference = _reference_check(console, ours, theirs, plan)
-        tte = _time_to_error(console, ours, theirs, plan, reference)
+        reference = tte = None
+        if convergence:
+            reference = _reference_check(console, ours, theirs, plan)
+            tte = _time_to_error(console, ours, theirs, plan, reference)
+            reference.pop("_image", None)
+            reference.pop("_var", None)
     finally:
         ours.close()
     load_after = os.getloadavg()
@@ -525,8 +538,6 @@ def run_mitsuba_comparison(
         f"Load average (1 min) before / after: {load_before[0]:.2f} / {load_after[0]:.2f} "
         f"on {os.cpu_count()} cores; times are the best of {plan.repeats} interleaved repeat(s)."
     )
-    reference.pop("_image", None)
-    reference.pop("_var", None)
     return {**setup, "rows": rows, "reference": reference, "time_to_error": tte}
 
 

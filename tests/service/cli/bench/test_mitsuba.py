@@ -6,6 +6,7 @@ there the tests assert the RuntimeError that says how to install it. Nothing her
 
 import importlib.util
 import io
+import json
 import math
 import os
 import subprocess
@@ -157,3 +158,39 @@ def test_ply_writer_and_camera_refusals(tmp_path):
 def test_find_libllvm_returns_a_file_or_none():
     path = bm.find_libllvm()
     assert path is None or Path(path).is_file()
+
+
+def test_cli_speed_table_as_json_or_clear_error(tmp_path):
+    """``--spp``/``--bounces`` lists and ``--json``: rows of the speed table, or exit 1 and the
+    install hint where Mitsuba does not load."""
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    out = tmp_path / "mitsuba.json"
+    res = CliRunner().invoke(app, ["bench", "mitsuba", "--spp", "1,2", "--bounces", "1",
+                                   "--no-convergence", "--json", str(out)])
+    ok, msg = _mitsuba_loads()
+    if not ok:
+        assert res.exit_code == 1 and not out.exists()
+        _assert_clear(msg)
+        return
+    assert res.exit_code == 0, res.output
+    data = json.loads(out.read_text())
+    assert [(r["spp"], r["bounces"]) for r in data["rows"]] == [(1, 1), (2, 1)]
+    for row in data["rows"]:
+        assert row["ours_s"] > 0 and row["mitsuba_s"] > 0
+        assert row["ratio_ours_over_mitsuba"] == pytest.approx(row["ours_s"] / row["mitsuba_s"])
+    assert data["reference"] is None and data["time_to_error"] is None
+    assert data["tracer_backend"] in ("binding", "embreex")
+
+
+@pytest.mark.parametrize("args", [["--spp", "16,x"], ["--spp", "0"], ["--bounces", "1,,2"]])
+def test_cli_refuses_bad_lists_before_loading_anything(args):
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    res = CliRunner().invoke(app, ["bench", "mitsuba", *args])
+    assert res.exit_code == 2
+    assert args[0] in res.output
