@@ -18,6 +18,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from drivers.errors import DeviceInputError
 from drivers.sim.faults import parse_rig_fault
+from sim_core.adaptive import NOISE_FRACTION_RANGE
 from sim_core.errors import InvalidInputError
 from sim_core.twin_file import load_reality
 
@@ -92,7 +93,8 @@ class Settings(BaseSettings):
     #: where the Monte Carlo error is above this fraction of its sensor's noise (the lab's
     #: "reality" then has little render noise frozen into it, as a real scene has none);
     #: None: ``camera_spp`` everywhere
-    camera_noise_fraction: float | None = Field(None, gt=0.0, le=2.0)
+    camera_noise_fraction: float | None = Field(None, ge=NOISE_FRACTION_RANGE[0],
+                                                le=NOISE_FRACTION_RANGE[1])
     camera_integrator: Literal["direct", "path"] = "path"
     camera_seed: int = Field(0, ge=0, le=2**31 - 1)
 

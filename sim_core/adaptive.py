@@ -38,6 +38,9 @@ INITIAL_SPP = 16
 MAX_SPP = 16384
 #: growth of a pixel's sample count per round, at most
 MAX_GROWTH = 4.0
+#: the Monte Carlo error targets a user may ask for, as a fraction of the sensor's noise
+#: (below 0.05 a render costs 400x the samples of 1; above 2 it adds 5x the sensor's variance)
+NOISE_FRACTION_RANGE = (0.05, 2.0)
 
 
 @dataclass(frozen=True)
@@ -130,9 +133,10 @@ def render_adaptive(
         raise InvalidInputError(
             "target_range_error_mm", f"{target_range_error_m * 1e3} mm is outside (0, 1e6) mm"
         )
-    if target_noise_fraction is not None and not 0.0 < target_noise_fraction <= 10.0:
+    lo, hi = NOISE_FRACTION_RANGE
+    if target_noise_fraction is not None and not lo <= target_noise_fraction <= hi:
         raise InvalidInputError(
-            "target_noise_fraction", f"{target_noise_fraction} is outside (0, 10]"
+            "target_noise_fraction", f"{target_noise_fraction} is outside [{lo:g}, {hi:g}]"
         )
     if time_budget_s is not None and not 0.0 < time_budget_s <= 86_400.0:
         raise InvalidInputError("time_budget_s", f"{time_budget_s} s is outside (0, 86400] s")
@@ -152,15 +156,17 @@ def render_adaptive(
                 break
             open_ = matter & (n < max_spp)
             ratio = _error_ratio(lf, scene, target_range_error_m, target_noise_fraction)
+            # what the budget spends on first: the worst ratio, or without a target the worst
+            # range error
+            worst = ratio if ratio is not None else range_standard_error_m(lf).ravel()
             if ratio is not None:
                 open_ &= ratio > 1.0
                 want = np.where(open_, n * ratio**2, n)
             else:
                 # Budget only: halve the error of the worse half of the pixels each round.
-                se = range_standard_error_m(lf).ravel()
                 if not open_.any():
                     break
-                open_ &= se >= np.median(se[open_])
+                open_ &= worst >= np.median(worst[open_])
                 want = np.where(open_, 4.0 * n, n)
             if not open_.any():
                 break
@@ -168,7 +174,6 @@ def render_adaptive(
             extra = np.where(open_, np.ceil(grow), 0).astype(np.int64)
             if time_budget_s is not None:
                 per_sample = (time.perf_counter() - t0) / max(int(n.sum()), 1)
-                worst = ratio if ratio is not None else range_standard_error_m(lf).ravel()
                 extra = _fit_budget(extra, worst, per_sample, time_budget_s - elapsed)
                 if not extra.any():
                     break

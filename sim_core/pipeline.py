@@ -127,7 +127,7 @@ def render_light(
             result = render(scene, run, tracer=tracer, progress=progress)
         else:
             target_m = None if target_range_error_mm is None else target_range_error_mm * 1e-3
-            initial = INITIAL_SPP if target_noise_fraction is None else max(settings.spp, 1)
+            initial = INITIAL_SPP if target_noise_fraction is None else settings.spp
             result, adaptive = render_adaptive(
                 scene, run, target_m, time_budget_s, tracer, initial_spp=initial,
                 max_spp=max(MAX_SPP, initial), target_noise_fraction=target_noise_fraction)

@@ -62,6 +62,7 @@ def simulate(
     ] = None,
 ) -> None:
     """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
+    from sim_core.adaptive import NOISE_FRACTION_RANGE
     from sim_core.pipeline import save_frame
     from sim_core.pipeline import simulate as run_simulation
     from sim_core.render import RenderSettings
@@ -87,8 +88,10 @@ def simulate(
             raise InvalidInputError(
                 "--effect-tolerance-mm", f"{effect_tolerance_mm} is outside (0, 10000] mm"
             )
-        if noise_fraction is not None and not 0.05 <= noise_fraction <= 2.0:
-            raise InvalidInputError("--noise-fraction", f"{noise_fraction} is outside [0.05, 2]")
+        lo, hi = NOISE_FRACTION_RANGE
+        if noise_fraction is not None and not lo <= noise_fraction <= hi:
+            raise InvalidInputError("--noise-fraction",
+                                    f"{noise_fraction} is outside [{lo:g}, {hi:g}]")
         twin = None if calibration is None else load_calibration(calibration)
         built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg, twin=twin)
     except InvalidInputError as exc:

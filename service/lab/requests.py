@@ -24,6 +24,7 @@ from pydantic import (
 )
 
 from calibration.rig_sequence import DEFAULT_FIXTURES
+from sim_core.adaptive import NOISE_FRACTION_RANGE
 from sim_core.lights import SUNS_RANGE
 
 SUNS_LOW, SUNS_HIGH = SUNS_RANGE
@@ -192,12 +193,14 @@ class ObjectFitIn(RequestBody):
         float, Strict(),
         Field(description="Every pose's simulations (nominal and fitted) take the campaign's "
               "samples per pixel and more where their Monte Carlo error is above this "
-              "fraction of the camera's own noise (glints, edges), 0.05 to 2; null: the "
+              f"fraction of the camera's own noise (glints, edges), {NOISE_FRACTION_RANGE[0]:g} "
+              f"to {NOISE_FRACTION_RANGE[1]:g}; null: the "
               "campaign's spp everywhere. A twin at fraction k has (1 + k^2) times the "
               "noise variance of a capture: 0.35 keeps the fitted twin within 0.5 dB of the "
               "noise ceiling when the fit is right.",
-              json_schema_extra={"minimum": 0.05, "maximum": 2}),
-        AfterValidator(_in_range(0.05, 2.0, "")),
+              json_schema_extra={"minimum": NOISE_FRACTION_RANGE[0],
+                                 "maximum": NOISE_FRACTION_RANGE[1]}),
+        AfterValidator(_in_range(*NOISE_FRACTION_RANGE, "")),
     ] | None = 0.35
 
 
