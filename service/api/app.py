@@ -123,7 +123,9 @@ def create_app(settings: Settings) -> FastAPI:
         lab = request.app.state.lab
         return {"status": "ok", "version": package_version(), "simulated": settings.simulated,
                 "executor": lab.executor.name, "workers": lab.executor.workers,
-                "scenes": bundled_scenes(settings.examples_dir)}
+                "scenes": bundled_scenes(settings.examples_dir),
+                "mounted_scene": lab.default_scene.name,
+                "mounted_objects": lab.default_scene.turntable_object_names}
 
     for module in (devices, simulate, poses, frames, campaigns, calibration, calibrations):
         api.include_router(module.router)

@@ -232,6 +232,11 @@ class Health(BaseModel):
     executor: str
     workers: int
     scenes: list[str]
+    mounted_scene: str = Field(
+        description="The scene whose object stands on the rig's turntable (TOFTWIN_SCENE): "
+        "poses and campaigns compare frames of it; another scene is refused with 409.")
+    mounted_objects: list[str] = Field(
+        description="The mounted scene's objects on the turntable, by name.")
 
 
 # -- calibration -------------------------------------------------------------------------------

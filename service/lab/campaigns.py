@@ -24,7 +24,13 @@ from service.lab.calibration import active_twin, effective_twin
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate
 from service.lab.runner import CampaignRunner
-from service.lab.scenes import check_mask, image_shape, scene_from_request
+from service.lab.scenes import (
+    SceneSource,
+    check_mask,
+    image_shape,
+    require_mounted,
+    scene_from_request,
+)
 from service.settings import Settings
 from service.store import queries
 from service.store.frame_files import FrameStore
@@ -32,9 +38,13 @@ from sim_core.errors import InvalidInputError
 
 
 def create_campaign(
-    req: CampaignCreate, *, sessions: sessionmaker, settings: Settings, rig: Rig | None
+    req: CampaignCreate, *, sessions: sessionmaker, settings: Settings, rig: Rig | None,
+    mounted: SceneSource,
 ) -> str:
     """Validate and store ``req``; returns the new campaign's id.
+
+    Its scene must be the one ``mounted`` on the rig's turntable (409 otherwise:
+    :func:`service.lab.scenes.require_mounted`).
 
     ``rig`` gives the stage's software limits the angles are checked against (None: the rig is
     not available, the angles are checked when the campaign runs).
@@ -56,6 +66,7 @@ def create_campaign(
     if fit is not None and not scene.turntable_object_ids:
         raise InvalidInputError(
             "object_fit", f"scene {scene.name!r} has no object on the turntable to fit")
+    require_mounted(scene, mounted, inline=isinstance(req.scene, dict))
     twin = effective_twin(active_twin(sessions), scene)
     pinned = twin.to_json()
     campaign_id = uuid.uuid4().hex

@@ -156,7 +156,7 @@ def _open_locked(settings: Settings, lock: DataDirLock) -> Lab:
         rig, rig_error = None, str(exc)
         _log.error("rig not available: %s", exc)
     lease = RigLease(rig, rig_error, settings.rig_wait_s)
-    runner = CampaignRunner(sessions, lease, store, executor, settings)
+    runner = CampaignRunner(sessions, lease, store, executor, settings, mounted=scene)
     calibrations = CalibrationJobs(sessions, lease, scene, settings, data / "calibrations", world)
     failed_jobs = calibrations.recover()
     if failed_jobs:

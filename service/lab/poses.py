@@ -37,6 +37,7 @@ from service.lab.scenes import (
     check_mask,
     for_use_case,
     image_shape,
+    require_mounted,
     scene_from_request,
 )
 from service.settings import Settings
@@ -293,14 +294,15 @@ def _finish(
 
 def run_single_pose(
     req: PoseCreate, *, lease: RigLease, sessions: sessionmaker, store: FrameStore,
-    executor: Executor, settings: Settings,
+    executor: Executor, settings: Settings, mounted: SceneSource,
 ) -> Outcome:
-    """``POST /poses``: the three stages in a row for one pose."""
+    """``POST /poses``: the three stages in a row for one pose (of the ``mounted`` scene)."""
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
     rig = lease.require()
     check_angle(rig, req.turntable_deg, "turntable_deg")
     check_mask(req.mask, scene, image_shape(scene, rig.camera.use_case))
+    require_mounted(scene, mounted, inline=isinstance(req.scene, dict))
     require_free(store.root, settings.min_free_bytes)  # 507 before anything moves
     plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp,
                     twin=effective_twin(active_twin(sessions), scene))

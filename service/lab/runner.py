@@ -42,7 +42,7 @@ from service.lab.object_fit import FitPose, capture_for_fit, fit_poses, fitted_t
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec, ObjectFitIn
 from service.lab.rig_lease import RigLease
-from service.lab.scenes import SceneSource
+from service.lab.scenes import SceneSource, require_mounted
 from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
@@ -83,11 +83,17 @@ class CampaignRunner:
     settings : Settings
         ``depth``, ``threads_per_job``, ``job_timeout_s``, ``solar_stable_timeout_s``,
         ``stop_wait_s``.
+    mounted : SceneSource, optional
+        The scene on the rig's turntable; a campaign of another scene (stored before the
+        service was restarted with another one) does not start (409).
     """
 
     def __init__(self, sessions: sessionmaker, lease: RigLease, store: FrameStore,
-                 executor: Executor, settings: Settings) -> None:
+                 executor: Executor, settings: Settings,
+                 mounted: SceneSource | None = None) -> None:
         self.sessions = sessions
+        #: the scene on the rig's turntable: a campaign of another one does not start
+        self.mounted = mounted
         self.lease = lease
         self.store = store
         self.executor = executor
@@ -126,6 +132,11 @@ class CampaignRunner:
             try:
                 with self.sessions() as s:
                     row = queries.require_campaign(s, campaign_id)
+                    if self.mounted is not None:
+                        stored = SceneSource.from_json(row.scene_json, row.scene_base_dir,
+                                                       row.scene_name)
+                        require_mounted(stored, self.mounted,
+                                        inline=stored.name != self.mounted.name)
                     if not queries.transition(s, campaign_id, allowed, "running", started=True,
                                               count_run=True):
                         verb = "resume" if resume else "start"

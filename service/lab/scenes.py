@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.camera import UseCase
+from service.errors import ConflictError
 from service.lab.requests import MaskSpec
 from sim_core.boards import board_triangles
 from sim_core.camera import Camera
@@ -46,6 +47,11 @@ class SceneSource:
     def turntable_object_ids(self) -> list[int]:
         """Indices of the objects that ride on the turntable."""
         return [i for i, o in enumerate(self.spec.objects) if o.on_turntable]
+
+    @property
+    def turntable_object_names(self) -> list[str]:
+        """Names of the objects that ride on the turntable, in the scene's order."""
+        return [o.name for o in self.spec.objects if o.on_turntable]
 
     def to_json(self) -> str:
         """The spec as JSON (stored with a campaign, so a resume uses the same scene)."""
@@ -183,6 +189,29 @@ def scene_from_request(settings, ref: str | dict[str, Any] | None) -> SceneSourc
         settings.max_scene_objects, max_pixels=settings.max_scene_pixels,
         max_triangles=settings.max_scene_triangles,
     )
+
+
+def require_mounted(scene: SceneSource, mounted: SceneSource, inline: bool) -> None:
+    """409 unless ``scene`` is what stands on the rig's turntable (``mounted``).
+
+    A pose or a campaign compares the camera's frames of the mounted object with a simulation
+    of ``scene``: a bundled scene must be the mounted one by name; an inline scene (a variant of
+    the mounted scene: other materials, another camera pose) must carry the same objects on its
+    turntable, by name. Anything else would compare frames of one object with a simulation of
+    another, with no word of it (a satellite's frames against a plane's simulation).
+    """
+    ours, theirs = mounted.turntable_object_names, scene.turntable_object_names
+    if inline and sorted(ours) == sorted(theirs):
+        return
+    if not inline and scene.name == mounted.name:
+        return
+    remount = "" if inline else f" (TOFTWIN_SCENE={scene.name})"
+    raise ConflictError(
+        f"the rig's turntable holds scene {mounted.name!r} (objects on the turntable: "
+        f"{ours}); the request's scene {scene.name!r} has {theirs or 'no object'} on it. A "
+        f"pose compares frames of what is mounted: name scene {mounted.name!r} (or an inline "
+        "variant with the same objects on its turntable), or mount the other object and "
+        f"restart the service with its scene{remount}")
 
 
 def for_use_case(spec: SceneSpec, use_case: UseCase) -> SceneSpec:

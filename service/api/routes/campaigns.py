@@ -16,6 +16,7 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 from service.api.deps import (
     LeaseDep,
     RunnerDep,
+    SceneDep,
     SessionDep,
     SessionsDep,
     SettingsDep,
@@ -44,13 +45,14 @@ CampaignId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A campa
 COMMAND = errors(401, 404, 409, 503)
 
 
-@router.post("", response_model=CampaignCreated, status_code=201, responses=errors(401))
+@router.post("", response_model=CampaignCreated, status_code=201, responses=errors(401, 409))
 def create(
     body: CampaignCreate, sessions: SessionsDep, settings: SettingsDep, lease: LeaseDep,
-    _: TokenDep,
+    mounted: SceneDep, _: TokenDep,
 ) -> dict:
     """Store a campaign (state ``created``); ``start`` runs it."""
-    cid = create_campaign(body, sessions=sessions, settings=settings, rig=lease.rig)
+    cid = create_campaign(body, sessions=sessions, settings=settings, rig=lease.rig,
+                          mounted=mounted)
     return {"id": cid, "state": "created", "links": {"self": f"/api/v1/campaigns/{cid}"}}
 
 

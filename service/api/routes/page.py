@@ -25,7 +25,6 @@ from service.export.report import verdict_rows
 from service.export.results_table import result_rows
 from service.lab.calibration import active_public, calibration_residuals
 from service.lab.campaigns import campaign_status
-from service.lab.scenes import bundled_scenes
 from service.store import queries
 from service.web import environment
 from sim_core.frame_io import package_version
@@ -40,7 +39,8 @@ def page(request: Request, settings: SettingsDep) -> HTMLResponse:
     """The operator page."""
     return templates.TemplateResponse(request, "page.html", {
         "simulated": settings.simulated, "version": package_version(),
-        "scenes": bundled_scenes(settings.examples_dir), "default_scene": settings.scene,
+        # poses and campaigns compare frames of the mounted scene: the only one offered
+        "scenes": [settings.scene], "default_scene": settings.scene,
         "max_spp": settings.max_spp, "sim_spp": settings.sim_spp,
         "plots": [p.name for p in CAMPAIGN_PLOTS],
         "explained_plots": [p.name for p in EXPLAINED_PLOTS]})

@@ -11,6 +11,7 @@ from fastapi.responses import Response
 from service.api.deps import (
     ExecutorDep,
     LeaseDep,
+    SceneDep,
     SessionDep,
     SessionsDep,
     SettingsDep,
@@ -36,11 +37,11 @@ PNG = {200: {"content": {"image/png": {}}, "description": "PNG image"}, **errors
 @router.post("", response_model=PosePublic, status_code=201, responses=errors(401, 409, 503, 507))
 def pose(
     body: PoseCreate, lease: LeaseDep, sessions: SessionsDep, store: StoreDep,
-    executor: ExecutorDep, settings: SettingsDep, _: TokenDep,
+    executor: ExecutorDep, settings: SettingsDep, mounted: SceneDep, _: TokenDep,
 ) -> dict:
     """Move, illuminate, capture, simulate and compare; the metrics and both frame ids."""
     outcome = run_single_pose(body, lease=lease, sessions=sessions, store=store,
-                              executor=executor, settings=settings)
+                              executor=executor, settings=settings, mounted=mounted)
     return pose_public(outcome.row)
 
 

@@ -45,7 +45,8 @@ def _run(lab: Lab, poses: int, repeats: int, spp: int, name: str):
         poses=[{"turntable_deg": float(a), "solar_suns": 1.0, "repeats": repeats}
                for a in angles],
     )
-    cid = create_campaign(req, sessions=lab.sessions, settings=lab.settings, rig=lab.lease.rig)
+    cid = create_campaign(req, sessions=lab.sessions, settings=lab.settings, rig=lab.lease.rig,
+                          mounted=lab.default_scene)
     t0 = time.perf_counter()
     lab.runner.start(cid)
     lab.runner.wait()
