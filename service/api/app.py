@@ -3,10 +3,16 @@
 The operator page is at ``/`` (:mod:`service.api.routes.page`, its assets under ``/static``).
 
 Routes live under ``/api/v1`` (one router per resource in :mod:`service.api.routes`); the OpenAPI
-document is at ``/api/v1/openapi.json`` and the interactive docs at ``/api/v1/docs``.
-Errors map to HTTP as: invalid input (:class:`InvalidInputError`, request validation) 422 with
-a message naming the field and the allowed range; device faults (:class:`DeviceError`) 503 with
-the device's message; :mod:`service.errors` their own codes.
+document is at ``/api/v1/openapi.json`` and the interactive docs (Swagger UI, served from the
+installed ``swagger-ui-bundle-v2`` package: no request leaves the machine) at ``/api/v1/docs``
+(``/docs`` redirects there). Every operation's id is its function's name in camelCase
+(``listCampaigns``, :func:`operation_id`).
+
+Every error is an RFC 9457 problem (:mod:`service.api.problems`): invalid input
+(:class:`InvalidInputError`, request validation) 422 with ``errors`` naming each field and the
+allowed range; device faults (:class:`DeviceError`) 503 with the device's message;
+:mod:`service.errors` their own codes; a request body over ``max_body_bytes`` 413; an unexpected
+exception 500 without its text.
 """
 
 from __future__ import annotations
@@ -17,14 +23,13 @@ from collections.abc import AsyncIterator
 
 from fastapi import APIRouter, FastAPI, Request
 from fastapi.concurrency import run_in_threadpool
-from fastapi.encoders import jsonable_encoder
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 
-from drivers.errors import DeviceError
+from service.api import problems
 from service.api.deps import StreamSlots
 from service.api.routes import (
+    api_docs,
     calibration,
     calibrations,
     campaigns,
@@ -35,55 +40,24 @@ from service.api.routes import (
     simulate,
 )
 from service.api.schemas import Health
-from service.errors import ServiceError
 from service.lab.lab import open_lab
 from service.lab.scenes import bundled_scenes
 from service.settings import Settings
 from service.web import STATIC_DIR
-from sim_core.errors import InvalidInputError
 from sim_core.frame_io import package_version
-from sim_core.json_safe import json_safe
 
 API_PREFIX = "/api/v1"
 _log = logging.getLogger(__name__)
 
 
-def _field(loc: tuple | list) -> str:
-    out = ""
-    for part in loc:
-        if part in ("body", "query", "path") and not out:
-            continue
-        out += f"[{part}]" if isinstance(part, int) else ("." if out else "") + str(part)
-    return out or "body"
+def operation_id(route: APIRoute) -> str:
+    """A route's OpenAPI operation id: its name (the function's) in camelCase.
 
-
-async def _validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:
-    # The errors echo the raw input (NaN, 1e309 read as inf, a lone surrogate): made strict JSON
-    # first, so that a bad request is always a 422 and never a failure to encode one.
-    errors = jsonable_encoder(json_safe(list(exc.errors())), custom_encoder={Exception: str})
-    errors = json_safe(errors)
-    messages = []
-    for e in errors:
-        msg = str(e.get("msg", "")).removeprefix("Value error, ")
-        e["msg"] = msg
-        e.pop("url", None)
-        e["field"] = _field(e.get("loc", ()))
-        messages.append(f"{e['field']}: {msg}")
-    return JSONResponse(status_code=422, content={"detail": errors, "message": "; ".join(messages)})
-
-
-async def _invalid_input(_: Request, exc: InvalidInputError) -> JSONResponse:
-    detail = [{"loc": ["body", *exc.field.replace("[", ".").replace("]", "").split(".")],
-               "msg": str(exc), "type": "invalid_input", "field": exc.field}]
-    return JSONResponse(status_code=422, content={"detail": detail, "message": str(exc)})
-
-
-async def _device_error(_: Request, exc: DeviceError) -> JSONResponse:
-    return JSONResponse(status_code=503, content={"detail": f"{type(exc).__name__}: {exc}"})
-
-
-async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
-    return JSONResponse(status_code=exc.status_code, content={"detail": exc.detail})
+    ``list_campaigns`` -> ``listCampaigns``; the names are unique across the API (a test says
+    so), so generated clients get readable method names.
+    """
+    first, *rest = route.name.split("_")
+    return first + "".join(part[:1].upper() + part[1:] for part in rest)
 
 
 def create_app(settings: Settings) -> FastAPI:
@@ -105,20 +79,17 @@ def create_app(settings: Settings) -> FastAPI:
         "need `Authorization: Bearer <TOFTWIN_TOKEN>`.",
         lifespan=lifespan,
         openapi_url=f"{API_PREFIX}/openapi.json",
-        docs_url=f"{API_PREFIX}/docs",
+        docs_url=None,  # our own page, its assets served from the package (api_docs)
         redoc_url=None,
-        max_body_size=settings.max_body_bytes,
+        generate_unique_id_function=operation_id,
     )
     app.state.stream_slots = StreamSlots(settings.sse_max_streams)
-    app.add_exception_handler(RequestValidationError, _validation_error)
-    app.add_exception_handler(InvalidInputError, _invalid_input)
-    app.add_exception_handler(DeviceError, _device_error)
-    app.add_exception_handler(ServiceError, _service_error)
+    problems.install(app, settings.max_body_bytes)
 
     api = APIRouter(prefix=API_PREFIX)
 
     @api.get("/health", response_model=Health, tags=["service"])
-    def health(request: Request) -> dict:
+    def get_health(request: Request) -> dict:
         """Liveness and what the service runs on."""
         lab = request.app.state.lab
         return {"status": "ok", "version": package_version(), "simulated": settings.simulated,
@@ -130,7 +101,12 @@ def create_app(settings: Settings) -> FastAPI:
     for module in (devices, simulate, poses, frames, campaigns, calibration, calibrations):
         api.include_router(module.router)
     app.include_router(api)
-    # The operator page (``/``, its fragments under ``/ui``) and its assets.
+    # The operator page (``/``, its fragments under ``/ui``), the API's documentation and their
+    # assets (Swagger UI's from its package, mounted before ours: the first mount that matches
+    # a path serves it).
     app.include_router(page.router)
+    app.include_router(api_docs.router)
+    app.mount(api_docs.SWAGGER_UI_URL, StaticFiles(directory=api_docs.swagger_ui_dir()),
+              name="swagger-ui")
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     return app

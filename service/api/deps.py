@@ -15,7 +15,7 @@ from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
-from service.api.schemas import Message
+from service.api.problems import problem_content
 from service.compute.executors import Executor
 from service.errors import UnavailableError
 from service.lab.calibration_jobs import CalibrationJobs
@@ -132,19 +132,19 @@ def require_token(
 
 TokenDep = Annotated[None, Depends(require_token)]
 
-#: documented error responses, shared by the routes
+#: documented error responses, shared by the routes (each an RFC 9457 problem,
+#: :mod:`service.api.problems`; 422 is declared wherever a route takes input)
 ERRORS = {
-    401: {"description": "Missing or wrong bearer token."},
-    404: {"description": "No such resource."},
-    409: {"description": "A campaign or calibration job holds the rig, or the resource is in "
-                         "the wrong state."},
-    410: {"description": "The resource is known but its files are gone from the data directory."},
-    507: {"description": "Too little free space on the data directory's disk."},
-    422: {"description": "Invalid input; the message names the field and the allowed range."},
-    503: {"description": "A device fault (the device's message) or a device not available."},
+    401: "Missing or wrong bearer token.",
+    404: "No such resource.",
+    409: "A campaign or calibration job holds the rig, or the resource is in the wrong state.",
+    410: "The resource is known but its files are gone from the data directory.",
+    503: "A device fault (`fault`: the driver's error class; `detail`: its message), or a "
+         "device, the executor or an event stream not available.",
+    507: "Too little free space on the data directory's disk.",
 }
 
 
 def errors(*codes: int) -> dict[int | str, dict]:
-    """The ``responses=`` entry of a route for the given error codes."""
-    return {c: {**ERRORS[c], "model": Message} for c in codes if c != 422}
+    """The ``responses=`` entry of a route for the error statuses it can answer."""
+    return {c: {"description": ERRORS[c], "content": problem_content()} for c in codes}

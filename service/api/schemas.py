@@ -1,5 +1,7 @@
 """Response schemas of the REST API (one ``Public`` family per resource) and device commands.
 
+The errors' schemas (RFC 9457 problem details) are in :mod:`service.api.problems`.
+
 The request bodies of simulations, poses and campaigns are what the lab's use cases take, so they
 live below the API in :mod:`service.lab.requests`; the routes use them as they are.
 """
@@ -11,12 +13,6 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field
 
 from service.lab.requests import Angle, Level, RequestBody, StrictBool
-
-
-class Message(BaseModel):
-    """An error: what went wrong and, for a device, which one."""
-
-    detail: str
 
 
 # -- simulate ----------------------------------------------------------------------------------

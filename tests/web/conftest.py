@@ -10,6 +10,7 @@ shows to ``docs/images/operator-*.png`` when missing or with ``TOFTWIN_DOC_SCREE
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import socket
@@ -107,10 +108,21 @@ def moving_server(tmp_path_factory) -> Iterator[Server]:
         yield srv
 
 
-class Page:
-    """A headless Chromium showing the operator page at one window size."""
+#: Chromium's switches for a machine without a network: no host name resolves (but the
+#: server's loopback address) and every connection that is not to loopback goes to a proxy
+#: that is not there (the discard port), so that an IP address does not get through either
+OFFLINE = ("--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
+           "--proxy-server=127.0.0.1:9", "--proxy-bypass-list=127.0.0.1")
 
-    def __init__(self, server: Server, size: tuple[int, int]) -> None:
+
+class Page:
+    """A headless Chromium showing the operator page at one window size.
+
+    ``offline``: with the network off (:data:`OFFLINE`), every request the browser makes
+    recorded (:meth:`requested_urls`).
+    """
+
+    def __init__(self, server: Server, size: tuple[int, int], offline: bool = False) -> None:
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
 
@@ -119,9 +131,11 @@ class Page:
         options = webdriver.ChromeOptions()
         options.binary_location = browser
         for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
-                    "--disable-gpu", "--hide-scrollbars", f"--window-size={size[0]},{size[1]}"):
+                    "--disable-gpu", "--hide-scrollbars", f"--window-size={size[0]},{size[1]}",
+                    *(OFFLINE if offline else ())):
             options.add_argument(arg)
-        options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+        logs = {"browser": "ALL", **({"performance": "ALL"} if offline else {})}
+        options.set_capability("goog:loggingPrefs", logs)
         self.driver = webdriver.Chrome(service=Service(executable_path=driver), options=options)
         self.driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
             "width": size[0], "height": size[1], "deviceScaleFactor": 1, "mobile": False})
@@ -203,6 +217,16 @@ class Page:
                 not doc_path.exists() or os.environ.get("TOFTWIN_DOC_SCREENSHOTS") == "1"):
             shutil.copyfile(path, doc_path)
         return path
+
+    def requested_urls(self) -> list[str]:
+        """Every URL the browser asked for since the last call (``offline`` pages only): the
+        network log's requests, those that failed or were blocked included."""
+        urls = []
+        for entry in self.driver.get_log("performance"):
+            message = json.loads(entry["message"])["message"]
+            if message["method"] == "Network.requestWillBeSent":
+                urls.append(message["params"]["request"]["url"])
+        return urls
 
     def take_console(self) -> list[dict]:
         """The console entries since the last call."""

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from tests.service.api.conftest import AUTH
+from tests.service.api.conftest import AUTH, problem
 from tests.web.conftest import DOC_SIZE, SIZES
 
 pytestmark = pytest.mark.timeout(300)
@@ -200,8 +200,7 @@ def test_a_bad_form_value_shows_the_apis_message_next_to_the_field(server, page)
     api = server.post("/api/v1/campaigns", {"name": "bad angle", "poses": [
         {"turntable_deg": 0, "solar_suns": 1, "repeats": 0},
         {"turntable_deg": 400, "solar_suns": 1, "repeats": 0}]})
-    assert api.status_code == 422
-    by_field = {e["field"]: e["msg"] for e in api.json()["detail"]}
+    by_field = {e["field"]: e["message"] for e in problem(api, 422)["errors"]}
     assert f"poses[1].turntable_deg: {by_field['poses[1].turntable_deg']}" in angle
     assert "allowed: -360 to 360 deg" in angle
     assert f"poses[0].repeats: {by_field['poses[0].repeats']}" in repeats

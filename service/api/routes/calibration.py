@@ -18,14 +18,14 @@ router = APIRouter(prefix="/calibration", tags=["calibration"])
 
 
 @router.get("", response_model=CalibrationPublic, responses=errors(404))
-def get_active(sessions: SessionsDep) -> dict:
+def get_active_calibration(sessions: SessionsDep) -> dict:
     """The active calibration: its values, hash and provenance, and when it was activated.
     404 while the simulations apply the nominal twin."""
     return active_public(sessions)
 
 
 @router.put("", response_model=CalibrationPublic, responses=errors(401))
-async def put_active(
+async def set_active_calibration(
     body: CalibrationFile, request: Request, sessions: SessionsDep, _: TokenDep
 ) -> dict:
     """Make a calibration the active one: the body is a calibration file's content as JSON
@@ -39,7 +39,7 @@ async def put_active(
 
 
 @router.delete("", status_code=204, responses=errors(401, 404))
-def delete_active(sessions: SessionsDep, _: TokenDep) -> Response:
+def delete_active_calibration(sessions: SessionsDep, _: TokenDep) -> Response:
     """Back to the nominal twin: simulations apply no calibration (404 if none is active)."""
     deactivate(sessions)
     return Response(status_code=204)

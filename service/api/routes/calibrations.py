@@ -37,7 +37,7 @@ _MEDIA = {"yaml": "application/yaml", "json": "application/json", "html": "text/
 
 @router.post("", response_model=CalibrationJobPublic, status_code=201,
              responses=errors(401, 409, 503, 507))
-def create(
+def create_calibration_job(
     body: CalibrationCreate, calibrations: CalibrationsDep, sessions: SessionsDep, _: TokenDep
 ) -> dict:
     """Run the calibration sequence (``toftwin calibrate rig``) on the rig in the background.
@@ -49,7 +49,7 @@ def create(
     return job_status(sessions, calibrations, job_id)
 
 @router.get("", response_model=list[CalibrationJobPublic])
-def list_jobs(
+def list_calibration_jobs(
     session: SessionDep,
     calibrations: CalibrationsDep,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
@@ -60,12 +60,14 @@ def list_jobs(
             for row in queries.list_calibration_jobs(session, limit, offset)]
 
 @router.get("/{job_id}", response_model=CalibrationJobPublic, responses=errors(404))
-def get_job(job_id: JobId, sessions: SessionsDep, calibrations: CalibrationsDep) -> dict:
+def get_calibration_job(
+    job_id: JobId, sessions: SessionsDep, calibrations: CalibrationsDep,
+) -> dict:
     """State, progress, what the sequence is doing, the error and what to do, the files."""
     return job_status(sessions, calibrations, job_id)
 
 @router.post("/{job_id}/cancel", response_model=CalibrationJobPublic, responses=COMMAND)
-def cancel(
+def cancel_calibration_job(
     job_id: JobId, sessions: SessionsDep, calibrations: CalibrationsDep, _: TokenDep
 ) -> dict:
     """Stop a running job before its next capture (it cannot be resumed)."""
@@ -73,7 +75,7 @@ def cancel(
     return job_status(sessions, calibrations, job_id)
 
 @router.post("/{job_id}/continue", response_model=CalibrationJobPublic, responses=COMMAND)
-def confirm(
+def continue_calibration_job(
     job_id: JobId, sessions: SessionsDep, calibrations: CalibrationsDep, _: TokenDep
 ) -> dict:
     """The operator has done what ``operator_instruction`` asked (real rig): go on."""
@@ -82,13 +84,13 @@ def confirm(
 
 @router.post("/{job_id}/activate", response_model=CalibrationPublic,
              responses=errors(401, 404, 409, 410))
-def activate(job_id: JobId, calibrations: CalibrationsDep, _: TokenDep) -> dict:
+def activate_calibration_job(job_id: JobId, calibrations: CalibrationsDep, _: TokenDep) -> dict:
     """Make a ``done`` job's calibration the service's active calibration."""
     return calibrations.activate(job_id)
 
 @router.get("/{job_id}/files/{name}", response_class=FileResponse,
             responses=errors(404, 409, 410))
-def files(job_id: JobId, name: FileName, sessions: SessionsDep) -> FileResponse:
+def get_calibration_job_file(job_id: JobId, name: FileName, sessions: SessionsDep) -> FileResponse:
     """An output file of a ``done`` job: ``calibration.yaml``, ``report.json``,
     ``report.html`` (its plots load from beside it)."""
     path = job_file(sessions, job_id, name)
@@ -105,7 +107,7 @@ def _stream_slot(job_id: JobId, sessions: SessionsDep, slots: StreamSlotsDep) ->
     slots.take()
 
 @router.get("/{job_id}/events", response_class=EventSourceResponse, responses=errors(404, 503))
-async def events(
+async def get_calibration_job_events(
     job_id: JobId, sessions: SessionsDep, calibrations: CalibrationsDep, settings: SettingsDep,
     slots: StreamSlotsDep, _: Annotated[None, Depends(_stream_slot)],
 ) -> AsyncIterator[ServerSentEvent]:

@@ -30,12 +30,8 @@ from service.export.bluesky import iter_campaign_documents
 from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
 from service.export.results_table import result_dict, result_rows, results_csv
-from service.lab.campaigns import (
-    campaign_status,
-    create_campaign,
-    delete_campaign,
-    status_key,
-)
+from service.lab import campaigns as lab_campaigns
+from service.lab.campaigns import campaign_status, status_key
 from service.lab.requests import CampaignCreate
 from service.store import queries
 from sim_core.json_safe import json_safe
@@ -46,13 +42,13 @@ COMMAND = errors(401, 404, 409, 503)
 
 
 @router.post("", response_model=CampaignCreated, status_code=201, responses=errors(401, 409))
-def create(
+def create_campaign(
     body: CampaignCreate, sessions: SessionsDep, settings: SettingsDep, lease: LeaseDep,
     mounted: SceneDep, _: TokenDep,
 ) -> dict:
     """Store a campaign (state ``created``); ``start`` runs it."""
-    cid = create_campaign(body, sessions=sessions, settings=settings, rig=lease.rig,
-                          mounted=mounted)
+    cid = lab_campaigns.create_campaign(body, sessions=sessions, settings=settings,
+                                        rig=lease.rig, mounted=mounted)
     return {"id": cid, "state": "created", "links": {"self": f"/api/v1/campaigns/{cid}"}}
 
 
@@ -76,17 +72,17 @@ def get_campaign(campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerD
 
 
 @router.delete("/{campaign_id}", status_code=204, responses=errors(401, 404, 409))
-def delete(
+def delete_campaign(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, store: StoreDep,
     _: TokenDep,
 ) -> Response:
     """Delete a campaign that is not running, with its results and frames (reclaims space)."""
-    delete_campaign(sessions, runner, store, campaign_id)
+    lab_campaigns.delete_campaign(sessions, runner, store, campaign_id)
     return Response(status_code=204)
 
 
 @router.post("/{campaign_id}/start", response_model=CampaignPublic, responses=COMMAND)
-def start(
+def start_campaign(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, _: TokenDep
 ) -> dict:
     """Run a ``created`` campaign in the background (409 if another one runs)."""
@@ -95,7 +91,7 @@ def start(
 
 
 @router.post("/{campaign_id}/pause", response_model=CampaignPublic, responses=COMMAND)
-def pause(
+def pause_campaign(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, _: TokenDep
 ) -> dict:
     """Stop after the poses in flight (they are kept); ``resume`` goes on from there."""
@@ -104,7 +100,7 @@ def pause(
 
 
 @router.post("/{campaign_id}/resume", response_model=CampaignPublic, responses=COMMAND)
-def resume(
+def resume_campaign(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, _: TokenDep
 ) -> dict:
     """Continue a ``paused``, ``interrupted`` or ``failed`` campaign at its first missing pose."""
@@ -113,7 +109,7 @@ def resume(
 
 
 @router.post("/{campaign_id}/cancel", response_model=CampaignPublic, responses=COMMAND)
-def cancel(
+def cancel_campaign(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, _: TokenDep
 ) -> dict:
     """Stop for good (results so far are kept)."""
@@ -131,7 +127,7 @@ def _stream_slot(
 
 @router.get("/{campaign_id}/events", response_class=EventSourceResponse,
             responses=errors(404, 503))
-async def events(
+async def get_campaign_events(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, settings: SettingsDep,
     slots: StreamSlotsDep, _: Annotated[None, Depends(_stream_slot)],
 ) -> AsyncIterator[ServerSentEvent]:
@@ -171,7 +167,7 @@ RESULTS_PAGE = 1000
           "description": "A page of results; `X-Total-Count` holds how many there are, a `Link` "
                          "header with `rel=\"next\"` the next page while there is one."},
     **errors(404)})
-def results(
+def list_campaign_results(
     campaign_id: CampaignId,
     sessions: SessionsDep,
     response: Response,
@@ -197,14 +193,16 @@ def results(
 
 
 @router.get("/{campaign_id}/report", response_class=HTMLResponse, responses=errors(404))
-def report(campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep) -> HTMLResponse:
+def get_campaign_report(
+    campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep,
+) -> HTMLResponse:
     """An HTML page: metrics over the poses, image panels measured / simulated / difference."""
     return HTMLResponse(campaign_report(sessions, store, campaign_id))
 
 
 @router.get("/{campaign_id}/plots/{name}.svg", response_class=Response, responses={
     200: {"content": {"image/svg+xml": {}}, "description": "An SVG plot"}, **errors(404)})
-def plot(
+def get_campaign_plot(
     campaign_id: CampaignId,
     name: Annotated[Literal[tuple(PLOTS)], Path(description="Which plot.")],  # type: ignore[valid-type]
     sessions: SessionsDep,
@@ -218,7 +216,7 @@ def plot(
 
 
 @router.get("/{campaign_id}/documents", responses=errors(404))
-def documents(campaign_id: CampaignId, sessions: SessionsDep) -> StreamingResponse:
+def get_campaign_documents(campaign_id: CampaignId, sessions: SessionsDep) -> StreamingResponse:
     """The campaign as Bluesky event-model documents: ``[{"name": ..., "doc": ...}, ...]``.
 
     Streamed as it is read (the results in batches), so a campaign of any size costs the

@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse, Response
 from service.api.deps import SessionDep, SessionsDep, StoreDep, TokenDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
-from service.lab.campaigns import delete_frame
+from service.lab import campaigns as lab_campaigns
 from service.store import queries
 from sim_core import frame_io
 from sim_core.json_safe import json_safe
@@ -39,16 +39,18 @@ def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> di
 
 
 @router.delete("/{frame_id}", status_code=204, responses=errors(401, 404, 409))
-def delete(frame_id: FrameIdPath, sessions: SessionsDep, store: StoreDep, _: TokenDep) -> Response:
+def delete_frame(
+    frame_id: FrameIdPath, sessions: SessionsDep, store: StoreDep, _: TokenDep
+) -> Response:
     """Delete a frame that no pose result compares (a capture, a simulation) and its files."""
-    delete_frame(sessions, store, frame_id)
+    lab_campaigns.delete_frame(sessions, store, frame_id)
     return Response(status_code=204)
 
 
 @router.get("/{frame_id}/arrays", response_class=FileResponse, responses={
     200: {"content": {"application/octet-stream": {}}, "description": "frame.npz"},
     **errors(404, 410)})
-def frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
+def get_frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``frame.npz``: range, depth, amplitude, intensity, phase, valid mask (units in metadata)."""
     _row(session, frame_id)
     return FileResponse(store.file(frame_id, frame_io.FRAME_NPZ),
@@ -58,7 +60,7 @@ def frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) ->
 @router.get("/{frame_id}/raw", response_class=FileResponse, responses={
     200: {"content": {"application/octet-stream": {}}, "description": "raw.npz"},
     **errors(404, 410)})
-def frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
+def get_frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``raw.npz``: the four-phase raw frame (measured, or a simulated non-ideal sensor's)."""
     _row(session, frame_id)
     store.file(frame_id, frame_io.FRAME_JSON)  # 410 if the frame's files are gone
@@ -71,7 +73,7 @@ def frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> Fi
 
 @router.get("/{frame_id}/preview/{kind}.png", response_class=FileResponse, responses={
     200: {"content": {"image/png": {}}, "description": "PNG preview"}, **errors(404, 410)})
-def frame_preview(
+def get_frame_preview(
     frame_id: FrameIdPath, kind: Literal["grey", "depth"], store: StoreDep, session: SessionDep
 ) -> FileResponse:
     """8-bit grey, or 16-bit depth in millimetres (0 where invalid), as the camera tools write."""

@@ -35,7 +35,7 @@ PNG = {200: {"content": {"image/png": {}}, "description": "PNG image"}, **errors
 
 
 @router.post("", response_model=PosePublic, status_code=201, responses=errors(401, 409, 503, 507))
-def pose(
+def create_pose(
     body: PoseCreate, lease: LeaseDep, sessions: SessionsDep, store: StoreDep,
     executor: ExecutorDep, settings: SettingsDep, mounted: SceneDep, _: TokenDep,
 ) -> dict:
@@ -52,7 +52,7 @@ def get_pose(pose_id: PoseId, session: SessionDep) -> dict:
 
 
 @router.get("/{pose_id}/panels/{name}.png", response_class=Response, responses=PNG)
-def panel_image(pose_id: PoseId, name: PanelName, session: SessionDep,
+def get_pose_panel(pose_id: PoseId, name: PanelName, session: SessionDep,
                 store: StoreDep) -> Response:
     """One of the pose's six images (grey and depth: measured, simulated, difference) in
     colour, pixel for pixel; its colour bar is ``colour-bar.png`` beside it."""
@@ -60,7 +60,7 @@ def panel_image(pose_id: PoseId, name: PanelName, session: SessionDep,
 
 
 @router.get("/{pose_id}/panels/{name}/colour-bar.png", response_class=Response, responses=PNG)
-def panel_colour_bar(pose_id: PoseId, name: PanelName, session: SessionDep,
+def get_pose_panel_colour_bar(pose_id: PoseId, name: PanelName, session: SessionDep,
                      store: StoreDep) -> Response:
     """The colour bar of one of the pose's images: its colour map, range and unit."""
     panel = _panel(session, store, pose_id, name)

@@ -14,7 +14,7 @@ router = APIRouter(tags=["simulation"])
 
 @router.post("/simulate", response_model=SimulationPublic, status_code=201,
              responses=errors(401, 503))
-def simulate(
+def create_simulation(
     body: SimulationCreate, sessions: SessionsDep, store: StoreDep, executor: ExecutorDep,
     settings: SettingsDep, _: TokenDep,
 ) -> dict:

@@ -1,7 +1,8 @@
 // The operator page: a client of the REST API (/api/v1) like any other.
 //
 // It validates nothing itself: every value goes to the API as typed, and what the API says
-// (a 422's `detail`, each naming its `field`) is shown next to that field. The token is kept in
+// (an RFC 9457 problem: its `detail`; for a 422 its `errors`, each naming its `field`) is shown
+// in the message box and next to each field. The token is kept in
 // sessionStorage (this browser tab's session); reading needs none. Campaigns and calibration
 // jobs are followed through their server-sent events; pose images, plots, the campaign list and
 // the calibration come as HTML fragments rendered by the service's templates (/ui/...).
@@ -30,7 +31,8 @@ async function call(method, path, body) {
     res = await fetch(path, {method, headers,
                              body: body === undefined ? undefined : JSON.stringify(body)});
   } catch (err) {
-    return {ok: false, status: 0, data: {detail: `the service does not answer (${err})`}};
+    return {ok: false, status: 0,
+            data: {title: "No answer", detail: `the service does not answer (${err})`}};
   }
   const type = res.headers.get("content-type") || "";
   const data = type.includes("json") ? await res.json() : await res.text();
@@ -43,13 +45,15 @@ async function fragment(path, target) {
   return res.ok;
 }
 
+// What went wrong, in a sentence: every error of the API is a problem (application/problem+json:
+// type, title, status, detail); anything else (a proxy's page) is shown as it came.
 function problem(res) {
   if (res.status === 401) {
     return "This needs the token: enter TOFTWIN_TOKEN at the top (kept for this session).";
   }
   const d = res.data || {};
   if (typeof d === "string") return `${res.status}: ${d.slice(0, 300)}`;
-  return d.message || (typeof d.detail === "string" ? d.detail : JSON.stringify(d.detail));
+  return d.detail || d.title || `${res.status}: ${JSON.stringify(d).slice(0, 300)}`;
 }
 
 // The message box keeps the last few messages, newest first (an emergency stop's report and the
@@ -69,18 +73,19 @@ function say(text, kind = "info") {
   if (kind === "info") say.timer = setTimeout(() => { box.hidden = true; }, 8000);
 }
 
-// What the API said about a form's fields, next to each field (its `field` path, else the
-// last or first part of it, else the form's general box).
+// What the API said about a form's fields (a 422 problem's `errors`), next to each field (its
+// `field` path, else the last or first part of it, else the form's general box).
 function showErrors(form, res) {
   $$(".field-error", form).forEach((el) => { el.textContent = ""; });
   if (res.ok) return;
-  const detail = res.status === 422 && Array.isArray(res.data.detail) ? res.data.detail : [];
-  for (const e of detail) {
+  const errors = res.status === 422 && Array.isArray(res.data.errors) ? res.data.errors : [];
+  for (const e of errors) {
     const field = e.field || "body";
     const parts = field.replace(/\[\d+\]/g, "").split(".");
     const keys = [field, parts.join("."), parts[parts.length - 1], parts[0], "body"];
     const box = keys.map((k) => $(`.field-error[data-field="${k}"]`, form)).find(Boolean);
-    const text = e.msg.startsWith(`${field}:`) ? e.msg : `${field}: ${e.msg}`;
+    const message = String(e.message || "");
+    const text = message.startsWith(`${field}:`) ? message : `${field}: ${message}`;
     if (box) box.textContent = box.textContent ? `${box.textContent}\n${text}` : text;
   }
   say(problem(res), "error");

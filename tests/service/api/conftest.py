@@ -8,15 +8,21 @@ two poses in flight, as a service with two local workers does.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 from fastapi.testclient import TestClient
+from jsonschema import Draft202012Validator
+from referencing import Registry, Resource
+from referencing.jsonschema import DRAFT202012
 
 from service.api.app import create_app
+from service.api.problems import PROBLEM_JSON
 from service.settings import Settings
 
 TOKEN = "test-token-0123456789"
@@ -29,6 +35,38 @@ def make_settings(data_dir: Path, **overrides: Any) -> Settings:
     values = {"token": TOKEN, "data_dir": data_dir, "simulated": True, "executor": "thread",
               **TINY, **overrides}
     return Settings(**values)
+
+
+@functools.cache
+def openapi_document() -> dict[str, Any]:
+    """The app's OpenAPI document (the app is made, not started)."""
+    return create_app(make_settings(Path("unused"))).openapi()
+
+
+#: the base URI the OpenAPI document is registered under for its ``$ref``s
+OPENAPI_URI = "urn:toftwin:openapi"
+
+
+def schema_validator(pointer: str, doc: dict[str, Any] | None = None) -> Draft202012Validator:
+    """A JSON Schema (2020-12, OpenAPI 3.1's dialect) validator for the schema at ``pointer``
+    of the OpenAPI document (``#/components/schemas/Problem``), its ``$ref``s resolved in it."""
+    doc = doc if doc is not None else openapi_document()
+    registry = Registry().with_resource(
+        OPENAPI_URI, Resource.from_contents(doc, default_specification=DRAFT202012))
+    return Draft202012Validator({"$ref": OPENAPI_URI + pointer}, registry=registry)
+
+
+def problem(res: httpx.Response, status: int) -> dict[str, Any]:
+    """The body of the error response ``res``, checked: its ``status``, the content type
+    ``application/problem+json`` and the OpenAPI document's schema of a problem (422: the
+    validation problem), whose ``status`` is the response's."""
+    assert res.status_code == status, (res.status_code, res.text[:2000])
+    assert res.headers["content-type"] == PROBLEM_JSON, res.headers
+    body = res.json()
+    schema = "ValidationProblem" if status == 422 else "Problem"
+    schema_validator(f"#/components/schemas/{schema}").validate(body)
+    assert body["status"] == status, body
+    return body
 
 
 @pytest.fixture

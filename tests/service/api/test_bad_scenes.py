@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 PLATE = {"name": "plate", "mesh": {"kind": "rectangle", "size_m": [1.0, 1.0]},
          "material": "black-flannel", "pose": {"position_m": [0.0, 0.0, 1.0]}}
@@ -44,8 +44,8 @@ def test_a_bad_inline_scene_is_refused_by_every_call_before_anything_moves(clien
     ]
     for path, body in calls:
         res = client.post(path, headers=AUTH, json=body)
-        assert res.status_code == 422, (path, res.status_code, res.text)
-        assert res.json()["message"].startswith(field), (path, res.json()["message"])
+        detail = problem(res, 422)["detail"]
+        assert detail.startswith(field), (path, detail)
     assert _angle(client) == pytest.approx(before, abs=1e-9)
     assert client.get("/api/v1/campaigns").json() == []
     assert client.get("/api/v1/frames").json() == []
@@ -60,8 +60,8 @@ def test_a_mask_the_frames_cannot_have_is_refused_before_anything_moves(client, 
                                "poses": [{"turntable_deg": before + 30.0}]}),
     ]:
         res = client.post(path, headers=AUTH, json=body)
-        assert res.status_code == 422, (path, res.status_code, res.text)
-        assert res.json()["message"].startswith(field), res.json()["message"]
+        detail = problem(res, 422)["detail"]
+        assert detail.startswith(field), (path, detail)
     assert _angle(client) == pytest.approx(before, abs=1e-9)
     assert client.get("/api/v1/frames").json() == []
 
@@ -72,9 +72,9 @@ def test_a_bad_scene_during_a_running_campaign_is_refused_and_the_campaign_compl
     wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
     scene, field = BAD_SCENES[0]
     res = client.post("/api/v1/simulate", headers=AUTH, json={"scene": scene, "spp": 1})
-    assert res.status_code == 422 and res.json()["message"].startswith(field)
+    assert problem(res, 422)["detail"].startswith(field)
     res = client.post("/api/v1/campaigns", headers=AUTH,
                       json={"name": "bad", "scene": scene, "poses": [{"turntable_deg": 0.0}]})
-    assert res.status_code == 422 and res.json()["message"].startswith(field)
+    assert problem(res, 422)["detail"].startswith(field)
     status = wait_campaign(client, cid, lambda s: s["state"] != "running")
     assert status["state"] == "completed" and status["poses_done"] == len(poses), status

@@ -24,7 +24,7 @@ from service.api.app import create_app
 from service.settings import EXAMPLES_DIR
 from service.store import queries
 from sim_core.twin_file import load_calibration, parse_calibration, twin_hash
-from tests.service.api.conftest import AUTH, make_settings, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, make_settings, problem, start_campaign, wait_campaign
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -77,7 +77,7 @@ def wait_job(client: TestClient, job_id: str, timeout_s: float = 120.0) -> dict:
 def test_put_get_delete_round_trip_and_the_active_one_survives_a_restart(tmp_path):
     with started(tmp_path) as client:
         res = client.get("/api/v1/calibration")
-        assert res.status_code == 404 and "no calibration is active" in res.json()["detail"]
+        assert "no calibration is active" in problem(res, 404)["detail"]
         assert client.put("/api/v1/calibration", json=CALIBRATION).status_code == 401
         assert client.delete("/api/v1/calibration").status_code == 401
 
@@ -117,8 +117,8 @@ def test_a_bad_calibration_is_a_422_naming_the_field_and_keeps_the_active_one(
     assert client.put("/api/v1/calibration", headers=AUTH, json=CALIBRATION).status_code == 200
     before = client.get("/api/v1/calibration").json()
     res = client.put("/api/v1/calibration", headers=AUTH, json=body)
-    assert res.status_code == 422, res.text
-    assert field in res.json()["message"], res.json()["message"]
+    detail = problem(res, 422)["detail"]
+    assert field in detail, detail
     assert client.get("/api/v1/calibration").json() == before
 
 
@@ -127,7 +127,7 @@ def test_a_bad_number_in_the_raw_body_is_a_422_and_nothing_is_activated(client):
         raw = '{"illumination": {"power_w": ' + text + "}}"
         res = client.put("/api/v1/calibration",
                          headers={**AUTH, "Content-Type": "application/json"}, content=raw)
-        assert res.status_code == 422 and "illumination.power_w" in res.json()["message"]
+        assert "illumination.power_w" in problem(res, 422)["detail"]
     assert client.get("/api/v1/calibration").status_code == 404
 
 
@@ -192,7 +192,7 @@ def test_an_inline_scene_may_not_name_a_calibration_file(client):
     scene = yaml.safe_load((EXAMPLES_DIR / "plane.yaml").read_text())
     scene["calibration"] = "/etc/passwd"
     res = client.post("/api/v1/simulate", headers=AUTH, json={"scene": scene})
-    assert res.status_code == 422 and "scene.calibration" in res.json()["message"]
+    assert "scene.calibration" in problem(res, 422)["detail"]
 
 
 def test_no_endpoint_returns_the_simulated_lab_s_reality(make_client, tmp_path):
@@ -236,11 +236,11 @@ def test_a_short_calibration_job_runs_to_done_with_progress_and_can_be_activated
     # while it runs it holds the rig
     assert client.get("/api/v1/devices").json()["calibration_id"] == jid
     res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 5})
-    assert res.status_code == 409 and jid in res.json()["detail"]
+    assert jid in problem(res, 409)["detail"]
     cid = client.post("/api/v1/campaigns", headers=AUTH,
                       json={"name": "c", "poses": [{"turntable_deg": 0}]}).json()["id"]
     res = client.post(f"/api/v1/campaigns/{cid}/start", headers=AUTH)
-    assert res.status_code == 409 and jid in res.json()["detail"]
+    assert jid in problem(res, 409)["detail"]
     assert client.get(f"/api/v1/campaigns/{cid}").json()["state"] == "created"  # unchanged
     assert client.post("/api/v1/calibrations", headers=AUTH,
                        json=SHORT_PLAN).status_code == 409  # one at a time
@@ -284,7 +284,7 @@ def test_a_calibration_job_refuses_to_start_while_a_campaign_holds_the_rig(clien
     cid = start_campaign(client, [{"turntable_deg": a, "repeats": 2} for a in range(0, 100, 10)])
     wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
     res = client.post("/api/v1/calibrations", headers=AUTH, json=SHORT_PLAN)
-    assert res.status_code == 409 and cid in res.json()["detail"]
+    assert cid in problem(res, 409)["detail"]
     assert client.get("/api/v1/calibrations").json() == []  # nothing stored
     client.post(f"/api/v1/campaigns/{cid}/cancel", headers=AUTH)
     wait_campaign(client, cid, lambda s: s["state"] != "running")
@@ -324,8 +324,8 @@ def test_a_job_whose_data_cannot_calibrate_fails_with_what_to_do(client, tmp_pat
 ])
 def test_a_bad_plan_is_a_422_naming_the_field_and_starts_nothing(client, plan, field):
     res = client.post("/api/v1/calibrations", headers=AUTH, json=plan)
-    assert res.status_code == 422, res.text
-    assert field in res.json()["message"], res.json()["message"]
+    detail = problem(res, 422)["detail"]
+    assert field in detail, detail
     assert client.get("/api/v1/calibrations").json() == []
     assert client.get("/api/v1/devices").json()["calibration_id"] is None
 

@@ -10,7 +10,7 @@ import event_model
 import pytest
 from event_model import DocumentNames, schema_validators
 
-from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -98,8 +98,7 @@ def test_manual_device_calls_during_a_campaign_get_409(client):
                        ("/api/v1/devices/camera/capture", None),
                        ("/api/v1/poses", {"turntable_deg": 5, "solar_suns": 1})):
         res = client.post(path, headers=AUTH, json=body)
-        assert res.status_code == 409, (path, res.text)
-        assert cid in res.json()["detail"]
+        assert cid in problem(res, 409)["detail"], path
     other = client.post("/api/v1/campaigns", headers=AUTH,
                         json={"name": "second", "poses": [{"turntable_deg": 0}]}).json()["id"]
     assert client.post(f"/api/v1/campaigns/{other}/start", headers=AUTH).status_code == 409

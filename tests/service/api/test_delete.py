@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 
 def test_a_finished_campaign_is_deleted_with_its_results_and_frames(client, tmp_path):
@@ -29,7 +29,7 @@ def test_a_running_campaign_cannot_be_deleted(client):
     cid = start_campaign(client, [{"turntable_deg": a} for a in range(-60, 70, 10)])
     wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
     res = client.delete(f"/api/v1/campaigns/{cid}", headers=AUTH)
-    assert res.status_code == 409 and "running" in res.json()["detail"]
+    assert "running" in problem(res, 409)["detail"]
     client.post(f"/api/v1/campaigns/{cid}/cancel", headers=AUTH)
     wait_campaign(client, cid, lambda s: s["state"] == "cancelled")
     assert client.delete(f"/api/v1/campaigns/{cid}", headers=AUTH).status_code == 204
@@ -46,5 +46,5 @@ def test_a_lone_frame_is_deleted_but_not_one_a_result_compares(client, tmp_path)
     pose = client.post("/api/v1/poses", headers=AUTH,
                        json={"turntable_deg": 10.0, "solar_suns": 1.0}).json()
     res = client.delete(f"/api/v1/frames/{pose['measured_frame_id']}", headers=AUTH)
-    assert res.status_code == 409 and str(pose["id"]) in res.json()["detail"]
+    assert str(pose["id"]) in problem(res, 409)["detail"]
     assert client.get(f"/api/v1/frames/{pose['measured_frame_id']}/arrays").status_code == 200

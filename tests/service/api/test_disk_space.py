@@ -9,7 +9,7 @@ import sqlalchemy.exc
 from sqlalchemy import event
 
 from service.store.disk_space import is_disk_full
-from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 
 def test_below_the_free_space_kept_a_campaign_pauses_and_a_pose_is_refused(make_client):
@@ -25,7 +25,7 @@ def test_below_the_free_space_kept_a_campaign_pauses_and_a_pose_is_refused(make_
     assert status["state"] == "paused" and status["runs"] == 2
     res = client.post("/api/v1/poses", headers=AUTH,
                       json={"turntable_deg": before + 20.0, "solar_suns": 1.0})
-    assert res.status_code == 507 and "TOFTWIN_MIN_FREE_BYTES" in res.json()["detail"]
+    assert "TOFTWIN_MIN_FREE_BYTES" in problem(res, 507)["detail"]
     assert client.get("/api/v1/devices/turntable/position").json()["angle_deg"] == before
     assert client.get("/api/v1/frames").json() == []
 

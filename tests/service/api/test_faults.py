@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -27,7 +27,9 @@ def test_a_device_fault_pauses_the_campaign_and_resume_finishes_it(client):
 
     # a manual call meets the same fault: 503 with the device's message
     res = client.get("/api/v1/devices/turntable/position")
-    assert res.status_code == 503 and "DeviceTimeoutError" in res.json()["detail"]
+    body = problem(res, 503)
+    assert body["type"] == "urn:toftwin:problem:device-fault"
+    assert body["fault"] == "DeviceTimeoutError" and "turntable" in body["detail"].lower()
 
     turntable_faults(client).clear()
     res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)
@@ -89,9 +91,9 @@ def test_a_lamp_fault_pauses_the_campaign_and_no_pose_is_stored_without_its_ligh
 def test_a_stalled_turntable_is_recovered_through_the_api(client):
     turntable_faults(client).inject("stall:1")  # the next move stalls: following error
     res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 60.0})
-    assert res.status_code == 503 and "following error" in res.json()["detail"]
+    assert "following error" in problem(res, 503)["detail"]
     res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 60.0})
-    assert res.status_code == 503 and "enable" in res.json()["detail"]  # still disabled
+    assert "enable" in problem(res, 503)["detail"]  # still disabled
 
     assert client.post("/api/v1/devices/turntable/enable").status_code == 401
     res = client.post("/api/v1/devices/turntable/enable", headers=AUTH)
@@ -110,7 +112,7 @@ def test_enable_and_reset_are_refused_while_a_campaign_holds_the_rig(client):
     wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
     for verb in ("enable", "reset"):
         res = client.post(f"/api/v1/devices/turntable/{verb}", headers=AUTH)
-        assert res.status_code == 409 and cid in res.json()["detail"], res.text
+        assert cid in problem(res, 409)["detail"], verb
     client.post(f"/api/v1/campaigns/{cid}/cancel", headers=AUTH)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shutil
 
-from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 
 def test_reads_of_a_lost_frame_answer_410_naming_it_and_the_report_shows_the_gap(
@@ -18,8 +18,8 @@ def test_reads_of_a_lost_frame_answer_410_naming_it_and_the_report_shows_the_gap
 
     for suffix in ("arrays", "raw", "preview/grey.png", "preview/depth.png"):
         res = client.get(f"/api/v1/frames/{lost}/{suffix}")
-        assert res.status_code == 410, (suffix, res.status_code, res.text)
-        assert lost in res.json()["detail"] and "gone" in res.json()["detail"]
+        detail = problem(res, 410)["detail"]
+        assert lost in detail and "gone" in detail, suffix
     assert client.get(f"/api/v1/frames/{lost}").status_code == 200  # the row is still there
 
     report = client.get(f"/api/v1/campaigns/{cid}/report")

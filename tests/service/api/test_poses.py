@@ -11,7 +11,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from service.cli import app as toftwin_app
-from tests.service.api.conftest import AUTH
+from tests.service.api.conftest import AUTH, problem
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -76,8 +76,7 @@ def test_inline_scenes_may_not_read_files_on_the_server(client):
     scene = json.loads(json.dumps(SMALL_SCENE))
     scene["objects"][0]["mesh"] = {"kind": "file", "path": "/etc/passwd"}
     res = client.post("/api/v1/simulate", headers=AUTH, json={"scene": scene})
-    assert res.status_code == 422
-    assert "scene.objects[0].mesh.kind" in res.json()["message"]
+    assert "scene.objects[0].mesh.kind" in problem(res, 422)["detail"]
 
 
 def test_calls_that_change_things_need_the_token(client):
@@ -95,22 +94,24 @@ def test_calls_that_change_things_need_the_token(client):
 def test_a_bad_angle_or_level_is_422_naming_the_field_and_changes_nothing(client):
     before = client.get("/api/v1/devices/turntable/position").json()["angle_deg"]
     res = client.post("/api/v1/devices/turntable/move", headers=AUTH, json={"angle_deg": 200})
-    assert res.status_code == 422
-    assert res.json()["message"].startswith("angle_deg:") and "[-170, 170] deg" in res.text
+    body = problem(res, 422)
+    assert body["detail"].startswith("angle_deg:") and "[-170, 170] deg" in body["detail"]
+    assert [e["field"] for e in body["errors"]] == ["angle_deg"]
     res = client.post("/api/v1/poses", headers=AUTH, json={"turntable_deg": 500, "solar_suns": 1})
-    assert res.status_code == 422 and "turntable_deg: got 500" in res.json()["message"]
+    assert "turntable_deg: got 500" in problem(res, 422)["detail"]
     res = client.post("/api/v1/poses", headers=AUTH, json={"turntable_deg": 0, "solar_suns": 1.5})
-    assert res.status_code == 422
-    assert "solar_suns" in res.json()["message"] and "0.8 to 1.2 sun" in res.json()["message"]
+    detail = problem(res, 422)["detail"]
+    assert "solar_suns" in detail and "0.8 to 1.2 sun" in detail
     res = client.post("/api/v1/devices/solar/level", headers=AUTH, json={"suns": 0.5})
-    assert res.status_code == 422 and "suns: got 0.5 sun" in res.json()["message"]
+    assert "suns: got 0.5 sun" in problem(res, 422)["detail"]
     res = client.post("/api/v1/campaigns", headers=AUTH, json={
         "name": "bad", "poses": [{"turntable_deg": 0}, {"turntable_deg": 175}]})
-    assert res.status_code == 422
-    assert res.json()["message"].startswith("poses[1].turntable_deg:")
+    body = problem(res, 422)
+    assert body["detail"].startswith("poses[1].turntable_deg:")
+    assert body["errors"][0]["field"] == "poses[1].turntable_deg"
     res = client.post("/api/v1/campaigns", headers=AUTH, json={
         "name": "bad", "poses": [{"turntable_deg": 0, "solar_suns": 2.0}]})
-    assert res.status_code == 422 and "poses[0].solar_suns" in res.json()["message"]
+    assert "poses[0].solar_suns" in problem(res, 422)["detail"]
     # nothing stored, nothing moved
     assert client.get("/api/v1/campaigns").json() == []
     assert client.get("/api/v1/frames").json() == []
@@ -120,7 +121,14 @@ def test_a_bad_angle_or_level_is_422_naming_the_field_and_changes_nothing(client
 def test_request_bodies_are_bounded(make_client, tmp_path):
     client = make_client(tmp_path / "small", max_body_bytes=4096)
     big = {"name": "x" * 8000, "poses": [{"turntable_deg": 0}]}
-    assert client.post("/api/v1/campaigns", headers=AUTH, json=big).status_code == 413
+    body = problem(client.post("/api/v1/campaigns", headers=AUTH, json=big), 413)
+    assert body["type"] == "urn:toftwin:problem:content-too-large"
+    assert "4096 bytes" in body["detail"]
+    # without a Content-Length (chunked), counted as it arrives
+    chunks = iter([b'{"name": "' + b"x" * 3000, b"x" * 3000 + b'", "poses": []}'])
+    res = client.post("/api/v1/campaigns", content=chunks,
+                      headers={**AUTH, "Content-Type": "application/json"})
+    assert "TOFTWIN_MAX_BODY_BYTES" in problem(res, 413)["detail"]
     assert client.get("/api/v1/campaigns").json() == []
 
 
