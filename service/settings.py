@@ -40,6 +40,16 @@ DASK_MISSING = ("Dask's `distributed` is not installed; a dask:// executor needs
                 "dask extra: pip install -e '.[dask]'")
 
 
+def dask_scheduler(executor: str) -> str | None:
+    """``tcp://HOST:PORT`` of a ``dask://HOST:PORT`` executor value, else None.
+
+    >>> dask_scheduler("dask://10.0.0.5:8786"), dask_scheduler("local")
+    ('tcp://10.0.0.5:8786', None)
+    """
+    m = _DASK.match(executor)
+    return None if m is None else f"tcp://{m['host']}:{m['port']}"
+
+
 def dask_installed() -> bool:
     """Whether Dask's ``distributed`` can be imported (the ``dask`` extra is installed)."""
     try:
@@ -200,8 +210,7 @@ class Settings(BaseSettings):
     @property
     def dask_address(self) -> str | None:
         """``tcp://HOST:PORT`` of the Dask scheduler, or None for a local executor."""
-        m = _DASK.match(self.executor)
-        return None if m is None else f"tcp://{m['host']}:{m['port']}"
+        return dask_scheduler(self.executor)
 
     @property
     def depth(self) -> int:
