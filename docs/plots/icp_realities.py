@@ -133,7 +133,7 @@ def main(argv: list[str]) -> None:
         have_o3d = False
         print("open3d is not installed: our ICP only")
     model = mount_model(SPEC, EXAMPLES)
-    summary: dict[str, list[tuple[float, float]]] = {"ours": [], "open3d": []}
+    summary: dict[str, list[tuple[float, float]]] = {"ours": [], "open3d": [], "ours - open3d": []}
     for seed in seeds:
         points, cameras = cloud(seed, frames, spp, cache)
         truth = random_reality(seed, nominal_power_w=SPEC.illumination.power_w,
@@ -142,12 +142,18 @@ def main(argv: list[str]) -> None:
               f"{[round(v * 1e3, 2) for v in truth.position_m]} mm "
               f"{[round(v, 2) for v in truth.rotation_deg]} deg")
         runs = [("ours", register_mount)] + ([("open3d", register_open3d)] if have_o3d else [])
+        offsets = {}
         for name, fn in runs:
             t0 = time.perf_counter()
             reg = fn(points, model, cameras)
             seconds = time.perf_counter() - t0
             print(_line(name, reg, truth, seconds))
             summary[name].append(pose_errors(reg.offset, truth))
+            offsets[name] = reg.offset
+        if len(offsets) == 2:
+            dp, dr = pose_errors(offsets["ours"], offsets["open3d"])
+            summary["ours - open3d"].append((dp, dr))
+            print(f"  ours - open3d: position {dp * 1e3:.3f} mm, rotation {dr:.3f} deg")
     for name, errs in summary.items():
         if errs:
             e = np.array(errs)
