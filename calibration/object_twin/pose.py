@@ -18,10 +18,11 @@ Checks, so that no wrong pose is ever reported: enough measured points near the 
 nominal pose (else the cloud does not overlap the mesh: wrong object, wrong place, wrong scene),
 and after ICP a large share of them matched within a few millimetres.
 
-ICP on this object determines the horizontal position and the rotations well, the height less
-well: every face the camera sees is vertical, so only the silhouette's top and bottom edges say
-where the object is along the axis (:mod:`calibration.object_twin.refine` settles it on the
-rendered phasors).
+ICP on this object determines the horizontal position and the rotations, not the height: every
+face the camera sees from the side is vertical, and a vertical face's point-to-plane residuals
+are horizontal, so ICP takes no step along the axis and reports that component's standard
+deviation as infinite (only the silhouette's top and bottom edges say where the object is along
+the axis: :mod:`calibration.object_twin.refine` settles it on the rendered phasors).
 """
 
 from __future__ import annotations
