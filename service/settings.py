@@ -3,11 +3,13 @@
 Every field can be set as an environment variable with the prefix ``TOFTWIN_`` (``TOFTWIN_TOKEN``,
 ``TOFTWIN_DATA_DIR``, ...) or in a settings file in dotenv format (``toftwin serve --settings
 FILE``); keyword arguments (the CLI options) win over both. Construction fails fast, naming the
-field, when the token is missing, a placeholder or too short, or the executor is malformed.
+field, when the token is missing, a placeholder or too short, or the executor is malformed (or
+is ``dask://...`` without Dask's ``distributed``, the ``dask`` extra, installed).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 from pathlib import Path
@@ -32,6 +34,28 @@ PLACEHOLDER_TOKENS = frozenset(
 MIN_TOKEN_LENGTH = 12
 
 _DASK = re.compile(r"^dask://(?P<host>[A-Za-z0-9_.:\[\]-]+):(?P<port>\d{1,5})$")
+
+#: what a Dask executor needs and is not installed by default (the project's ``dask`` extra)
+DASK_MISSING = ("Dask's `distributed` is not installed; a dask:// executor needs the project's "
+                "dask extra: pip install -e '.[dask]'")
+
+
+def dask_scheduler(executor: str) -> str | None:
+    """``tcp://HOST:PORT`` of a ``dask://HOST:PORT`` executor value, else None.
+
+    >>> dask_scheduler("dask://10.0.0.5:8786"), dask_scheduler("local")
+    ('tcp://10.0.0.5:8786', None)
+    """
+    m = _DASK.match(executor)
+    return None if m is None else f"tcp://{m['host']}:{m['port']}"
+
+
+def dask_installed() -> bool:
+    """Whether Dask's ``distributed`` can be imported (the ``dask`` extra is installed)."""
+    try:
+        return importlib.util.find_spec("distributed") is not None
+    except (ImportError, ValueError):  # a broken or half-removed installation
+        return False
 
 
 class Settings(BaseSettings):
@@ -170,7 +194,11 @@ class Settings(BaseSettings):
     @field_validator("executor")
     @classmethod
     def _known_executor(cls, v: str) -> str:
-        if v in ("local", "thread") or _DASK.match(v):
+        if v in ("local", "thread"):
+            return v
+        if _DASK.match(v):
+            if not dask_installed():
+                raise ValueError(f"got {v!r}: {DASK_MISSING}")
             return v
         raise ValueError(f"got {v!r}; allowed: 'local', 'thread' or 'dask://HOST:PORT'")
 
@@ -182,8 +210,7 @@ class Settings(BaseSettings):
     @property
     def dask_address(self) -> str | None:
         """``tcp://HOST:PORT`` of the Dask scheduler, or None for a local executor."""
-        m = _DASK.match(self.executor)
-        return None if m is None else f"tcp://{m['host']}:{m['port']}"
+        return dask_scheduler(self.executor)
 
     @property
     def depth(self) -> int:

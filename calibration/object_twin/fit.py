@@ -96,6 +96,40 @@ def _check_captures(captures: Sequence[AveragedCapture], min_valid_pixels: int,
     return usable
 
 
+def measured_points(
+    spec: SceneSpec,
+    calibration: TwinParameters | None,
+    captures: Sequence[AveragedCapture],
+    min_amplitude_dn: float = MIN_AMPLITUDE_DN,
+    edge_jump_m: float = EDGE_JUMP_M,
+) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """Every view's points in the mount frame, merged: what ICP registers (step 1-2).
+
+    Returns
+    -------
+    points : (n, 3) float64
+        The merged points [m], mount frame.
+    cameras : (n_views, 3) float64
+        Each view's camera position in the mount frame [m].
+    views : list of dict
+        Per view: angle, frames, usable pixels and points (the report's ``views``).
+    """
+    points, cams, views = [], [], []
+    for cap in captures:
+        cspec = capture_spec(spec, cap)
+        intr = calibrated_camera(cspec, calibration).intrinsics
+        depth = calibration.camera.depth if calibration is not None else None
+        model_d = None if depth is None else DepthErrorModel.from_spec(
+            depth, cap.frequencies_hz, cap.shape)
+        cloud = capture_cloud(cap, intr, model_d, min_amplitude_dn, edge_jump_m)
+        m = mount_from_camera(cspec, calibration, cap.turntable_angle_deg)
+        points.append(cloud.points_cam_m @ m[:3, :3].T + m[:3, 3])
+        cams.append(m[:3, 3])
+        views.append({"turntable_angle_deg": cap.turntable_angle_deg, "frames": cap.n_frames,
+                      "usable_pixels": int(cloud.usable.sum()), "points": cloud.n_points})
+    return np.concatenate(points), np.asarray(cams), views
+
+
 def fit_object(
     spec: SceneSpec,
     base_dir: str | Path,
@@ -143,20 +177,9 @@ def fit_object(
     model = mount_model(spec, base)
 
     # 1-2. points, ICP ------------------------------------------------------------------------
-    points, cams, views = [], [], []
-    for cap in captures:
-        cspec = capture_spec(spec, cap)
-        intr = calibrated_camera(cspec, calibration).intrinsics
-        depth = calibration.camera.depth if calibration is not None else None
-        model_d = None if depth is None else DepthErrorModel.from_spec(
-            depth, cap.frequencies_hz, cap.shape)
-        cloud = capture_cloud(cap, intr, model_d, min_amplitude_dn, edge_jump_m)
-        m = mount_from_camera(cspec, calibration, cap.turntable_angle_deg)
-        points.append(cloud.points_cam_m @ m[:3, :3].T + m[:3, 3])
-        cams.append(m[:3, 3])
-        views.append({"turntable_angle_deg": cap.turntable_angle_deg, "frames": cap.n_frames,
-                      "usable_pixels": int(cloud.usable.sum()), "points": cloud.n_points})
-    reg = register_mount(np.concatenate(points), model, np.asarray(cams))
+    points, cams, views = measured_points(spec, calibration, captures, min_amplitude_dn,
+                                          edge_jump_m)
+    reg = register_mount(points, model, cams)
     t_icp = time.perf_counter() - t0
 
     # 3. the twin's prediction at the ICP pose; which objects it determines; starting scales -

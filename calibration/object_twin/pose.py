@@ -4,21 +4,25 @@ Every view's points go to the mount frame (:mod:`calibration.object_twin.views`)
 the target is the on-turntable objects' meshes at their nominal pose, densely sampled with their
 face normals (faces turned away from the camera in every view are left out: they were never
 seen, and a thin panel's back face would otherwise attract the points of its front face).
-Open3D's point-to-plane ICP with a Tukey kernel (robust to the mixed pixels and multipath the
-edge filter leaves) registers the measured points to the model, from the nominal pose, at
-shrinking correspondence distances. Its transform ``T`` maps the measured (real) object onto the
-nominal one, so the mount offset is ``M = T^-1``, expressed in the reality's convention
+Point-to-plane ICP with a Tukey kernel (robust to the mixed pixels and multipath the edge
+filter leaves) registers the measured points to the model, from the nominal pose, at shrinking
+correspondence distances (:func:`icp_point_to_plane`: scipy's KD-tree for the nearest model
+sample, one Gauss-Newton step of the Tukey-weighted point-to-plane residuals per correspondence
+search). Its transform ``T`` maps the measured (real) object onto the nominal one, so the mount
+offset is ``M = T^-1``, expressed in the reality's convention
 (:class:`sim_core.twin_file.MountParameters`: ``x' = c + R (x - c) + t`` about the nominal axis
-point ``c``, extrinsic xyz Euler angles): :func:`offset_from_transform`.
+point ``c``, extrinsic xyz Euler angles): :func:`offset_from_transform`. Single-threaded and
+free of order effects: the same points give the same pose to the last bit.
 
 Checks, so that no wrong pose is ever reported: enough measured points near the model at the
 nominal pose (else the cloud does not overlap the mesh: wrong object, wrong place, wrong scene),
 and after ICP a large share of them matched within a few millimetres.
 
-ICP on this object determines the horizontal position and the rotations well, the height less
-well: every face the camera sees is vertical, so only the silhouette's top and bottom edges say
-where the object is along the axis (:mod:`calibration.object_twin.refine` settles it on the
-rendered phasors).
+ICP on this object determines the horizontal position and the rotations, not the height: every
+face the camera sees from the side is vertical, and a vertical face's point-to-plane residuals
+are horizontal, so ICP takes no step along the axis and reports that component's standard
+deviation as infinite (only the silhouette's top and bottom edges say where the object is along
+the axis: :mod:`calibration.object_twin.refine` settles it on the rendered phasors).
 """
 
 from __future__ import annotations
@@ -27,7 +31,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import open3d as o3d
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -49,6 +52,14 @@ CROP_M = 0.025
 ICP_DISTANCES_M = (0.02, 0.01, 0.006)
 #: Tukey kernel's width [m] (a few times the averaged range noise)
 TUKEY_K_M = 0.008
+#: ICP stops at a distance when fitness and inlier RMSE [m] change less than these between two
+#: iterations, or after this many iterations
+ICP_RELATIVE_FITNESS, ICP_RELATIVE_RMSE_M, ICP_MAX_ITERATIONS = 1e-9, 1e-9, 60
+#: eigenvalues of J^T J at most this times the largest are directions the points do not
+#: determine: ICP takes no step along them, their standard deviation is infinite
+RCOND = 1e-9
+#: a pose component is undetermined if this much of it lies along such directions
+NULL_SHARE = 1e-6
 #: least number of measured points near the model
 MIN_POINTS = 150
 #: least share of the points near the model that ICP matches within its finest distance
@@ -173,8 +184,11 @@ class Registration:
     n_points_total : int
         All measured points.
     std : dict
-        Standard deviations from Open3D's information matrix scaled by the residual variance:
-        ``rotation_deg`` (about x, y, z) and ``translation_m``.
+        Standard deviations of the ICP pose, ``rotation_deg`` (about the mount frame's x, y, z
+        axes through its origin) and ``translation_m``: the inverse of the information matrix
+        (:func:`information_matrix`) times the squared inlier RMSE (:func:`pose_std`);
+        infinite along what the matched faces do not determine (the height, when all of them
+        are vertical: the report shows it as null).
     """
 
     offset: ObjectPose
@@ -191,11 +205,162 @@ class Registration:
                 "points_total": self.n_points_total, "std": self.std}
 
 
-def _cloud(points: np.ndarray, normals: np.ndarray | None = None) -> o3d.geometry.PointCloud:
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points)))
-    if normals is not None:
-        pc.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(normals))
-    return pc
+@dataclass(frozen=True)
+class IcpResult:
+    """One ICP run's result (:func:`icp_point_to_plane`).
+
+    Attributes
+    ----------
+    transform : (4, 4) float64
+        Maps the source points onto the target.
+    fitness : float
+        Share of the source points with a target sample within the correspondence distance.
+    inlier_rmse_m : float
+        RMS point-to-plane distance of those correspondences [m].
+    iterations : int
+        Gauss-Newton steps taken.
+    """
+
+    transform: np.ndarray = field(repr=False)
+    fitness: float
+    inlier_rmse_m: float
+    iterations: int
+
+
+def _correspond(tree: cKDTree, target_normals: np.ndarray, moved: np.ndarray, distance_m: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Source indices with a target sample within ``distance_m``, their samples' indices and
+    point-to-plane residuals ``(p - q) . n``."""
+    dist, idx = tree.query(moved, distance_upper_bound=distance_m, workers=1)
+    src = np.flatnonzero(np.isfinite(dist))
+    tgt = idx[src]
+    r = np.einsum("ij,ij->i", moved[src] - tree.data[tgt], target_normals[tgt])
+    return src, tgt, r
+
+
+def _fitness_rmse(n_source: int, r: np.ndarray) -> tuple[float, float]:
+    if r.size == 0:
+        return 0.0, 0.0
+    return r.size / n_source, float(np.sqrt(np.einsum("i,i->", r, r) / r.size))
+
+
+def _eigen(a: np.ndarray, rcond: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eigenvalues and vectors of a symmetric PSD 6x6, and which are determined (above
+    ``rcond`` times the largest)."""
+    lam, vec = np.linalg.eigh(a)
+    top = float(lam[-1])
+    return lam, vec, (lam > rcond * top) if top > 0.0 else np.zeros(lam.shape, dtype=bool)
+
+
+def _solve_psd(a: np.ndarray, b: np.ndarray, rcond: float = RCOND) -> np.ndarray:
+    """The least-norm ``x`` of ``a x = b`` for a symmetric PSD ``a``: no step along directions
+    the residuals do not determine (eigenvalues at most ``rcond`` times the largest; e.g. the
+    height, when every matched face is vertical)."""
+    lam, vec, keep = _eigen(a, rcond)
+    v = vec[:, keep]
+    return v @ ((v.T @ b) / lam[keep])
+
+
+def pose_std(info: np.ndarray, rmse_m: float, rcond: float = RCOND) -> dict[str, list[float]]:
+    """Standard deviations of a pose from its information matrix (:func:`information_matrix`)
+    and residual RMS: ``rmse_m^2 info^-1``'s diagonal, square-rooted; ``rotation_deg`` (about
+    x, y, z through the origin) and ``translation_m``. A component along a direction the
+    matrix does not determine is infinite."""
+    lam, vec, keep = _eigen(info, rcond)
+    var = (vec[:, keep] ** 2 / lam[keep]).sum(axis=1) * rmse_m**2
+    var[(vec[:, ~keep] ** 2).sum(axis=1) > NULL_SHARE] = np.inf
+    d = np.sqrt(var)
+    return {"rotation_deg": np.degrees(d[:3]).tolist(), "translation_m": d[3:].tolist()}
+
+
+def _jacobian(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """d residual / d (small rotation about the origin, translation): rows ``[p x n, n]``."""
+    return np.hstack([np.cross(points, normals), normals])
+
+
+def icp_point_to_plane(
+    source_m: np.ndarray,
+    target_m: np.ndarray,
+    target_normals: np.ndarray,
+    distances_m: tuple[float, ...] = ICP_DISTANCES_M,
+    tukey_k_m: float = TUKEY_K_M,
+    init: np.ndarray | None = None,
+    relative_fitness: float = ICP_RELATIVE_FITNESS,
+    relative_rmse_m: float = ICP_RELATIVE_RMSE_M,
+    max_iterations: int = ICP_MAX_ITERATIONS,
+) -> IcpResult:
+    """Point-to-plane ICP with a Tukey kernel, coarse to fine: ``source`` onto ``target``.
+
+    At each correspondence distance in turn: every source point (moved by the current
+    transform) is paired with its nearest target sample if that lies within the distance; one
+    Gauss-Newton step on the point-to-plane residuals ``r = (p - q) . n``, each weighted by
+    Tukey's ``(1 - (r / k)^2)^2`` (0 beyond ``k``), linearised in a small rotation about the
+    origin and a translation, gives an update that is made an exact rotation
+    (:meth:`scipy.spatial.transform.Rotation.from_rotvec`) and composed on the left; repeated
+    until fitness and inlier RMSE change less than ``relative_fitness`` and
+    ``relative_rmse_m`` (or ``max_iterations`` steps). Fitness and RMSE are those of the finest
+    distance's last correspondences.
+
+    Examples
+    --------
+    Three faces of a box corner recover a small shift:
+
+    >>> g = np.linspace(0.0, 0.1, 21)
+    >>> u, v = (a.ravel() for a in np.meshgrid(g, g))
+    >>> o = np.zeros_like(u)
+    >>> target = np.r_[np.c_[u, v, o], np.c_[u, o, v], np.c_[o, u, v]]
+    >>> normals = np.repeat([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], u.size, axis=0)
+    >>> res = icp_point_to_plane(target + (0.002, -0.001, 0.001), target, normals)
+    >>> np.round(res.transform[:3, 3] * 1e3, 6).tolist(), res.fitness
+    ([-2.0, 1.0, -1.0], 1.0)
+    """
+    src = np.asarray(source_m, dtype=np.float64).reshape(-1, 3)
+    tgt_normals = np.asarray(target_normals, dtype=np.float64).reshape(-1, 3)
+    tree = cKDTree(np.asarray(target_m, dtype=np.float64).reshape(-1, 3))
+    t = np.eye(4) if init is None else np.array(init, dtype=np.float64)
+    fitness, rmse, steps = 0.0, 0.0, 0
+    for distance in distances_m:
+        moved = src @ t[:3, :3].T + t[:3, 3]
+        idx, tidx, r = _correspond(tree, tgt_normals, moved, distance)
+        fitness, rmse = _fitness_rmse(len(src), r)
+        for _ in range(max_iterations):
+            w = np.clip(1.0 - (r / tukey_k_m) ** 2, 0.0, None) ** 2
+            if np.count_nonzero(w) < 6:
+                break
+            jac = _jacobian(moved[idx], tgt_normals[tidx])
+            jtj = np.einsum("ni,n,nj->ij", jac, w, jac)
+            jtr = np.einsum("ni,n->i", jac, w * r)
+            x = -_solve_psd(jtj, jtr)
+            update = np.eye(4)
+            update[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix()
+            update[:3, 3] = x[3:]
+            t = update @ t
+            t[:3, :3] = Rotation.from_matrix(t[:3, :3]).as_matrix()  # re-orthonormalised
+            steps += 1
+            moved = src @ t[:3, :3].T + t[:3, 3]
+            idx, tidx, r = _correspond(tree, tgt_normals, moved, distance)
+            previous = fitness, rmse
+            fitness, rmse = _fitness_rmse(len(src), r)
+            if (abs(fitness - previous[0]) < relative_fitness
+                    and abs(rmse - previous[1]) < relative_rmse_m):
+                break
+    return IcpResult(t, fitness, rmse, steps)
+
+
+def information_matrix(source_m: np.ndarray, target_m: np.ndarray, target_normals: np.ndarray,
+                       distance_m: float, transform: np.ndarray) -> np.ndarray:
+    """6x6 ``J^T J`` of the point-to-plane residuals over the correspondences within
+    ``distance_m`` at ``transform``: rows of ``J`` are ``[p x n, n]`` (a small rotation about the
+    origin, then a translation), unweighted. Its inverse times the residual variance is the
+    pose's covariance."""
+    src = np.asarray(source_m, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(transform, dtype=np.float64)
+    moved = src @ t[:3, :3].T + t[:3, 3]
+    normals = np.asarray(target_normals, dtype=np.float64).reshape(-1, 3)
+    idx, tidx, _ = _correspond(cKDTree(np.asarray(target_m, dtype=np.float64).reshape(-1, 3)),
+                               normals, moved, distance_m)
+    jac = _jacobian(moved[idx], normals[tidx])
+    return np.einsum("ni,nj->ij", jac, jac)
 
 
 def register_mount(
@@ -228,33 +393,17 @@ def register_mount(
             f"{list(model.names)}: {n_near} of {len(pts)} points lie within "
             f"{crop_m * 1e3:.0f} mm of them at the nominal pose, at least {min_points} are "
             "needed (is the right object mounted, where the scene says?)")
-    source = _cloud(pts[near])
-    target = _cloud(target_pts, target_normals)
-    reg = o3d.pipelines.registration
-    estimation = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=tukey_k_m))
-    t = np.eye(4)
-    result = None
-    for d in distances_m:
-        result = reg.registration_icp(source, target, d, t, estimation,
-                                      reg.ICPConvergenceCriteria(1e-9, 1e-9, 60))
-        t = np.asarray(result.transformation)
-    fitness = float(result.fitness)
+    source = pts[near]
+    result = icp_point_to_plane(source, target_pts, target_normals, distances_m, tukey_k_m)
+    t, fitness, rmse = result.transform, result.fitness, result.inlier_rmse_m
     if fitness < min_fitness:
         raise InvalidInputError(
             "mesh", f"the measured point cloud does not fit the mounted objects' meshes "
             f"{list(model.names)}: after ICP only {fitness:.0%} of the {n_near} points near them "
             f"lie within {distances_m[-1] * 1e3:.0f} mm (at least {min_fitness:.0%} needed); no "
             "pose is reported")
-    info = np.asarray(reg.get_information_matrix_from_point_clouds(
-        source, target, distances_m[-1], t))
-    rmse = float(result.inlier_rmse)
-    std: dict = {}
-    try:
-        cov = rmse**2 * np.linalg.inv(info)
-        d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        std = {"rotation_deg": np.degrees(d[:3]).tolist(), "translation_m": d[3:].tolist()}
-    except np.linalg.LinAlgError:
-        std = {"singular": True}
+    info = information_matrix(source, target_pts, target_normals, distances_m[-1], t)
+    std = pose_std(info, rmse)
     m = np.linalg.inv(t)
     return Registration(offset_from_transform(m, model.axis_point_m), m, fitness, rmse, n_near,
                         len(pts), std)

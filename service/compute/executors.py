@@ -6,7 +6,8 @@
 - :class:`ThreadExecutor`: the same in threads of the service process (tests, debugging).
 - :class:`DaskExecutor`: ``dask://HOST:PORT``, an existing Dask scheduler; the job carries the
   scene and its meshes, the frame comes back as arrays. Workers need ``toftwin`` installed at
-  the same version.
+  the same version. Dask's ``distributed`` is not a dependency: it comes with the ``dask`` extra
+  (``pip install -e ".[dask]"``), and is imported only here.
 
 ``submit`` returns a future with ``result(timeout)``; the caller never blocks the event loop on it
 (the service waits in worker threads).
@@ -27,6 +28,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Protocol
 
 from service.compute.jobs import SimulationJob, run_job, warm_up
+from service.settings import DASK_MISSING
 
 
 class JobFuture(Protocol):
@@ -166,7 +168,10 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, address: str, timeout_s: float = 10.0) -> None:
-        from distributed import Client
+        try:
+            from distributed import Client
+        except ImportError as exc:
+            raise ImportError(f"{DASK_MISSING} ({exc})") from exc
 
         self.address = address
         self._client = Client(address, timeout=timeout_s, set_as_default=False)

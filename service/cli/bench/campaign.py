@@ -27,6 +27,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from rich.console import Console
 
+from service.cli.common import fail_invalid
+from service.settings import DASK_MISSING, dask_installed
+from sim_core.errors import InvalidInputError
+
 if TYPE_CHECKING:
     from service.lab.lab import Lab
 
@@ -109,6 +113,8 @@ def run_campaign_benchmark(
 
     ``local_executor`` is the executor of the "local" configurations (``thread`` in tests).
     """
+    if dask and not dask_installed():  # before the local configurations, not after them
+        fail_invalid(InvalidInputError("--dask", DASK_MISSING))
     results = []
     cores = os.cpu_count() or 1
     for w in workers:

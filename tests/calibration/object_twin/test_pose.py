@@ -1,4 +1,5 @@
-"""The mount offset's convention, and ICP recovering a known offset from exact points."""
+"""The mount offset's convention, ICP recovering a known offset from exact points, and the ICP's
+fitness, RMSE and standard deviations meaning what they say on noisy planes."""
 
 from __future__ import annotations
 
@@ -9,8 +10,11 @@ from calibration.captures import AveragedCapture
 from calibration.object_twin.fit import fit_object
 from calibration.object_twin.pose import (
     MountModel,
+    icp_point_to_plane,
+    information_matrix,
     mount_model,
     offset_from_transform,
+    pose_std,
     register_mount,
     sample_model,
     transform_from_offset,
@@ -57,6 +61,71 @@ def test_icp_recovers_a_known_offset_from_exact_points():
     np.testing.assert_allclose(reg.offset.position_m, OFFSET.position_m, atol=1e-4)
     np.testing.assert_allclose(reg.offset.rotation_deg, OFFSET.rotation_deg, atol=0.02)
     assert reg.fitness > 0.95
+
+
+def test_the_registration_is_the_same_to_the_last_bit_run_to_run():
+    points, _, _ = sample_model(_real_model(), CAMERAS, spacing_m=0.004, seed=5)
+    noisy = points + np.random.default_rng(1).normal(scale=0.001, size=points.shape)
+    model = mount_model(SPEC, EXAMPLES)
+    a, b = (register_mount(noisy, model, CAMERAS) for _ in range(2))
+    assert np.array_equal(a.transform, b.transform)
+    assert (a.fitness, a.inlier_rmse_m, a.std) == (b.fitness, b.inlier_rmse_m, b.std)
+
+
+def _planes(rng: np.random.Generator, n: int, normals: np.ndarray) -> np.ndarray:
+    """``n`` random points on each plane through the origin with one of ``normals``, within
+    0.1 m of it."""
+    out = []
+    for nrm in normals:
+        u = np.cross(nrm, [0.3, 0.5, 0.8])
+        u /= np.linalg.norm(u)
+        v = np.cross(nrm, u)
+        a, b = rng.uniform(0.0, 0.1, (2, n))
+        out.append(a[:, None] * u + b[:, None] * v + 0.02 * nrm)
+    return np.concatenate(out)
+
+
+CORNER = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_fitness_rmse_and_std_mean_what_they_say_on_noisy_planes():
+    """Three faces of a box, measured with 1 mm noise along their normals: the RMSE is the
+    point-to-plane noise, fitness the share matched, and the standard deviations those of the
+    estimates over repeated measurements."""
+    rng = np.random.default_rng(7)
+    target = _planes(rng, 4000, CORNER)
+    target_normals = np.repeat(CORNER, 4000, axis=0)
+    sigma, shift = 0.001, np.array([0.003, -0.002, 0.001])
+    estimates, stds, rmses = [], [], []
+    for _ in range(40):
+        clean = _planes(rng, 300, CORNER)
+        noisy = clean + rng.normal(scale=sigma, size=(900, 1)) * np.repeat(CORNER, 300, axis=0)
+        res = icp_point_to_plane(noisy + shift, target, target_normals)
+        info = information_matrix(noisy + shift, target, target_normals, 0.006, res.transform)
+        std = pose_std(info, res.inlier_rmse_m)
+        assert res.fitness == 1.0  # every point has a sample within 6 mm
+        estimates.append(res.transform[:3, 3])
+        stds.append(std["translation_m"])
+        rmses.append(res.inlier_rmse_m)
+    np.testing.assert_allclose(np.mean(estimates, axis=0), -shift, atol=2e-4)
+    assert np.median(rmses) == pytest.approx(sigma, rel=0.1)
+    # the reported standard deviation is the spread of the estimates (within sampling error)
+    np.testing.assert_allclose(np.std(estimates, axis=0), np.median(stds, axis=0), rtol=0.35)
+
+
+def test_what_vertical_faces_do_not_determine_is_not_moved_and_has_no_std():
+    """Two vertical faces say nothing about the height: ICP leaves it, its std is infinite."""
+    rng = np.random.default_rng(3)
+    walls = CORNER[:2]
+    target = _planes(rng, 4000, walls)
+    normals = np.repeat(walls, 4000, axis=0)
+    source = _planes(rng, 500, walls) + np.array([0.002, 0.003, 0.004])
+    res = icp_point_to_plane(source, target, normals)
+    np.testing.assert_allclose(res.transform[:3, 3], (-0.002, -0.003, 0.0), atol=2e-4)
+    std = pose_std(information_matrix(source, target, normals, 0.006, res.transform),
+                   res.inlier_rmse_m)
+    assert np.isinf(std["translation_m"][2])
+    assert np.isfinite(std["translation_m"][:2]).all()
 
 
 def test_a_cloud_that_does_not_overlap_the_mesh_is_refused_without_a_pose():
