@@ -118,9 +118,11 @@ def in_range(allowed: Range) -> Callable[[Any], Any]:
     """A typer option callback that refuses a value (or any of a list's values) outside
     ``allowed``: exit code 2, "Invalid value for '--name': X is outside [lo, hi]"."""
 
-    def check(value: Any) -> Any:
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        if value is None:  # not given; typer before 0.17 wants a repeatable option's () back
+            return () if param.multiple else None
         for v in value if isinstance(value, list | tuple) else [value]:
-            if v is not None and not allowed.contains(v):
+            if not allowed.contains(v):
                 raise typer.BadParameter(f"{v} is outside {allowed}")
         return value
 

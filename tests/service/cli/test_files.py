@@ -49,6 +49,22 @@ def test_the_session_token_stays_private_under_a_loose_umask(tmp_path, umask):
     assert _mode(tmp_path / "data") == 0o700
 
 
+def test_the_database_and_the_lock_stay_private_under_a_loose_umask(tmp_path, umask):
+    from service.store.data_lock import DataDirLock
+    from service.store.database import init_db, make_engine
+
+    umask(0o002)
+    lock = DataDirLock.acquire(tmp_path / "data")
+    try:
+        engine = make_engine(f"sqlite:///{tmp_path / 'data' / 'toftwin.db'}")
+        init_db(engine)
+        engine.dispose()
+        assert _mode(tmp_path / "data" / ".lock") == 0o600
+        assert _mode(tmp_path / "data" / "toftwin.db") == 0o600
+    finally:
+        lock.release()
+
+
 def test_a_broken_scene_file_is_named_with_its_line_and_column(tmp_path):
     scene = tmp_path / "scene.yaml"
     scene.write_text("name: broken\ncamera:\n  preset: pmd-camboard-pico-flexx\n pose: {}\n")
