@@ -20,7 +20,6 @@ Units: power in W, current in A, voltage in V, time in s, level in suns.
 from __future__ import annotations
 
 import bisect
-import json
 import logging
 import math
 import re
@@ -217,17 +216,17 @@ class SunsCalibration:
     def from_file(cls, path: str | Path) -> SunsCalibration:
         """Load a YAML (``.yaml``/``.yml``) or JSON (``.json``) table."""
         path = Path(path)
-        text = path.read_text(encoding="utf-8")
-        if path.suffix.lower() == ".json":
-            data = json.loads(text)
-        elif path.suffix.lower() in (".yaml", ".yml"):
-            import yaml  # project dependency; imported here so the driver loads without it
-
-            data = yaml.safe_load(text)
-        else:
+        if path.suffix.lower() not in (".json", ".yaml", ".yml"):
             raise CalibrationError(
                 "calibration.path", f"{str(path)!r}: expected a .yaml, .yml or .json file"
             )
+        # YAML is a project dependency; imported here so the driver loads without it
+        from sim_core.files import StructuredFileError, load_structured
+
+        try:
+            data = load_structured(path)
+        except StructuredFileError as exc:
+            raise CalibrationError("calibration.path", str(exc)) from None
         if not isinstance(data, Mapping):
             raise CalibrationError("calibration", f"{str(path)!r} does not hold a mapping")
         return cls.from_mapping(data, source=str(path))

@@ -23,8 +23,6 @@ reader never sees a half-written file and a crash leaves at most a stray ``*.tmp
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -35,6 +33,7 @@ from PIL import Image
 
 from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics
 from sim_core.errors import InvalidInputError
+from sim_core.files import StructuredFileError, atomic_write, load_structured
 from sim_core.json_safe import json_safe
 from sim_core.raw import RawFrame, ValidityThresholds, reconstruct_raw
 from sim_core.sensor import SensorParams
@@ -205,16 +204,7 @@ def intrinsics_from_meta(meta: dict, shape: tuple[int, int]) -> Intrinsics:
 
 # -- atomic files ----------------------------------------------------------------------------
 def _atomic_write(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, write)
 
 
 def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
@@ -421,7 +411,15 @@ class Frame:
 
 def _read_meta(d: Path) -> dict:
     p = d / FRAME_JSON
-    return json.loads(p.read_text()) if p.is_file() else {}
+    if not p.is_file():
+        return {}
+    try:
+        meta = load_structured(p, json_only=True)
+    except StructuredFileError as exc:
+        raise InvalidInputError("frame.json", str(exc)) from None
+    if not isinstance(meta, dict):
+        raise InvalidInputError("frame.json", f"{p} holds no JSON object")
+    return meta
 
 
 def _read_arrays(d: Path) -> dict[str, np.ndarray]:

@@ -7,15 +7,14 @@ spec into a posed :class:`~sim_core.scene.Scene`.
 
 from __future__ import annotations
 
-import json
 from itertools import pairwise
 from pathlib import Path
 from typing import Annotated, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from sim_core.errors import SceneError
+from sim_core.files import StructuredFileError, load_structured
 from sim_core.lights import SUNS_RANGE
 from sim_core.sensor import SENSOR_BOUNDS
 
@@ -435,9 +434,8 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
     p = Path(path)
     if not p.is_file():
         raise SceneError("scene", f"scene file '{p}' does not exist")
-    text = p.read_text(encoding="utf-8")
     try:
-        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as exc:
-        raise SceneError("scene", f"scene file '{p}' is not valid YAML/JSON: {exc}") from None
+        data = load_structured(p)
+    except StructuredFileError as exc:
+        raise SceneError("scene", f"scene file {exc}") from None
     return parse_scene_spec(data)

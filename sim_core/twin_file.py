@@ -33,6 +33,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from sim_core.errors import InvalidInputError
+from sim_core.files import StructuredFileError, atomic_write, load_structured
 from sim_core.scene_spec import (
     Distortion,
     ObjectPose,
@@ -331,10 +332,9 @@ def _read_mapping(path: str | Path, what: str) -> Any:
     if not p.is_file():
         raise InvalidInputError(what, f"file '{p}' does not exist")
     try:
-        text = p.read_text(encoding="utf-8")
-        return json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(what, f"file '{p}' is not valid YAML/JSON: {exc}") from None
+        return load_structured(p)
+    except StructuredFileError as exc:
+        raise InvalidInputError(what, f"file {exc}") from None
 
 
 def load_calibration(path: str | Path) -> CalibrationFile:
@@ -370,10 +370,7 @@ def dump_yaml(params: TwinParameters | ObjectTwinParameters) -> str:
 def _write_atomic(path: str | Path, text: str) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(p)
-    return p
+    return atomic_write(p, text)
 
 
 def write_calibration(path: str | Path, calibration: CalibrationFile) -> Path:

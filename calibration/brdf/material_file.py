@@ -18,13 +18,12 @@ reader never sees half a file.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import yaml
 
 from calibration.brdf.fit import BrdfFit
+from sim_core.files import atomic_write
 
 __all__ = ["material_file_text", "write_material_file"]
 
@@ -43,12 +42,4 @@ def write_material_file(path: str | Path, fit: BrdfFit) -> Path:
     """Write the material file of ``fit`` to ``path`` atomically; returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(material_file_text(fit))
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return out
+    return atomic_write(out, material_file_text(fit))

@@ -143,19 +143,19 @@ class Slices:
         ``turntable_angle_deg`` and ``n_pixels`` (``brdf_std_per_sr`` from the frames alone);
         :func:`sim_core.materials.goniometer.read_goniometer_csv` reads it back."""
         import csv
-        from pathlib import Path
+        import io
 
-        out = Path(path)
-        tmp = out.with_name(out.name + ".tmp")
+        from sim_core.files import atomic_write
+
         cols = ("incidence_zenith_deg", "reflection_zenith_deg", "azimuth_difference_deg",
                 "brdf_per_sr", "brdf_std_per_sr", "turntable_angle_deg", "n_pixels")
-        with tmp.open("w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(("slice", *cols))
-            for part in self.parts:
-                for i in range(len(part)):
-                    w.writerow((part.slice_name, *(f"{getattr(part, c)[i]:.8g}" for c in cols)))
-        tmp.replace(out)
+        fh = io.StringIO(newline="")
+        w = csv.writer(fh)
+        w.writerow(("slice", *cols))
+        for part in self.parts:
+            for i in range(len(part)):
+                w.writerow((part.slice_name, *(f"{getattr(part, c)[i]:.8g}" for c in cols)))
+        atomic_write(path, fh.getvalue())
 
 
 def extract_slices(captures: list[SampleCaptures], references: list[ReferenceView],

@@ -7,6 +7,7 @@ Exit codes: 0 success, 2 invalid input (the message names the field and the allo
 from __future__ import annotations
 
 import sys
+from typing import Annotated
 
 import typer
 
@@ -21,14 +22,31 @@ from service.cli import (
     simulate,
 )
 from service.cli.bench import bench_app
-from service.cli.common import err_console
+from service.cli.common import command_group, print_error
 from sim_core.errors import InvalidInputError
 
-app = typer.Typer(
-    help="toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera.",
-    no_args_is_help=True,
-    add_completion=False,
-)
+app = command_group("toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera.",
+                    add_completion=False)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from sim_core.frame_io import package_version
+
+        typer.echo(f"toftwin {package_version()}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", is_eager=True, callback=_print_version,
+                           help="Print the version of toftwin and exit.")
+    ] = False,
+) -> None:
+    """toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera."""
+
+
 app.command("simulate")(simulate.simulate)
 app.command("preview")(simulate.preview)
 app.command("serve")(serve.serve)
@@ -47,5 +65,5 @@ def main() -> None:
     try:
         app()
     except InvalidInputError as exc:  # pragma: no cover - commands catch their own
-        err_console.print(f"[bold red]error:[/] {exc}")
+        print_error(str(exc))
         sys.exit(2)

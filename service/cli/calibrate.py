@@ -18,18 +18,21 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from service.cli import ranges
 from service.cli.common import (
-    bounded,
     check_rig_options,
+    command_group,
     console,
     err_console,
     fail_invalid,
+    number_option,
+    print_error,
+    print_warning,
     rig_scene,
 )
 from sim_core.errors import InvalidInputError
 
-calibrate_app = typer.Typer(help="Measure the twin's camera and rig parameters.",
-                            no_args_is_help=True)
+calibrate_app = command_group("Measure the twin's camera and rig parameters.")
 
 
 class ConsoleOperator:
@@ -55,22 +58,27 @@ def rig_command(
                           "solar simulator.")
     ] = "satellite_ground_test",
     frames_per_view: Annotated[
-        int, typer.Option("--frames-per-view", help="Frames averaged per board view (1-64).")
+        int, number_option("--frames-per-view", help="Frames averaged per board view.",
+                           allowed=ranges.FRAMES_PER_VIEW)
     ] = 4,
     sweep_step_deg: Annotated[
-        float, typer.Option("--sweep-step", help="Step of the board sweep over -55..55 deg "
-                            "[deg, 1-30]; coarser is quicker and measures less well.")
+        float, number_option("--sweep-step", help="Step of the board sweep over -55..55 deg "
+                             "[deg]; coarser is quicker and measures less well.",
+                             allowed=ranges.SWEEP_STEP)
     ] = 5.0,
     solar_reference_suns: Annotated[
         float | None,
-        typer.Option("--solar-reference-suns",
-                     help="A reference cell's reading at a set level of 1 sun, used when the "
-                          "frames do not determine the solar simulator's scale."),
+        number_option("--solar-reference-suns",
+                      help="A reference cell's reading at a set level of 1 sun [sun], used when "
+                           "the frames do not determine the solar simulator's scale.",
+                      allowed=ranges.REFERENCE_SUNS),
     ] = None,
     camera_spp: Annotated[
-        int, typer.Option("--camera-spp", help="Samples per pixel of the simulated camera.")
+        int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
+                           allowed=ranges.CAMERA_SPP)
     ] = 32,
-    seed: Annotated[int, typer.Option(help="Noise seed of the simulated camera.")] = 0,
+    seed: Annotated[int, number_option("--seed", help="Noise seed of the simulated camera.",
+                                       allowed=ranges.CAMERA_SEED)] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
@@ -83,9 +91,6 @@ def rig_command(
 
     try:
         check_rig_options(out, reality, simulated)
-        bounded("--frames-per-view", frames_per_view, 1, 64)
-        bounded("--camera-spp", camera_spp, 1, 4096)
-        bounded("--sweep-step", sweep_step_deg, 1.0, 30.0)
         source = rig_scene(scene)
         n_angles = math.floor(110.0 / sweep_step_deg + 1e-9) + 1
         plan = RigCalibrationPlan(frames_per_view=frames_per_view,
@@ -107,7 +112,7 @@ def rig_command(
             rig = stack.enter_context(_real_rig())
             operator, rig_name = ConsoleOperator(), "lab"
         bar = stack.enter_context(Progress(
-            TextColumn("{task.description}"), BarColumn(),
+            TextColumn("{task.description}", markup=False), BarColumn(),
             TextColumn("{task.completed}/{task.total}"),
             TimeElapsedColumn(), console=err_console, transient=True,
             disable=quiet or not err_console.is_terminal))
@@ -154,25 +159,34 @@ def material_command(
         typer.Option("--prior", help="Preset (or material file) holding the values of the "
                      "parameters the slices do not determine; default: the model's defaults."),
     ] = None,
-    size_m: Annotated[float, typer.Option("--size-m", help="Side of the square sample [m].")] = 0.2,
+    size_m: Annotated[
+        float, number_option("--size-m", help="Side of the square sample [m].",
+                             allowed=ranges.SAMPLE_SIZE)
+    ] = 0.2,
     angles: Annotated[
         str, typer.Option("--angles", help="Turntable angles: FROM:TO:STEP or a list [deg].")
     ] = "-70:70:5",
     frames_per_state: Annotated[
-        int, typer.Option("--frames-per-state", help="Frames averaged per rig state (2-64).")
+        int, number_option("--frames-per-state", help="Frames averaged per rig state.",
+                           allowed=ranges.FRAMES_PER_STATE)
     ] = 4,
     solar_suns: Annotated[
-        float, typer.Option("--solar-suns", help="Solar simulator level of the solar slice "
-                            "[sun]; 0 leaves it out.")
+        float, number_option("--solar-suns", help="Solar simulator level of the solar slice "
+                             "[sun]; 0 leaves it out.",
+                             allowed=ranges.SOLAR_SUNS_OR_OFF)
     ] = 0.8,
     scene: Annotated[
         str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
                           "solar simulator.")
     ] = "satellite_ground_test",
     camera_spp: Annotated[
-        int, typer.Option("--camera-spp", help="Samples per pixel of the simulated camera.")
+        int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
+                           allowed=ranges.CAMERA_SPP)
     ] = 32,
-    seed: Annotated[int, typer.Option(help="Noise seed of the simulated camera and the fit.")] = 0,
+    seed: Annotated[
+        int, number_option("--seed", help="Noise seed of the simulated camera and the fit.",
+                           allowed=ranges.CAMERA_SEED)
+    ] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Measure a material's BRDF on the rig: a sample plate swept by the turntable (issue 14)."""
@@ -195,7 +209,6 @@ def material_command(
         if sample_material is not None and not simulated:
             raise InvalidInputError("--sample-material", "is the simulated lab's sample: needs "
                                     "--simulated")
-        bounded("--camera-spp", camera_spp, 1, 4096)
         plan = MaterialSweepPlan(angles_deg=parse_angles(angles), size_m=size_m,
                                  frames_per_state=frames_per_state, solar_suns=solar_suns)
         prior_mat = prior_material(model, _material_arg(prior, "--prior"))
@@ -223,7 +236,7 @@ def material_command(
             rig = stack.enter_context(_real_rig())
             operator = ConsoleOperator()
         bar = stack.enter_context(Progress(
-            TextColumn("{task.description}"), BarColumn(),
+            TextColumn("{task.description}", markup=False), BarColumn(),
             TextColumn("{task.completed}/{task.total}"),
             TimeElapsedColumn(), console=err_console, transient=True,
             disable=quiet or not err_console.is_terminal))
@@ -250,7 +263,7 @@ def material_command(
                 "prior": "held at the prior: NOT DETERMINED by these slices"}[st.status]
         console.print(f"  {name:>16} = {st.value:.4g}  {note}")
     for w in result.slices.check.warnings:
-        console.print(f"[yellow]warning:[/] {w}")
+        print_warning(w)
     console.print(f"material file written to {path} (slices {csv_path}, report {report_path})")
 
 
@@ -281,9 +294,10 @@ def _spec_dict(material) -> dict:
 def _write_json(path: Path, data: dict) -> None:
     import json
 
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, allow_nan=False), encoding="utf-8")
-    tmp.replace(path)
+    from sim_core.files import atomic_write
+
+    atomic_write(path, json.dumps(data, indent=2, allow_nan=False))
+
 
 def _real_rig():
     from drivers.rig import Rig
@@ -292,7 +306,7 @@ def _real_rig():
     missing = [k for k in ("TOFTWIN_TURNTABLE_PORT", "TOFTWIN_LAMP_PORT", "TOFTWIN_SHUTTER_PORT")
                if not env.get(k)]
     if missing:
-        err_console.print(f"[bold red]error:[/] no {', '.join(missing)} set (or use --simulated)")
+        print_error(f"no {', '.join(missing)} set (or use --simulated)")
         raise typer.Exit(code=2)
     return Rig.open(env["TOFTWIN_TURNTABLE_PORT"], env["TOFTWIN_LAMP_PORT"],
                     env["TOFTWIN_SHUTTER_PORT"], camera_serial=env.get("TOFTWIN_CAMERA_SERIAL"))
@@ -325,17 +339,22 @@ def brdf_command(
     out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML).")],
     wavelength_nm: Annotated[
         float | None,
-        typer.Option("--wavelength-nm", help="Band to fit when the file holds several [nm]."),
+        number_option("--wavelength-nm", help="Band to fit when the file holds several [nm].",
+                      allowed=ranges.WAVELENGTH),
     ] = None,
     fix: Annotated[
         list[str] | None,
         typer.Option("--fix", help="Pin a parameter: NAME=VALUE (repeatable)."),
     ] = None,
     outlier_threshold: Annotated[
-        float, typer.Option("--outlier-threshold",
-                            help="Relative error beyond which a sample is an outlier (0-10).")
+        float, number_option("--outlier-threshold",
+                             help="Relative error beyond which a sample is an outlier.",
+                             allowed=ranges.OUTLIER_THRESHOLD)
     ] = 0.25,
-    seed: Annotated[int, typer.Option(help="Seed of RANSAC and differential evolution.")] = 0,
+    seed: Annotated[
+        int, number_option("--seed", help="Seed of RANSAC and differential evolution.",
+                           allowed=ranges.FIT_SEED)
+    ] = 0,
 ) -> None:
     """Fit a material model to goniometer data and write a material file (issue 14)."""
     from calibration.brdf import FitSettings, fit_brdf

@@ -9,7 +9,8 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from service.cli.common import console, err_console
+from service.cli import ranges
+from service.cli.common import console, number_option, print_error
 from sim_core.errors import InvalidInputError
 
 
@@ -22,8 +23,14 @@ def compare(
     objects: Annotated[
         str | None, typer.Option(help="Comma-separated object names (--mask objects).")
     ] = None,
-    near_m: Annotated[float | None, typer.Option("--near-m", help="Window start [m].")] = None,
-    far_m: Annotated[float | None, typer.Option("--far-m", help="Window end [m].")] = None,
+    near_m: Annotated[
+        float | None, number_option("--near-m", help="Window start [m].",
+                                    allowed=ranges.MASK_DISTANCE)
+    ] = None,
+    far_m: Annotated[
+        float | None, number_option("--far-m", help="Window end [m].",
+                                    allowed=ranges.MASK_DISTANCE)
+    ] = None,
     rows: Annotated[str | None, typer.Option(help="Region rows START:STOP.")] = None,
     cols: Annotated[str | None, typer.Option(help="Region cols START:STOP.")] = None,
     out: Annotated[Path, typer.Option("--out", help="JSON file to write.")] = Path(
@@ -49,10 +56,14 @@ def compare(
         report = compare_images(measured.image, simulated.image, m,
                                 (measured.grey_full_scale, simulated.grey_full_scale))
     except ValidationError as exc:
-        err_console.print(f"[bold red]error:[/] --mask: {exc.errors()[0]['msg']}")
+        e = exc.errors()[0]
+        option = {"names": "--objects", "near_m": "--near-m", "far_m": "--far-m",
+                  "rows": "--rows", "cols": "--cols"}.get(str(e["loc"][0]) if e["loc"] else "",
+                                                          "--mask")
+        print_error(f"{option}: {e['msg']}")
         raise typer.Exit(code=2) from None
     except InvalidInputError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}")
+        print_error(str(exc))
         raise typer.Exit(code=2) from None
     table = Table(*TABLE_HEADER, title=f"{measured_dir} vs {simulated_dir} ({mask} mask, "
                   f"{report.n_pixels} pixels)")

@@ -10,9 +10,11 @@ from typing import Annotated
 import typer
 
 from drivers.diagnostics import check_devices, list_devices
-from service.cli.common import console
+from service.cli import ranges
+from service.cli.common import command_group, console, fail_invalid, number_option
+from sim_core.errors import InvalidInputError
 
-devices_app = typer.Typer(help="Devices of the rig: list and check them.", no_args_is_help=True)
+devices_app = command_group("Devices of the rig: list and check them.")
 
 
 @contextlib.contextmanager
@@ -53,7 +55,10 @@ def list_cmd(
 def check_cmd(
     simulated: bool = typer.Option(False, "--simulated", help="Check against the simulators."),
     turntable_port: str | None = typer.Option(None, help="SMC100 serial port."),
-    turntable_address: int = typer.Option(1, help="SMC100 address (1-31)."),
+    turntable_address: Annotated[
+        int, number_option("--turntable-address", help="SMC100 address.",
+                           allowed=ranges.TURNTABLE_ADDRESS)
+    ] = 1,
     lamp_port: str | None = typer.Option(None, help="Oriel lamp supply port."),
     shutter_port: str | None = typer.Option(None, help="Oriel exposure controller port."),
     camera_serial: str | None = typer.Option(None, help="Which camera (default: first)."),
@@ -84,13 +89,16 @@ def sim_device(
     transport: str = typer.Option("pty", help="pty (a pseudo-terminal) or tcp (socket://)."),
     instant: bool = typer.Option(False, "--instant", help="Moves and warm-up finish at once."),
 ) -> None:
-    """Serve one serial device simulator; prints its port first, serves until stopped."""
-    from drivers.sim.pty_server import serve
+    """Serve one serial device simulator; prints its port first, serves until stopped.
 
-    if kind not in ("turntable", "solar-simulator"):
-        console.print(f"error: KIND '{kind}' is not one of ['turntable', 'solar-simulator']")
-        raise typer.Exit(code=2)
-    if transport not in ("pty", "tcp"):
-        console.print(f"error: --transport '{transport}' is not one of ['pty', 'tcp']")
-        raise typer.Exit(code=2)
-    serve(kind, list(fault or []), transport=transport, instant=instant)
+    Only the port paths go to stdout (a script reads them); every error goes to stderr.
+    """
+    from drivers.sim.pty_server import serve
+    from service.cli.common import choice
+
+    try:
+        choice("KIND", kind, ("turntable", "solar-simulator"))
+        choice("--transport", transport, ("pty", "tcp"))
+        serve(kind, list(fault or []), transport=transport, instant=instant)
+    except InvalidInputError as exc:
+        fail_invalid(exc)

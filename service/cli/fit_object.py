@@ -17,12 +17,14 @@ from typing import Annotated
 
 import typer
 
+from service.cli import ranges
 from service.cli.common import (
-    bounded,
     check_rig_options,
     console,
     err_console,
     fail_invalid,
+    number_option,
+    print_warning,
     rig_scene,
 )
 from sim_core.errors import InvalidInputError
@@ -77,12 +79,15 @@ def fit_object_command(
                      "own calibration, else the nominal rig)."),
     ] = None,
     frames: Annotated[
-        int, typer.Option("--frames", help="Frames averaged per angle (1-256).")
+        int, number_option("--frames", help="Frames averaged per angle.",
+                           allowed=ranges.FIT_FRAMES)
     ] = 32,
     camera_spp: Annotated[
-        int, typer.Option("--camera-spp", help="Samples per pixel of the simulated camera.")
+        int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
+                           allowed=ranges.CAMERA_SPP)
     ] = 32,
-    seed: Annotated[int, typer.Option(help="Noise seed of the simulated camera.")] = 0,
+    seed: Annotated[int, number_option("--seed", help="Noise seed of the simulated camera.",
+                                       allowed=ranges.CAMERA_SEED)] = 0,
 ) -> None:
     """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
     from calibration.captures import average_frames
@@ -90,14 +95,13 @@ def fit_object_command(
     from drivers.rig import Rig, RigState
     from drivers.sim.world import SimulatedWorld
     from service.cli.calibrate import _real_rig
+    from sim_core.files import atomic_write
     from sim_core.render import RenderSettings
     from sim_core.scene import scene_twin
     from sim_core.twin_file import load_calibration, load_reality, write_object_twin
 
     try:
         check_rig_options(out, reality, simulated)
-        bounded("--frames", frames, 1, 256)
-        bounded("--camera-spp", camera_spp, 1, 4096)
         angle_list = parse_angles(angles)
         source = rig_scene(scene)
         cal = (load_calibration(calibration) if calibration is not None
@@ -131,16 +135,13 @@ def fit_object_command(
         fail_invalid(exc)
     out.mkdir(parents=True)
     path = write_object_twin(out / "object.yaml", fit.object_twin)
-    report = out / "object-report.json"
-    tmp = report.with_name(report.name + ".tmp")
-    tmp.write_text(json.dumps(fit.report, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    tmp.replace(report)
+    report = atomic_write(out / "object-report.json",
+                          json.dumps(fit.report, indent=2, allow_nan=False) + "\n")
     off = fit.object_twin.mount.pose_offset
     console.print(f"object twin written to {path} (report {report}): offset "
                   f"{[round(v * 1e3, 2) for v in off.position_m]} mm, "
                   f"{[round(v, 3) for v in off.rotation_deg]} deg")
     undetermined = [n for n, e in fit.report["objects"].items() if not e["determined"]]
     if undetermined or not fit.report["pose_determined"]:
-        err_console.print(f"[yellow]not determined:[/] "
-                          f"{'pose, ' if not fit.report['pose_determined'] else ''}"
-                          f"{', '.join(undetermined)} (see the report)")
+        print_warning(f"{'pose, ' if not fit.report['pose_determined'] else ''}"
+                      f"{', '.join(undetermined)} (see the report)", label="not determined:")

@@ -16,14 +16,14 @@ from typing import Annotated, Any
 
 import typer
 
-from service.cli.common import err_console
+from service.cli.common import command_group, err_console
 
 #: the JSON Schema dialect pydantic generates
 DIALECT = "https://json-schema.org/draft/2020-12/schema"
 SCENE_SCHEMA_ID = "urn:toftwin:schema:scene"
 SCENE_SCHEMA_FILE = "docs/scene.schema.json"
 
-schema_app = typer.Typer(help="JSON Schemas of the file formats.", no_args_is_help=True)
+schema_app = command_group("JSON Schemas of the file formats.")
 
 
 def scene_schema() -> dict[str, Any]:

@@ -1,7 +1,7 @@
-"""``toftwin serve``, ``toftwin compare`` and ``toftwin bench campaign``: typer command functions.
+"""``toftwin serve``: the REST service (uvicorn) on the rig or the simulated lab.
 
-``service/cli.py`` registers them (see :func:`register`). ``python -m service.cli.serve`` runs the
-same commands without it.
+Every setting is validated, and the data directory checked to be free, before anything is
+written (the session token of a simulated rig included).
 """
 
 from __future__ import annotations
@@ -14,13 +14,22 @@ from typing import Annotated
 
 import typer
 
-from service.cli.common import err_console
+from service.cli import ranges
+from service.cli.common import err_console, number_option, print_error, print_warning
 from service.store.data_lock import make_private
+
+#: the settings the options of ``serve`` set: field -> option
+OPTION_OF_FIELD = {"host": "--host", "port": "--port", "data_dir": "--data-dir",
+                   "simulated": "--simulated", "executor": "--executor", "workers": "--workers",
+                   "faults": "--fault", "reality": "--reality"}
 
 
 def serve(
     host: Annotated[str | None, typer.Option(help="Address to bind (default 127.0.0.1).")] = None,
-    port: Annotated[int | None, typer.Option(help="TCP port (default 8000).")] = None,
+    port: Annotated[
+        int | None, number_option("--port", help="TCP port (default 8000; 0: any free port).",
+                                  allowed=ranges.PORT)
+    ] = None,
     data_dir: Annotated[
         Path | None,
         typer.Option("--data-dir", help="Frames and database (default ./toftwin-data)."),
@@ -31,7 +40,10 @@ def serve(
     executor: Annotated[
         str | None, typer.Option(help="local (process pool), thread, or dask://HOST:PORT.")
     ] = None,
-    workers: Annotated[int | None, typer.Option(help="Local executor workers.")] = None,
+    workers: Annotated[
+        int | None, number_option("--workers", help="Local executor workers.",
+                                  allowed=ranges.WORKERS)
+    ] = None,
     settings_file: Annotated[
         Path | None, typer.Option("--settings", help="Settings file (dotenv, TOFTWIN_* keys).")
     ] = None,
@@ -55,25 +67,31 @@ def serve(
     from service.api.app import create_app
     from service.settings import Settings
 
-    token = None
-    if simulated and "TOFTWIN_TOKEN" not in os.environ and settings_file is None:
-        refuse_if_in_use(data_dir or Path("toftwin-data"))  # keep a running server's token
-        token = session_token(data_dir or Path("toftwin-data"))
+    # A simulated rig started without a token gets a session token; it is written only once
+    # every setting is known to be valid and the data directory free (a refused start writes
+    # nothing, and a running server's token stays).
+    session = (simulated and "TOFTWIN_TOKEN" not in os.environ and settings_file is None)
+    token = secrets.token_urlsafe(24) if session else None
+    given = {"host": host, "port": port, "data_dir": data_dir, "simulated": simulated or None,
+             "executor": executor, "workers": workers, "faults": fault or None,
+             "reality": reality}
     try:
-        settings = Settings.load(
-            settings_file, host=host, port=port, data_dir=data_dir,
-            simulated=simulated or None, executor=executor, workers=workers, token=token,
-            faults=fault or None, reality=reality,
-        )
+        settings = Settings.load(settings_file, token=token, **given)
     except ValidationError as exc:
         for e in exc.errors():
             field = ".".join(str(p) for p in e["loc"]) or "settings"
-            err_console.print(f"[bold red]error:[/] TOFTWIN_{field.upper()}: {e['msg']}")
+            name = f"TOFTWIN_{field.upper()}"
+            top = str(e["loc"][0]) if e["loc"] else ""
+            if given.get(top) is not None and top in OPTION_OF_FIELD:
+                name = f"{OPTION_OF_FIELD[top]}{field[len(top):]} ({name})"
+            print_error(f"{name}: {e['msg']}")
         raise typer.Exit(code=2) from None
     refuse_if_in_use(settings.data_dir)
+    if session:
+        session_token(settings.data_dir, token)
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     if settings.host not in ("127.0.0.1", "localhost", "::1"):
-        err_console.print(f"[yellow]warning:[/] listening on {settings.host}, not loopback")
+        print_warning(f"listening on {settings.host}, not loopback")
     try:
         uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
                     log_level=log_level.lower())
@@ -91,14 +109,12 @@ def refuse_if_in_use(data_dir: Path) -> None:
     check makes the usual case (a second ``toftwin serve`` on the same directory) a one-line
     error before anything (the session token file included) is written.
     """
-    from rich.markup import escape
-
     from service.store.data_lock import DataDirInUseError, DataDirLock
 
     try:
         DataDirLock.check(data_dir)
     except DataDirInUseError as exc:
-        err_console.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
+        print_error(str(exc))
         raise typer.Exit(code=2) from None
 
 
@@ -106,23 +122,25 @@ def refuse_if_in_use(data_dir: Path) -> None:
 _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
 
 
-def session_token(data_dir: Path) -> str:
-    """A random bearer token for a simulated service started without one.
+def session_token(data_dir: Path, token: str | None = None) -> str:
+    """A bearer token (``token``, or a new random one) for a simulated service started without
+    one.
 
     Written to ``DATA_DIR/token`` (mode 0600) and printed once, so that the first command of the
     README works on a fresh machine without a placeholder secret; a real rig needs TOFTWIN_TOKEN.
     """
     make_private(data_dir)
     path = data_dir / "token"
-    token = secrets.token_urlsafe(24)
+    token = token or secrets.token_urlsafe(24)
     try:  # never through a symlink (it could point anywhere), and 0600 even if it existed
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | _NOFOLLOW, 0o600)
     except OSError as exc:
-        err_console.print(f"[bold red]error:[/] cannot write the session token to {path}: "
-                          f"{exc.strerror} (a symlink is refused); remove it or set TOFTWIN_TOKEN")
+        print_error(f"cannot write the session token to {path}: {exc.strerror} (a symlink is "
+                    "refused); remove it or set TOFTWIN_TOKEN")
         raise typer.Exit(code=2) from None
     with os.fdopen(fd, "w") as fh:
         os.fchmod(fh.fileno(), 0o600)
         fh.write(token + "\n")
-    err_console.print(f"simulated rig: no TOFTWIN_TOKEN given, this session's token is in {path}")
+    err_console.print(f"simulated rig: no TOFTWIN_TOKEN given, this session's token is in {path}",
+                      soft_wrap=True)
     return token

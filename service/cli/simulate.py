@@ -7,18 +7,33 @@ from typing import Annotated
 
 import typer
 
-from service.cli.common import bounded, choice, console, err_console, fail_invalid, progress_bar
+from service.cli import ranges
+from service.cli.common import (
+    choice,
+    console,
+    fail_invalid,
+    number_option,
+    print_error,
+    progress_bar,
+)
 from sim_core.errors import InvalidInputError
 
 
 def simulate(
     scene: Annotated[Path, typer.Argument(help="Scene file (YAML or JSON).")],
     out: Annotated[Path, typer.Option("--out", help="Output directory.")],
-    spp: Annotated[int | None, typer.Option(help="Samples per pixel (1-65536).")] = None,
-    max_bounces: Annotated[
-        int | None, typer.Option("--max-bounces", help="Surface interactions per path (1-16).")
+    spp: Annotated[
+        int | None, number_option("--spp", help="Samples per pixel (default: the scene's).",
+                                  allowed=ranges.SPP)
     ] = None,
-    seed: Annotated[int | None, typer.Option(help="Random seed (>= 0).")] = None,
+    max_bounces: Annotated[
+        int | None, number_option("--max-bounces", help="Surface interactions per path.",
+                                  allowed=ranges.MAX_BOUNCES)
+    ] = None,
+    seed: Annotated[
+        int | None, number_option("--seed", help="Random seed.",
+                                  allowed=ranges.SEED)
+    ] = None,
     integrator: Annotated[
         str | None, typer.Option(help="direct or path (default: the scene's).")
     ] = None,
@@ -31,29 +46,34 @@ def simulate(
     explain: Annotated[bool, typer.Option("--explain", help="Print the effect plan.")] = False,
     effect_tolerance_mm: Annotated[
         float | None,
-        typer.Option("--effect-tolerance-mm", help="Range change below which an effect is off."),
+        number_option("--effect-tolerance-mm", help="Range change below which an effect is off.",
+                      allowed=ranges.EFFECT_TOLERANCE),
     ] = None,
     threads: Annotated[
-        int | None, typer.Option(help="Embree threads (default: all cores).")
+        int | None, number_option("--threads", help="Embree threads (default: all cores).",
+                                  allowed=ranges.THREADS)
     ] = None,
     turntable_deg: Annotated[
-        float | None, typer.Option("--turntable-deg", help="Override the turntable angle [deg].")
+        float | None, number_option("--turntable-deg", help="Override the turntable angle [deg].",
+                                    allowed=ranges.TURNTABLE_DEG)
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     target_range_error_mm: Annotated[
         float | None,
-        typer.Option("--target-range-error-mm",
-                     help="Sample adaptively until the range standard error is below this."),
+        number_option("--target-range-error-mm", help="Sample adaptively until the range "
+                      "standard error is below this.", allowed=ranges.TARGET_RANGE_ERROR),
     ] = None,
     time_budget_s: Annotated[
         float | None,
-        typer.Option("--time-budget-s", help="Best accuracy within this many seconds."),
+        number_option("--time-budget-s", help="Best accuracy within this many seconds.",
+                      allowed=ranges.TIME_BUDGET),
     ] = None,
     noise_fraction: Annotated[
         float | None,
-        typer.Option("--noise-fraction",
-                     help="At least --spp samples, more where the Monte Carlo error (depth and "
-                     "grey) is above this fraction of the sensor's own noise (0.05 to 2)."),
+        number_option("--noise-fraction",
+                      help="At least --spp samples, more where the Monte Carlo error (depth and "
+                      "grey) is above this fraction of the sensor's own noise.",
+                      allowed=ranges.NOISE_FRACTION),
     ] = None,
     calibration: Annotated[
         Path | None,
@@ -62,7 +82,6 @@ def simulate(
     ] = None,
 ) -> None:
     """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
-    from sim_core.adaptive import NOISE_FRACTION_RANGE
     from sim_core.pipeline import save_frame
     from sim_core.pipeline import simulate as run_simulation
     from sim_core.render import RenderSettings
@@ -75,23 +94,13 @@ def simulate(
         r = spec.render
         settings = RenderSettings(
             integrator=choice("--integrator", integrator or r.integrator, ("direct", "path")),
-            spp=bounded("--spp", spp if spp is not None else r.spp, 1, 65536),
-            max_bounces=bounded(
-                "--max-bounces", max_bounces if max_bounces is not None else r.max_bounces, 1, 16
-            ),
-            seed=bounded("--seed", seed if seed is not None else r.seed, 0, 2**63 - 1),
+            spp=spp if spp is not None else r.spp,
+            max_bounces=max_bounces if max_bounces is not None else r.max_bounces,
+            seed=seed if seed is not None else r.seed,
             russian_roulette_from_bounce=r.russian_roulette_from_bounce,
-            threads=None if threads is None else bounded("--threads", threads, 1, 256),
+            threads=threads,
         )
         choice("--effects", effects, ("auto", "all"))
-        if effect_tolerance_mm is not None and not 0.0 < effect_tolerance_mm <= 1e4:
-            raise InvalidInputError(
-                "--effect-tolerance-mm", f"{effect_tolerance_mm} is outside (0, 10000] mm"
-            )
-        lo, hi = NOISE_FRACTION_RANGE
-        if noise_fraction is not None and not lo <= noise_fraction <= hi:
-            raise InvalidInputError("--noise-fraction",
-                                    f"{noise_fraction} is outside [{lo:g}, {hi:g}]")
         twin = None if calibration is None else load_calibration(calibration)
         built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg, twin=twin)
     except InvalidInputError as exc:
@@ -136,16 +145,17 @@ def simulate(
 def preview(
     frame_dir: Annotated[Path, typer.Argument(help="A directory holding frame.npz.")],
     out: Annotated[Path, typer.Option("--out", help="PNG file to write.")],
-    scale: Annotated[int, typer.Option(help="Pixel magnification (1-8).")] = 2,
+    scale: Annotated[int, number_option("--scale", help="Pixel magnification.",
+                                        allowed=ranges.PREVIEW_SCALE)] = 2,
 ) -> None:
     """Grey and depth side by side (depth colour-coded near -> far) as one PNG."""
     from sim_core.frame_io import read_frame
     from sim_core.preview import side_by_side
 
     try:
-        image = side_by_side(read_frame(frame_dir), bounded("--scale", scale, 1, 8))
+        image = side_by_side(read_frame(frame_dir), scale)
     except FileNotFoundError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}")
+        print_error(str(exc))
         raise typer.Exit(code=2) from None
     except InvalidInputError as exc:
         fail_invalid(exc)

@@ -18,9 +18,8 @@ import numbers
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from sim_core.errors import InvalidInputError
+from sim_core.files import StructuredFileError, load_structured
 
 __all__ = ["MATERIAL_FILE_KEYS", "read_material_file"]
 
@@ -42,9 +41,9 @@ def read_material_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     if not p.is_file():
         raise InvalidInputError("file", f"material file '{p}' does not exist")
     try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise InvalidInputError("file", f"material file '{p}' is not valid YAML: {exc}") from None
+        data = load_structured(p, json_only=False)
+    except StructuredFileError as exc:
+        raise InvalidInputError("file", f"material file {exc}") from None
     if not isinstance(data, dict):
         raise InvalidInputError("file", f"material file '{p}' holds no mapping with "
                                         f"'kind' and 'params'")

@@ -8,10 +8,18 @@ from typing import Annotated
 
 import typer
 
-from service.cli.common import bounded, console, err_console, fail_invalid, int_list
+from service.cli import ranges
+from service.cli.common import (
+    command_group,
+    console,
+    fail_invalid,
+    int_list,
+    number_option,
+    print_error,
+)
 from sim_core.errors import InvalidInputError
 
-bench_app = typer.Typer(help="Benchmarks that print figures.", no_args_is_help=True)
+bench_app = command_group("Benchmarks that print figures.")
 
 
 @bench_app.command("render")
@@ -19,9 +27,17 @@ def bench_render(
     scenes: Annotated[
         list[Path] | None, typer.Argument(help="Scene files (default: the bundled examples).")
     ] = None,
-    spp: Annotated[list[int] | None, typer.Option(help="Samples per pixel to try.")] = None,
-    bounces: Annotated[list[int] | None, typer.Option(help="Bounce counts to try.")] = None,
-    threads: Annotated[int | None, typer.Option(help="Embree threads.")] = None,
+    spp: Annotated[
+        list[int] | None, number_option("--spp", help="Samples per pixel to try (repeatable).",
+                                        allowed=ranges.SPP)
+    ] = None,
+    bounces: Annotated[
+        list[int] | None, number_option("--bounces", help="Bounce counts to try (repeatable).",
+                                        allowed=ranges.MAX_BOUNCES)
+    ] = None,
+    threads: Annotated[
+        int | None, number_option("--threads", help="Embree threads.", allowed=ranges.THREADS)
+    ] = None,
 ) -> None:
     """Seconds per frame, rays per second and the share of time inside Embree."""
     from service.cli.bench.render import run_render_benchmark
@@ -76,8 +92,9 @@ def bench_mitsuba(
     from service.cli.bench.mitsuba import run_mitsuba_comparison
 
     try:
-        spps = int_list("--spp", spp or ["16,64,256"], 1, 65536)
-        bounce_counts = int_list("--bounces", bounces or ["1,2,3"], 1, 64)
+        spps = int_list("--spp", spp or ["16,64,256"], ranges.SPP.lo, ranges.SPP.hi)
+        bounce_counts = int_list("--bounces", bounces or ["1,2,3"], ranges.MAX_BOUNCES.lo,
+                                 ranges.MAX_BOUNCES.hi)
     except InvalidInputError as exc:
         fail_invalid(exc)
     try:
@@ -85,7 +102,7 @@ def bench_mitsuba(
             console, spps=spps, bounces=bounce_counts, quick=quick, convergence=convergence
         )
     except RuntimeError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}")
+        print_error(str(exc))
         raise typer.Exit(code=1) from None
     if json_out is not None:
         json_out.write_text(json.dumps(res, indent=2, default=float))
@@ -94,26 +111,37 @@ def bench_mitsuba(
 
 @bench_app.command("ground-test")
 def bench_ground_test(
-    spp: Annotated[int, typer.Option(help="Samples per pixel.")] = 64,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    spp: Annotated[int, number_option("--spp", help="Samples per pixel.",
+                                      allowed=ranges.SPP)] = 64,
+    seed: Annotated[int, number_option("--seed", help="Random seed.", allowed=ranges.SEED)] = 0,
 ) -> None:
     """Seed Fig. 14: grey and depth statistics with and without solar simulator and SBI."""
     from service.cli.bench.ground_test import run_ground_test
 
-    run_ground_test(bounded("--spp", spp, 1, 65536), seed, console)
+    run_ground_test(spp, seed, console)
 
 
 @bench_app.command("campaign")
 def bench_campaign(
-    poses: Annotated[int, typer.Option(help="Poses per campaign.")] = 12,
-    repeats: Annotated[int, typer.Option(help="Repeats per pose.")] = 1,
-    spp: Annotated[int, typer.Option(help="Samples per pixel of the simulations.")] = 16,
-    camera_spp: Annotated[int, typer.Option(help="Samples per pixel of the camera twin.")] = 8,
-    workers: Annotated[list[int] | None, typer.Option(help="Local worker counts.")] = None,
+    poses: Annotated[int, number_option("--poses", help="Poses per campaign.",
+                                        allowed=ranges.BENCH_POSES)] = 12,
+    repeats: Annotated[int, number_option("--repeats", help="Repeats per pose.",
+                                          allowed=ranges.BENCH_REPEATS)] = 1,
+    spp: Annotated[int, number_option("--spp", help="Samples per pixel of the simulations.",
+                                      allowed=ranges.BENCH_SPP)] = 16,
+    camera_spp: Annotated[
+        int, number_option("--camera-spp", help="Samples per pixel of the camera twin.",
+                           allowed=ranges.CAMERA_SPP)
+    ] = 8,
+    workers: Annotated[
+        list[int] | None, number_option("--workers", help="Local worker counts (repeatable).",
+                                        allowed=ranges.WORKERS)
+    ] = None,
     dask: Annotated[
         bool, typer.Option("--dask", help="Also on a LocalCluster with 1 and 2 workers.")
     ] = False,
-    rounds: Annotated[int, typer.Option(help="Timed campaigns per configuration.")] = 1,
+    rounds: Annotated[int, number_option("--rounds", help="Timed campaigns per configuration.",
+                                         allowed=ranges.BENCH_ROUNDS)] = 1,
     out: Annotated[Path | None, typer.Option("--out", help="JSON file of the figures.")] = None,
 ) -> None:
     """Poses per minute of a simulated campaign, and where the time goes per pose."""

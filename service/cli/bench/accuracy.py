@@ -17,6 +17,7 @@ the path integrator: Monte Carlo error falls as 1/sqrt(time), slope -0.5).
 from __future__ import annotations
 
 import csv
+import io
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -28,6 +29,7 @@ from rich.table import Table
 
 from service.settings import EXAMPLES_DIR
 from sim_core.errors import InvalidInputError
+from sim_core.files import atomic_write
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
 from sim_core.scene import build_scene
@@ -174,14 +176,13 @@ def write_outputs(out: Path, rows: list[Row], summary: dict) -> None:
 
     out.mkdir(parents=True, exist_ok=True)
     fields = list(asdict(rows[0]).keys())
-    tmp = out / ".accuracy.csv.tmp"
-    with tmp.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields)
-        w.writeheader()
-        for r in rows:
-            w.writerow(asdict(r))
-    tmp.replace(out / "accuracy.csv")
-    (out / "accuracy_summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True))
+    fh = io.StringIO(newline="")
+    w = csv.DictWriter(fh, fieldnames=fields)
+    w.writeheader()
+    for r in rows:
+        w.writerow(asdict(r))
+    atomic_write(out / "accuracy.csv", fh.getvalue())
+    atomic_write(out / "accuracy_summary.json", json.dumps(summary, indent=2, sort_keys=True))
 
     scenes = list(dict.fromkeys(r.scene for r in rows))
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 4.4), squeeze=False)
@@ -210,7 +211,5 @@ def write_outputs(out: Path, rows: list[Row], summary: dict) -> None:
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
-    tmp_png = out / ".accuracy.png.tmp.png"
-    fig.savefig(tmp_png, dpi=110)
+    atomic_write(out / "accuracy.png", lambda fh: fig.savefig(fh, format="png", dpi=110))
     plt.close(fig)
-    tmp_png.replace(out / "accuracy.png")

@@ -101,6 +101,62 @@ def test_unloadable_libllvm_raises_clear_error(tmp_path):
     _assert_clear(proc.stdout)
 
 
+def test_the_install_hint_names_the_bench_extra_from_the_clone(monkeypatch):
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    assert 'pip install -c requirements/lock.txt -e ".[bench]"' in bm.INSTALL_HINT
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # makes `import mitsuba` fail
+    res = CliRunner().invoke(app, ["bench", "mitsuba", "--spp", "1", "--bounces", "1",
+                                   "--no-convergence"])
+    assert res.exit_code == 1 and res.stdout == ""
+    err = " ".join(res.stderr.split())
+    assert 'pip install -c requirements/lock.txt -e ".[bench]"' in err, err
+    assert "'toftwin'" not in err
+
+
+def test_a_probe_that_aborts_is_reported_and_the_caller_goes_on():
+    ok, detail = bm.probe_backend(bm.MITSUBA_VARIANT, None, timeout_s=60,
+                                  code="import os, sys\nsys.stderr.write('LLVM ERROR: Cannot "
+                                  "select: f32 = fminimum\\n  more\\n')\nos.abort()\n")
+    assert not ok
+    assert detail == "the probe was killed by SIGABRT: LLVM ERROR: Cannot select: f32 = fminimum"
+
+
+def test_the_failure_message_names_the_library_its_version_and_what_to_install():
+    detail = "the probe was killed by SIGABRT: LLVM ERROR: Cannot select: f32 = fminimum"
+    for path, says in (("/usr/lib/x86_64-linux-gnu/libLLVM-15.so", "stop in LLVM 15's"),
+                       ("/usr/lib/llvm-14/lib/libLLVM.so", "needs LLVM 15 or newer"),
+                       ("/tmp/libfoo.so", "not a libLLVM Dr.Jit can load"),
+                       (None, "no libLLVM shared library was found")):
+        msg = bm.backend_failure_message(path, "found", detail)
+        assert says in msg and detail in msg, msg
+        assert path is None or path in msg
+        _assert_clear(msg)
+
+
+@pytest.mark.timeout(600)
+def test_a_backend_that_cannot_run_is_an_error_naming_the_library_not_a_crash(tmp_path):
+    """A fresh CLI process pointed at a library Dr.Jit cannot use: exit 1, the library, its
+    version and what to install; no LLVM dump, no traceback."""
+    fake = tmp_path / "libLLVM-15.so"
+    fake.write_bytes(b"not a shared library")
+    env = {**os.environ, "DRJIT_LIBLLVM_PATH": str(fake)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "service.cli", "bench", "mitsuba", "--spp", "1", "--bounces", "1",
+         "--no-convergence"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stdout == "" and "Traceback" not in proc.stderr
+    err = " ".join(proc.stderr.split())
+    _assert_clear(err)
+    if importlib.util.find_spec("mitsuba") is None:
+        assert "not installed" in err
+    else:
+        assert f"DRJIT_LIBLLVM_PATH names: {fake} (LLVM 15)" in err, err
+        assert "the probe exited with code 1" in err
+
+
 def test_scale_fit_and_errors():
     rng = np.random.default_rng(0)
     ours = rng.uniform(1.0, 2.0, (40, 48))
@@ -155,9 +211,13 @@ def test_ply_writer_and_camera_refusals(tmp_path):
             bm.mitsuba_sensor_dict(None, bad)
 
 
-def test_find_libllvm_returns_a_file_or_none():
+def test_find_libllvm_returns_the_newest_library_found_or_none():
     path = bm.find_libllvm()
     assert path is None or Path(path).is_file()
+    found = bm.libllvm_candidates()
+    assert (path is None) == (not found)
+    versions = [bm.llvm_version(p) or 0 for p in found]
+    assert versions == sorted(versions, reverse=True)
 
 
 def test_cli_speed_table_as_json_or_clear_error(tmp_path):
