@@ -71,9 +71,10 @@ DIRECTIONS: tuple[tuple[int, int], ...] = ((0, 1), (1, 0), (1, 1), (1, -1))
 #: standard deviation
 MAD_TO_SIGMA = 1.482602218505602
 
-#: the local noise is the median over NOISE_SAMPLES x NOISE_SAMPLES samples taken on every second
-#: row and column, a window of 2 * NOISE_SAMPLES - 1 = 13 pixels
-NOISE_SAMPLES = 7
+#: the local noise is the median over NOISE_SAMPLES x NOISE_SAMPLES samples taken on every
+#: NOISE_STRIDE-th row and column, a window of (NOISE_SAMPLES - 1) * NOISE_STRIDE + 1 = 13 pixels
+NOISE_SAMPLES = 5
+NOISE_STRIDE = 3
 
 
 @dataclass(frozen=True)
@@ -172,8 +173,9 @@ def _noise_from_second_differences(d2: np.ndarray) -> np.ndarray:
     # where a pixel has no second difference, the frame's median stands in (neither raises nor
     # lowers its neighbours' estimate)
     filled = np.where(known, per_pixel, np.median(per_pixel[known]))
-    sub = ndimage.median_filter(filled[::2, ::2], size=NOISE_SAMPLES, mode="nearest")
-    full = np.repeat(np.repeat(sub, 2, axis=0), 2, axis=1)[:h, :w]
+    k = NOISE_STRIDE
+    sub = ndimage.median_filter(filled[::k, ::k], size=NOISE_SAMPLES, mode="nearest")
+    full = np.repeat(np.repeat(sub, k, axis=0), k, axis=1)[:h, :w]
     return MAD_TO_SIGMA * full
 
 
@@ -182,10 +184,11 @@ def second_difference_noise_m(range_m: np.ndarray, valid: np.ndarray) -> np.ndar
     pixel.
 
     Per pixel the median of |second difference| over the directions where it exists; then the
-    median of those over a 13 x 13 window sampled on every second row and column (7 x 7
-    samples; a straight edge crossing the window holds about a quarter of them, too few to move
-    the median much); times 1.4826, the ratio of a Gaussian's standard deviation to its median
-    absolute value. For independent Gaussian range noise of standard deviation sigma the second
+    median of those over a 13 x 13 window sampled on every third row and column (5 x 5
+    samples, each standing for its 3 x 3 block; a straight edge crossing the window holds about
+    a fifth of them, too few to move the median much; a full median filter costs six times as
+    much); times 1.4826, the ratio of a Gaussian's standard deviation to its median absolute
+    value. For independent Gaussian range noise of standard deviation sigma the second
     differences have sqrt(6) sigma, and this estimates that within a few per cent (a test
     checks it). Pixels with no second difference of their own take the frame's median. NaN
     everywhere when the image has no second difference at all.
