@@ -187,7 +187,9 @@ def _colour_bar_png(scale: ColourScale, label: str, width_px: int, height_px: in
     with MATPLOTLIB_LOCK:
         fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
         FigureCanvasAgg(fig)
-        ax = fig.add_axes((0.04, 0.52, 0.92, 0.26))
+        # with its ends labelled, room either side for half a label ("-1435", "107.9")
+        margin = 0.1 if scale.label_ends else 0.04
+        ax = fig.add_axes((margin, 0.52, 1.0 - 2.0 * margin, 0.26))
         # hi == lo would make matplotlib's Normalize divide by zero
         hi = scale.hi if scale.hi > scale.lo else scale.lo + 1.0
         bar = ColorbarBase(ax, cmap=colormaps[scale.cmap], norm=Normalize(scale.lo, hi),

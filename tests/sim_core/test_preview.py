@@ -78,5 +78,5 @@ def test_the_colour_bar_states_the_range_at_its_ends():
     assert png.size == (300, 56)
     bar = np.asarray(png.convert("L"))
     row = bar[int(0.35 * 56)]  # through the bar: dark on the left, light on the right
-    assert row[30] < 60 and row[270] > 200
+    assert row[40] < 60 and row[260] > 200
     assert colour_bar_ticks(ColourScale("gray", 0.0, 1.0, "DN")) == ()  # matplotlib's own

@@ -52,9 +52,10 @@ def test_a_pose_reports_its_depth_difference_and_pixels_first(client):
     folders = [lab.store.path(pose[k]) for k in ("measured_frame_id", "simulated_frame_id")]
     before = [_digests(f) for f in folders]
 
-    # the page's result view: the figures before Table 5, the grey panels stretched
+    # the page's result view: the figures first (above the images and Table 5), the grey
+    # panels stretched
     html = client.get(f"/ui/poses/{pose['id']}").text
-    assert html.index("Depth difference and pixels") < html.index("Table 5")
+    assert html.index('class="tof-depth"') < html.index('class="panels"') < html.index("Table 5")
     assert f"{tof['depth_diff_median_mm']:+.1f}" in html
     assert "grey [DN], 1st-99th pct of valid pixels" in html
     src = f"/api/v1/poses/{pose['id']}/panels/grey-measured.png"
