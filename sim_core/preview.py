@@ -10,8 +10,8 @@ the valid pixels (:data:`GREY_DISPLAY_PERCENTILES`, :func:`grey_scale`), black t
 colour bar whose ends state that range in DN (the sensor's digital numbers). The stored grey
 image (``grey.png``, ``grey_8bit``, the metrics' grey) keeps the frame's fixed full scale
 (:func:`sim_core.frame_io.grey_full_scale`: 2048 DN for the 12-bit sensor), on which the
-satellite ground test reads about 4 of 255: black to the eye. Measured and simulated images of
-one pose share one range (:func:`grey_scale` of both), so they compare by eye.
+satellite ground test (15-55 DN) reads 2 to 7 of 255: black to the eye. Measured and simulated
+images of one pose share one range (:func:`grey_scale` of both), so they compare by eye.
 """
 
 from __future__ import annotations
@@ -198,7 +198,9 @@ def _colour_bar_png(scale: ColourScale, label: str, width_px: int, height_px: in
         if ticks:
             bar.set_ticks([v for v, _ in ticks], labels=[t for _, t in ticks])
         bar.ax.tick_params(labelsize=7, length=2, pad=1)
-        bar.set_label(label, fontsize=8, labelpad=1)
+        # 8 pt, smaller where the label would not fit (about 0.83 px a character per point)
+        size = max(5.0, min(8.0, width_px / (0.83 * max(len(label), 1))))
+        bar.set_label(label, fontsize=size, labelpad=1)
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=dpi)
     return buf.getvalue()
