@@ -13,8 +13,10 @@ A frame folder holds, for a measured and a simulated frame alike:
 
 The grey full scale (amplitude shown as grey 255) is a property of the frame, chosen by
 :func:`grey_full_scale` and recorded in ``frame.json`` as ``grey_preview_full_scale``; every
-grey image of the frame (the PNG, the ``grey_8bit`` array, ``toftwin preview``, the report
-panels, the service's comparison metrics) uses it.
+stored grey image of the frame (the PNG, the ``grey_8bit`` array) and the service's comparison
+metrics use it. Pictures for people (``toftwin preview``, the report's and the operator page's
+panels) stretch the amplitude to its own percentiles instead (:mod:`sim_core.preview`): at the
+fixed full scale a dim scene is black to the eye.
 
 Every file is written to a temporary name in the target directory and renamed into place, so a
 reader never sees a half-written file and a crash leaves at most a stray ``*.tmp``.

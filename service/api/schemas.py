@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from service.lab.requests import Angle, Level, RequestBody, StrictBool
 
@@ -30,8 +30,42 @@ class SimulationPublic(BaseModel):
 
 
 # -- poses -------------------------------------------------------------------------------------
+class ToFFiguresPublic(BaseModel):
+    """What a ToF engineer reads of a comparison, before Table 5 (``sim_core.metrics.ToFFigures``):
+    the depth difference over the mask's pixels valid in both frames and flying in neither, and
+    the share of flying and invalid pixels of each frame in the mask."""
+
+    depth_diff_median_mm: float | None = Field(
+        description="Median of simulated - measured range [mm] (None: no pixel left).")
+    depth_diff_mad_mm: float | None = Field(
+        description="Median absolute deviation from that median [mm], unscaled.")
+    depth_diff_p95_abs_mm: float | None = Field(
+        description="95th percentile of |simulated - measured| [mm].")
+    depth_diff_n_pixels: int = Field(description="Pixels the depth figures are taken over.")
+    mask_pixels: int = Field(description="Pixels of the comparison mask; the shares are of these.")
+    flying_share_measured: float = Field(description="Share of flying (mixed) pixels, 0 to 1.")
+    flying_share_simulated: float
+    invalid_share_measured: float = Field(description="Share of invalid pixels, 0 to 1.")
+    invalid_share_simulated: float
+    flying_rule: dict[str, float] = Field(
+        description="The flying-pixel rule's parameters (sim_core.flying_pixels.FlyingPixelRule).")
+
+
+class MetricsPublic(BaseModel):
+    """A comparison's metrics: ``tof`` (the figures above; null in results stored before them),
+    the seed's Table 5 indexes per image (``grey``, ``depth``: mean, variance, MSE, SSIM, PSNR,
+    relative errors), ``grey_chi_square``, ``n_pixels``, the grey full scales and depth unit;
+    ``error`` instead when the frames had no pixel to compare; ``explained`` for campaigns with
+    an object fit (nominal, fitted and noise-ceiling comparisons, each with its ``tof``)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    tof: ToFFiguresPublic | None = None
+
+
 class PosePublic(BaseModel):
-    """The comparison of one pose: both frames and the metrics of seed Table 5."""
+    """The comparison of one pose: both frames, the depth difference and pixel shares
+    (``metrics.tof``) and the metrics of seed Table 5."""
 
     id: int
     campaign_id: str | None
@@ -41,7 +75,7 @@ class PosePublic(BaseModel):
     solar_suns: float
     measured_frame_id: str
     simulated_frame_id: str
-    metrics: dict[str, Any]
+    metrics: MetricsPublic
     table: list[list[str]]
     rig: dict[str, Any]
     timings_s: dict[str, float]
@@ -113,7 +147,7 @@ class ResultPublic(BaseModel):
     repeat: int
     turntable_deg: float
     solar_suns: float
-    metrics: dict[str, Any]
+    metrics: MetricsPublic
     measured_frame_id: str
     simulated_frame_id: str
     fitted_frame_id: str | None = Field(

@@ -1,4 +1,5 @@
-"""``toftwin compare``: the seed's Table 5 rows for a measured and a simulated frame folder."""
+"""``toftwin compare``: the depth difference, flying and invalid pixels, and the seed's Table 5
+rows for a measured and a simulated frame folder."""
 
 from __future__ import annotations
 
@@ -65,6 +66,8 @@ def compare(
     except InvalidInputError as exc:
         print_error(str(exc))
         raise typer.Exit(code=2) from None
+    for line in report.tof.summary_lines():  # what a ToF engineer reads first
+        console.print(line, markup=False, highlight=False)
     table = Table(*TABLE_HEADER, title=f"{measured_dir} vs {simulated_dir} ({mask} mask, "
                   f"{report.n_pixels} pixels)")
     for row in report.table_rows():

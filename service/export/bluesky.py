@@ -5,7 +5,8 @@ Built with :func:`event_model.compose_run`, which validates every document again
 ``event-model`` JSON schemas as it composes it. Uids are derived from the campaign id (UUID5),
 so the same campaign gives the same documents every time they are asked for. Frames are
 referenced by id (``measured_frame_id``, ``simulated_frame_id``); their arrays are at
-``/api/v1/frames/{id}/arrays``. Non-finite metrics (PSNR of identical images) are ``None``.
+``/api/v1/frames/{id}/arrays``. Non-finite metrics (PSNR of identical images) are ``None``, and
+so are the depth-difference figures of a result stored before they were computed.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any
 import event_model
 from sqlalchemy.orm import sessionmaker
 
-from service.export.results_table import CHANNEL_FIELDS
+from service.export.results_table import CHANNEL_FIELDS, TOF_FIELDS
 from service.store import queries
 from sim_core.frame_io import package_version
 
@@ -52,6 +53,11 @@ def _data_keys() -> dict[str, dict[str, Any]]:
         "n_pixels": {"source": "toftwin:compare", "dtype": "integer", "shape": []},
         "grey_chi_square": {"source": "toftwin:compare", "dtype": "number", "shape": []},
     }
+    for f in TOF_FIELDS:
+        keys[f] = {"source": "toftwin:compare", "shape": [],
+                   "dtype": "integer" if f.endswith("pixels") else "number"}
+        if f.endswith("_mm"):
+            keys[f]["units"] = "mm"
     for ch in ("grey", "depth"):
         for f in CHANNEL_FIELDS:
             keys[f"{ch}_{f}"] = {"source": "toftwin:compare", "dtype": "number", "shape": []}
@@ -114,6 +120,9 @@ def _documents(row, results: Iterable) -> Iterator[dict[str, Any]]:
             "simulated_frame_id": r.simulated_frame_id, "n_pixels": metrics.get("n_pixels"),
             "grey_chi_square": _num(metrics.get("grey_chi_square")),
         })
+        tof = metrics.get("tof") or {}
+        for f in TOF_FIELDS:  # None in results stored before these figures
+            data[f] = tof.get(f) if f.endswith("pixels") else _num(tof.get(f))
         for ch in ("grey", "depth"):
             for f in CHANNEL_FIELDS:
                 data[f"{ch}_{f}"] = _num((metrics.get(ch) or {}).get(f))

@@ -51,6 +51,15 @@ class PlotSpec:
 
 
 CAMPAIGN_PLOTS = (
+    PlotSpec("depth-difference", "Depth sim - meas [mm]", (
+        ("median", metric("tof", "depth_diff_median_mm")),
+        ("MAD", metric("tof", "depth_diff_mad_mm")),
+        ("95 % of |diff|", metric("tof", "depth_diff_p95_abs_mm")))),
+    PlotSpec("pixel-shares", "Flying and invalid pixels [% of mask]", (
+        ("flying, measured", metric("tof", "flying_share_measured", 100.0)),
+        ("flying, simulated", metric("tof", "flying_share_simulated", 100.0)),
+        ("invalid, measured", metric("tof", "invalid_share_measured", 100.0)),
+        ("invalid, simulated", metric("tof", "invalid_share_simulated", 100.0)))),
     PlotSpec("ssim", "SSIM", (("grey", metric("grey", "ssim")),
                               ("depth", metric("depth", "ssim")))),
     PlotSpec("psnr", "PSNR [dB]", (("grey", metric("grey", "psnr_db")),

@@ -3,7 +3,9 @@
 Rendered with the operator page's templates (:mod:`service.web`: ``report.html`` and the macros
 of ``_pose.html``). Self-contained: plots are inline SVG (matplotlib, :mod:`service.export.plots`),
 images and their colour bars inline PNG data URIs, so the page can be saved and mailed. Per pose
-(its first repeat) the six panels of :mod:`service.export.panels`, each with its colour bar.
+(its first repeat) first the depth difference and the flying and invalid pixels
+(:class:`sim_core.metrics.ToFFigures`, and the noise ceiling's where a second capture exists),
+then the six panels of :mod:`service.export.panels`, each with its colour bar.
 """
 
 from __future__ import annotations
@@ -81,10 +83,17 @@ def explained_context(camp: Any, first: list[dict[str, Any]]) -> dict[str, Any]:
             "rows": rows, "medians": medians}
 
 
+def ceiling_tof(metrics: dict[str, Any]) -> dict[str, Any] | None:
+    """The ToF figures of the measured frame against a second capture of the same state (the
+    noise ceiling of a campaign with an object fit), or None."""
+    return ((metrics.get("explained") or {}).get("ceiling") or {}).get("tof")
+
+
 def _pose_context(store: FrameStore, r: dict[str, Any]) -> dict[str, Any]:
     out = {"pose_index": r["pose_index"], "turntable_deg": r["turntable_deg"],
            "solar_suns": r["solar_suns"], "ssim_grey": metric("grey", "ssim")(r),
            "ssim_depth": metric("depth", "ssim")(r), "error": r["metrics"].get("error"),
+           "tof": r["metrics"].get("tof"), "ceiling": ceiling_tof(r["metrics"]),
            "gap": None, "panels": []}
     try:
         out["panels"] = inline_panels(

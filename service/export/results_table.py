@@ -22,6 +22,15 @@ CHANNEL_FIELDS = ("mean_measured", "mean_simulated", "var_measured", "var_simula
 EXPLAINED_TWINS = ("nominal", "fitted", "ceiling")
 EXPLAINED_FIELDS = ("depth_rmse_m", "grey_psnr_db")
 
+#: the depth difference and pixel shares (``metrics["tof"]``, :class:`sim_core.metrics.ToFFigures`),
+#: the first metric columns of the CSV; rows stored before them have empty cells
+TOF_FIELDS = ("depth_diff_median_mm", "depth_diff_mad_mm", "depth_diff_p95_abs_mm",
+              "depth_diff_n_pixels", "mask_pixels", "flying_share_measured",
+              "flying_share_simulated", "invalid_share_measured", "invalid_share_simulated")
+#: the explained difference's comparisons whose ToF figures get columns of their own
+#: (``fitted_*``, ``ceiling_*``: the noise ceiling); the nominal twin's are the main columns
+TOF_TWINS = ("fitted", "ceiling")
+
 
 def result_rows(
     sessions: sessionmaker, campaign_id: str, limit: int | None = None, offset: int = 0
@@ -49,8 +58,12 @@ def result_dict(r: PoseResultRow) -> dict[str, Any]:
 
 
 def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
-    """``grey_ssim``, ``depth_mse``, ... from a ``ComparisonReport.to_dict()``."""
+    """``depth_diff_median_mm``, ..., ``grey_ssim``, ``depth_mse``, ... from a
+    ``ComparisonReport.to_dict()`` (the ToF figures first)."""
     flat: dict[str, Any] = {}
+    tof = metrics.get("tof") or {}
+    for f in TOF_FIELDS:
+        flat[f] = tof.get(f)
     for ch in ("grey", "depth"):
         values = metrics.get(ch) or {}
         for f in CHANNEL_FIELDS:
@@ -65,6 +78,10 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
             flat[f"{twin}_{f}"] = values.get(f)
     for ch in ("depth", "grey"):
         flat[f"explained_{ch}"] = (explained.get("explained") or {}).get(ch)
+    for twin in TOF_TWINS:
+        values = (explained.get(twin) or {}).get("tof") or {}
+        for f in TOF_FIELDS:
+            flat[f"{twin}_{f}"] = values.get(f)
     return flat
 
 

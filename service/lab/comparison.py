@@ -1,8 +1,13 @@
-"""Comparing a measured and a simulated frame: masks, loading frame folders, Table 5.
+"""Comparing a measured and a simulated frame: masks, loading frame folders, Table 5 and the
+figures a ToF engineer reads first.
 
-The metrics themselves are :func:`sim_core.metrics.compare_images`; this module decides which
-pixels count (:class:`~service.api.schemas.MaskSpec`); frame folders are read by
-:mod:`sim_core.frame_io`.
+The metrics themselves are :func:`sim_core.metrics.compare_images`: the seed's Table 5 rows and
+(``tof``) the depth difference over the pixels valid in both frames and flying in neither
+(median, median absolute deviation, 95th percentile of its magnitude, in mm) and the share of
+flying and invalid pixels of each frame. This module decides which pixels count
+(:class:`~service.lab.requests.MaskSpec`); frame folders are read by :mod:`sim_core.frame_io`.
+Where a second capture of the same state exists (campaigns with an object fit), the same
+figures of the measured frame against it are the noise ceiling (:func:`explained_difference`).
 """
 
 from __future__ import annotations
@@ -76,7 +81,8 @@ def compare(
 
 
 def _summary(report: ComparisonReport) -> dict[str, Any]:
-    """The figures of one comparison the explained difference uses (plain floats)."""
+    """The figures of one comparison the explained difference uses (plain floats), with its
+    depth difference and pixel shares (``tof``, :class:`sim_core.metrics.ToFFigures`)."""
     return json_safe({
         "depth_rmse_m": math.sqrt(max(report.depth.mse, 0.0)) * report.depth_unit_m,
         "depth_mse": report.depth.mse,
@@ -85,6 +91,7 @@ def _summary(report: ComparisonReport) -> dict[str, Any]:
         "grey_mse": report.grey.mse,
         "grey_ssim": report.grey.ssim,
         "n_pixels": report.n_pixels,
+        "tof": None if report.tof is None else report.tof.to_dict(),
     })
 
 
@@ -124,8 +131,9 @@ def explained_difference(
     The fitted twin and the ceiling are compared inside the mask the fitted simulation gives
     (its objects sit where the measurement sees them); the nominal comparison keeps its own.
     Returns ``{"nominal": ..., "fitted": ..., "ceiling": ..., "explained": {"depth": f,
-    "grey": f}}`` with the figures of :func:`_summary` and :func:`explained_fraction`, or an
-    ``error`` where a comparison had no pixel.
+    "grey": f}}`` with the figures of :func:`_summary` (each with its ``tof`` figures: the
+    ceiling's are the depth difference and pixel shares between two captures, what no twin can
+    beat) and :func:`explained_fraction`, or an ``error`` where a comparison had no pixel.
     """
     out: dict[str, Any] = {"nominal": None if nominal is None else _summary(nominal)}
     try:

@@ -97,7 +97,13 @@ class FrameRow(Base):
 
 
 class PoseResultRow(Base):
-    """The comparison of one measured and one simulated frame (a pose and repeat)."""
+    """The comparison of one measured and one simulated frame (a pose and repeat).
+
+    ``metrics_json`` is the comparison as one JSON document (``ComparisonReport.to_dict()`` with
+    the Table 5 text rows under ``table``, and ``explained`` for campaigns with an object fit),
+    so a figure added to the report needs no schema change: the depth difference and pixel
+    shares (``tof``) came that way, and rows stored before them simply lack the key.
+    """
 
     __tablename__ = "pose_results"
     __table_args__ = (UniqueConstraint("campaign_id", "pose_index", "repeat"),)

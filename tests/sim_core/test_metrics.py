@@ -35,6 +35,7 @@ from sim_core.metrics import (
     pearson_chi_square,
     psnr_db,
     relative_error,
+    tof_figures,
 )
 from sim_core.tof import ToFImage
 
@@ -222,6 +223,94 @@ def test_effective_mask_intersects_both_valid_masks():
     eff = effective_mask(user, frame(a.amplitude, a.range_m, va), frame(b.amplitude, b.range_m, vb))
     assert eff.sum() == H * W - 3
     assert not (eff[0, 0] or eff[1, 1] or eff[2, 2])
+
+
+# ------------------------------------------------------------------------------------------
+# The figures a ToF engineer reads: depth difference, flying and invalid pixels
+# ------------------------------------------------------------------------------------------
+
+
+def step_with_mixed_column(offset_m: float = 0.0, mixed: bool = True) -> np.ndarray:
+    """Columns < 12 at 1 m, > 12 at 2 m (plus ``offset_m``); column 12 mixed (1.5 m) or on the
+    background."""
+    r = np.full((H, W), 2.0)
+    r[:, :12] = 1.0
+    r[:, 12] = 1.5 if mixed else 2.0
+    return r + offset_m
+
+
+def test_a_known_offset_and_known_flying_pixels_give_known_figures():
+    """Simulated = measured + 5 mm, except that the measured frame has a column of mixed pixels
+    (flying) and four invalid pixels; the simulated edge is clean."""
+    amp = np.full((H, W), 100.0)
+    valid = np.ones((H, W), bool)
+    valid[0, :4] = False
+    meas = frame(amp, step_with_mixed_column(), valid)
+    sim = frame(amp, step_with_mixed_column(0.005, mixed=False))
+    rep = compare_images(meas, sim, None, grey_full_scale=255.0)
+    tof = rep.tof
+    assert tof.mask_pixels == H * W
+    assert tof.flying_share_measured == pytest.approx(H / (H * W))
+    assert tof.flying_share_simulated == 0.0
+    assert tof.invalid_share_measured == pytest.approx(4 / (H * W))
+    assert tof.invalid_share_simulated == 0.0
+    assert tof.depth_diff_n_pixels == H * W - H - 4
+    assert tof.depth_diff_median_mm == pytest.approx(5.0)
+    assert tof.depth_diff_mad_mm == pytest.approx(0.0, abs=1e-9)
+    assert tof.depth_diff_p95_abs_mm == pytest.approx(5.0)
+    # near the edge the mixed column is 1 pixel in 9 (500 mm off): left in, it would be the 95th
+    # percentile
+    near_edge = tof_figures(meas, sim, mask_by_region((H, W), (0, H), (8, 17)))
+    assert near_edge.depth_diff_n_pixels == H * 8
+    assert near_edge.depth_diff_p95_abs_mm == pytest.approx(5.0)
+    d = rep.to_dict()["tof"]
+    assert d["depth_diff_median_mm"] == pytest.approx(5.0)
+    assert d["flying_rule"]["near_threshold_m"] == 0.018
+    json.dumps(d, allow_nan=False)
+    # swapped, the difference changes sign and the shares swap
+    back = compare_images(sim, meas, None, grey_full_scale=255.0).tof
+    assert back.depth_diff_median_mm == pytest.approx(-5.0)
+    assert back.flying_share_simulated == tof.flying_share_measured
+    assert back.invalid_share_simulated == tof.invalid_share_measured
+
+
+def test_the_figures_are_over_the_mask_and_say_why_pixels_are_left_out():
+    amp = np.full((H, W), 100.0)
+    meas = frame(amp, step_with_mixed_column())
+    sim = frame(amp, step_with_mixed_column(-0.002))
+    # a mask on the background only: no flying pixel in it, 2 mm nearer
+    tof = tof_figures(meas, sim, mask_by_region((H, W), (0, H), (14, W)))
+    assert tof.mask_pixels == H * (W - 14)
+    assert tof.flying_share_measured == tof.flying_share_simulated == 0.0
+    assert tof.depth_diff_median_mm == pytest.approx(-2.0)
+    # a mask on the mixed column only: every pixel is flying in both, none left to compare
+    only = tof_figures(meas, sim, mask_by_region((H, W), (0, H), (12, 13)))
+    assert only.flying_share_measured == only.flying_share_simulated == 1.0
+    assert only.depth_diff_n_pixels == 0
+    assert only.depth_diff_median_mm is None and only.depth_diff_p95_abs_mm is None
+    assert "no pixel valid in both frames" in only.summary_lines()[0]
+    # the depth along the optical axis (0.9 x range in these frames) when asked
+    z = tof_figures(meas, sim, mask_by_region((H, W), (0, H), (14, W)), depth_source="z")
+    assert z.depth_diff_median_mm == pytest.approx(-1.8)
+    with pytest.raises(InvalidInputError, match="mask"):
+        tof_figures(meas, sim, np.zeros((H, W), bool))
+    with pytest.raises(InvalidInputError, match="depth_source"):
+        tof_figures(meas, sim, None, depth_source="x")
+
+
+@settings(max_examples=40, deadline=None)
+@given(offset_mm=st.floats(-500.0, 500.0), tilt=st.floats(-0.05, 0.05),
+       seed=st.integers(0, 2**16))
+def test_a_constant_offset_is_the_median_with_no_spread(offset_mm, tilt, seed):
+    gen = np.random.default_rng(seed)
+    xx = np.mgrid[0:H, 0:W][1]
+    rng = 1.5 + tilt * (xx - W / 2) / W + gen.normal(0.0, 0.003, (H, W))
+    amp = np.full((H, W), 100.0)
+    tof = tof_figures(frame(amp, rng), frame(amp, rng + offset_mm / 1e3), None)
+    assert tof.depth_diff_n_pixels == H * W
+    assert tof.depth_diff_median_mm == pytest.approx(offset_mm, abs=1e-6)
+    assert tof.depth_diff_mad_mm == pytest.approx(0.0, abs=1e-6)
+    assert tof.depth_diff_p95_abs_mm == pytest.approx(abs(offset_mm), abs=1e-6)
 
 
 # ------------------------------------------------------------------------------------------

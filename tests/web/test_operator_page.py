@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from service.export.plots import CAMPAIGN_PLOTS
 from tests.service.api.conftest import AUTH, problem
 from tests.web.conftest import DOC_SIZE, SIZES
 
@@ -75,12 +76,20 @@ def test_the_page_loads_on_the_simulated_rig_and_runs_a_manual_pose(server, page
     table = page.text("#pose-result .table5")
     for row in ("Grey Mean", "Depth SSIM", "Depth PSNR"):
         assert row in table, table
+    # the depth difference and the pixel shares come first, above Table 5
+    assert "median [mm]" in page.text("#pose-result .tof-depth")
+    assert "flying" in page.text("#pose-result .tof-pixels")
+    assert page.js("return document.querySelector('#pose-result .tof-depth')"
+                   ".compareDocumentPosition(document.querySelector('#pose-result .table5'))"
+                   " & Node.DOCUMENT_POSITION_FOLLOWING") != 0
+    assert "grey [DN], 1st-99th pct of valid pixels" in bars, bars
     # the panels are the pose the API stored
     pose_id = int(page.find("#pose-result .pose").get_attribute("data-pose-id"))
     stored = server.api.get(f"/api/v1/poses/{pose_id}").json()
     assert stored["turntable_deg"] == 20.0
+    # the grey shown is the pose's stretched panel, not the frame's stored (dark) grey.png
     assert page.find('#pose-result [data-panel="grey-measured"] img').get_attribute(
-        "src").endswith(f"/api/v1/frames/{stored['measured_frame_id']}/preview/grey.png")
+        "src").endswith(f"/api/v1/poses/{pose_id}/panels/grey-measured.png")
     page.js("window.scrollTo(0, document.querySelector('#pose-form').offsetTop - 60)")
     page.shot("pose", doc=True)
     page.assert_no_console_errors()
@@ -124,7 +133,7 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     page.wait(lambda: page.text("#cc-latest .pose-title") == "Pose 4: 30 deg, 1 sun",
               "the last pose's images")
     assert_images_keep_their_aspect_ratio(page, "#cc-latest .frame-image", 6)
-    assert_images_keep_their_aspect_ratio(page, "#cc-plots img", 4)
+    assert_images_keep_their_aspect_ratio(page, "#cc-plots img", len(CAMPAIGN_PLOTS))
     cid = server.api.get("/api/v1/campaigns").json()[0]["id"]
     status = server.api.get(f"/api/v1/campaigns/{cid}").json()
     assert status["state"] == "completed" and status["runs"] == 2
@@ -143,7 +152,7 @@ def test_a_campaign_from_the_form_runs_live_and_pauses_and_resumes(server, page)
     page.driver.get(links["report"])
     assert_images_keep_their_aspect_ratio(page, ".frame-image", 4 * 6)
     assert_images_keep_their_aspect_ratio(page, ".colour-bar", 4 * 6)
-    assert len(page.find_all(".plots svg")) == 4
+    assert len(page.find_all(".plots svg")) == len(CAMPAIGN_PLOTS)
     assert all(i.get_attribute("src").startswith("data:image/png;base64,")
                for i in page.find_all("img"))
     page.shot("report", doc=True)

@@ -21,7 +21,7 @@ from service.api.routes.poses import PoseId, require_pose
 from service.errors import GoneError, NotFoundError
 from service.export.panels import pose_panels
 from service.export.plots import CAMPAIGN_PLOTS, EXPLAINED_PLOTS
-from service.export.report import verdict_rows
+from service.export.report import ceiling_tof, verdict_rows
 from service.export.results_table import result_rows
 from service.lab.calibration import active_public, calibration_residuals
 from service.lab.campaigns import campaign_status
@@ -47,24 +47,21 @@ def page(request: Request, settings: SettingsDep) -> HTMLResponse:
 
 
 def panel_links(store, row) -> list[dict[str, Any]]:
-    """The pose's six panels as the ``panels`` macro takes them, served by the API (the grey
-    images are the frames' own grey.png previews)."""
+    """The pose's six panels as the ``panels`` macro takes them, served by the API
+    (``/api/v1/poses/{id}/panels/...``: the grey images stretched to their percentiles, not the
+    frames' stored grey.png, on which a dim scene is black)."""
     base = f"/api/v1/poses/{row.id}/panels"
-    previews = {"grey-measured": row.measured_frame_id, "grey-simulated": row.simulated_frame_id}
-    out = []
-    for p in pose_panels(store, row.measured_frame_id, row.simulated_frame_id):
-        frame = previews.get(p.name)
-        src = f"/api/v1/frames/{frame}/preview/grey.png" if frame else f"{base}/{p.name}.png"
-        out.append({"name": p.name, "caption": p.caption, "label": p.label, "src": src,
-                    "bar_src": f"{base}/{p.name}/colour-bar.png", "width": p.rgb.shape[1],
-                    "height": p.rgb.shape[0]})
-    return out
+    return [{"name": p.name, "caption": p.caption, "label": p.label,
+             "src": f"{base}/{p.name}.png", "bar_src": f"{base}/{p.name}/colour-bar.png",
+             "width": p.rgb.shape[1], "height": p.rgb.shape[0]}
+            for p in pose_panels(store, row.measured_frame_id, row.simulated_frame_id)]
 
 
 @router.get("/ui/poses/{pose_id}", response_class=HTMLResponse)
 def pose_fragment(request: Request, pose_id: PoseId, session: SessionDep,
                   store: StoreDep) -> HTMLResponse:
-    """A pose: its images with colour bars, its Table 5 rows and (object fit) its verdict."""
+    """A pose: its images with colour bars, its depth difference and pixel shares (first), its
+    Table 5 rows and (object fit) its verdict."""
     row = require_pose(session, pose_id)
     metrics = json.loads(row.metrics_json)
     try:
@@ -77,7 +74,8 @@ def pose_fragment(request: Request, pose_id: PoseId, session: SessionDep,
                                  "turntable_deg": row.turntable_deg, "metrics": metrics}])[0]
     return templates.TemplateResponse(request, "_pose_fragment.html", {
         "row": row, "panels": panels, "gap": gap, "header": TABLE_HEADER,
-        "table": metrics.get("table", []), "error": metrics.get("error"), "verdict": verdict})
+        "table": metrics.get("table", []), "error": metrics.get("error"), "verdict": verdict,
+        "tof": metrics.get("tof"), "ceiling_tof": ceiling_tof(metrics)})
 
 
 @router.get("/ui/campaigns", response_class=HTMLResponse)

@@ -10,6 +10,7 @@ import event_model
 import pytest
 from event_model import DocumentNames, schema_validators
 
+from service.export.plots import CAMPAIGN_PLOTS
 from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 pytestmark = pytest.mark.timeout(120)
@@ -33,6 +34,9 @@ def test_a_campaign_runs_to_completion_with_every_metric_stored(client):
         for ch in ("grey", "depth"):
             assert set(r["metrics"][ch]) >= {"mean_measured", "mean_simulated", "var_measured",
                                              "var_simulated", "mse", "ssim", "psnr_db"}
+        tof = r["metrics"]["tof"]  # the depth difference and pixel shares
+        assert tof["depth_diff_n_pixels"] > 0 and tof["depth_diff_mad_mm"] >= 0.0
+        assert 0.0 <= tof["invalid_share_measured"] <= 1.0
         assert client.get(f"/api/v1/frames/{r['measured_frame_id']}").status_code == 200
         assert client.get(f"/api/v1/frames/{r['simulated_frame_id']}").status_code == 200
     # repeats of a pose are different captures and different simulations
@@ -44,11 +48,18 @@ def test_a_campaign_runs_to_completion_with_every_metric_stored(client):
         client.get(f"/api/v1/campaigns/{cid}/results?format=csv").text)))
     assert len(table) == 6 and float(table[0]["depth_ssim"]) == pytest.approx(
         rows[0]["metrics"]["depth"]["ssim"])
+    assert list(table[0])[9] == "depth_diff_median_mm"  # the first metric column
+    assert float(table[0]["depth_diff_p95_abs_mm"]) == pytest.approx(
+        rows[0]["metrics"]["tof"]["depth_diff_p95_abs_mm"])
 
     html = client.get(f"/api/v1/campaigns/{cid}/report")
     assert html.headers["content-type"].startswith("text/html")
-    # four plots; per pose six images, each with its colour bar (all inline)
-    assert html.text.count("<svg") == 4 and html.text.count('class="frame-image"') == 5 * 6
+    # the plots; per pose its depth difference first, then six images, each with its colour
+    # bar (all inline)
+    assert html.text.count("<svg") == len(CAMPAIGN_PLOTS)
+    assert html.text.count('class="tof-depth"') == 5
+    assert html.text.index('class="tof-depth"') < html.text.index('class="frame-image"')
+    assert html.text.count('class="frame-image"') == 5 * 6
     assert html.text.count('class="colour-bar"') == 5 * 6
     assert html.text.count("data:image/png;base64,") == 5 * 6 * 2
 
@@ -79,6 +90,8 @@ def test_events_follow_a_campaign_live_and_documents_are_valid_bluesky(client):
     assert all(e["descriptor"] == descriptor["uid"] for e in events)
     assert stop["exit_status"] == "success" and stop["num_events"] == {"primary": 4}
     assert events[0]["data"]["turntable_deg"] == -60 and events[0]["data"]["depth_ssim"] > 0
+    assert descriptor["data_keys"]["depth_diff_median_mm"]["units"] == "mm"
+    assert events[0]["data"]["depth_diff_n_pixels"] > 0
     # the same documents every time (uids derived from the campaign)
     assert client.get(f"/api/v1/campaigns/{cid}/documents").json() == docs
     # and they replay through event-model's own run router (which pages the events)

@@ -161,7 +161,13 @@ def test_compare_cli_prints_table_5_and_writes_json(client, tmp_path):
         str(frames / pose["simulated_frame_id"]), "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert "PSNR" in res.output and "Chi-square" in res.output
+    # the depth difference and the pixel shares first, as the service stores them
+    assert res.output.index("depth sim - meas: median") < res.output.index("PSNR")
+    assert "flying pixels: measured" in res.output
     data = json.loads(out.read_text())
+    cli_tof, tof = data["metrics"]["tof"], pose["metrics"]["tof"]
+    assert cli_tof.pop("flying_rule") == tof.pop("flying_rule")
+    assert cli_tof == pytest.approx(tof)
     # the CLI's default mask (turntable objects) gives the service's numbers
     assert data["metrics"]["n_pixels"] == pose["metrics"]["n_pixels"]
     assert data["metrics"]["depth"]["ssim"] == pytest.approx(pose["metrics"]["depth"]["ssim"])
