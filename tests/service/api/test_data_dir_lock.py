@@ -3,29 +3,43 @@
 Before the lock, the second server's start-up marked the first one's running campaign
 ``interrupted`` and swept its frames in flight. Now it exits with code 2 naming the holder, and
 the first server's campaign runs on to completion with all its frames.
+
+The first server is a real process; it is frozen (SIGSTOP) with its poses in flight while the
+second one tries, so the attempt always meets a running campaign, however loaded the machine.
+The second one is ``toftwin serve`` run in this process (the command line's own entry): the
+lock is per open file and its holder another process, as between two servers.
 """
 
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
-from pathlib import Path
+import signal
 
 import pytest
 
+from service.store.data_lock import DataDirLock, read_holder
 from tests.service.api.conftest import AUTH, TOKEN
-from tests.service.api.test_crash_resume import free_port, server, wait_for
+from tests.service.api.test_crash_resume import (
+    ONE_WORKER_TWO_IN_FLIGHT,
+    free_port,
+    server,
+    wait_for,
+)
 
 pytestmark = pytest.mark.timeout(180)
 
-#: long enough that the campaign is still running while the second server tries to start
-POSES = [{"turntable_deg": a, "solar_suns": 1.0, "repeats": 1} for a in range(-60, 61, 8)]
+#: after the first pose, four to go: the campaign is still running when it is frozen (the
+#: freeze follows the first pose's report within milliseconds; a pose takes ~0.5 CPU seconds)
+POSES = [{"turntable_deg": a, "solar_suns": 1.0, "repeats": 1} for a in (-40, -20, 0, 20, 40)]
 
 
-def test_a_second_server_on_the_same_data_dir_is_refused(tmp_path):
+def test_a_second_server_on_the_same_data_dir_is_refused(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
     data, log = tmp_path / "data", tmp_path / "server.log"
-    with server(data, log) as (client, proc):
+    with server(data, log, **ONE_WORKER_TWO_IN_FLIGHT) as (client, proc):
         res = client.post("/api/v1/campaigns", headers=AUTH,
                           json={"name": "first", "poses": POSES, "seed": 3})
         cid = res.json()["id"]
@@ -33,21 +47,22 @@ def test_a_second_server_on_the_same_data_dir_is_refused(tmp_path):
         wait_for(client, cid, lambda s: s["poses_done"] >= 1)
 
         # the second one: no TOFTWIN_TOKEN, so it would write DATA_DIR/token if it got that far
-        env = {k: v for k, v in os.environ.items() if k != "TOFTWIN_TOKEN"}
-        second = subprocess.run(
-            [sys.executable, "-m", "service.cli", "serve", "--simulated",
-             "--port", str(free_port()), "--data-dir", str(data)],
-            env=env, capture_output=True, text=True, timeout=60, cwd=Path(__file__).parents[3],
-        )
-        assert second.returncode == 2, second.stderr
-        message = " ".join(second.stderr.split())
+        monkeypatch.delenv("TOFTWIN_TOKEN", raising=False)
+        os.killpg(proc.pid, signal.SIGSTOP)  # the first server and its worker, mid-campaign
+        try:
+            second = CliRunner().invoke(app, ["serve", "--simulated", "--port", str(free_port()),
+                                              "--data-dir", str(data)])
+        finally:
+            os.killpg(proc.pid, signal.SIGCONT)
+        assert second.exit_code == 2, second.output
+        message = " ".join(second.output.split())
         assert f"error: data directory {data} is in use by toftwin serve (pid {proc.pid} " \
                in message, message
         assert "stop it or use --data-dir" in message
         assert not (data / "token").exists()
 
         status = client.get(f"/api/v1/campaigns/{cid}").json()
-        assert status["state"] in ("running", "completed"), status
+        assert status["state"] == "running" and status["poses_done"] < len(POSES), status
         status = wait_for(client, cid, lambda s: s["state"] != "running")
         assert status["state"] == "completed", status
         rows = client.get(f"/api/v1/campaigns/{cid}/results").json()
@@ -56,7 +71,13 @@ def test_a_second_server_on_the_same_data_dir_is_refused(tmp_path):
         assert {p.name for p in (data / "frames").iterdir()} == named
         campaigns = client.get("/api/v1/campaigns").json()
         assert [c["state"] for c in campaigns] == ["completed"]
+
+        proc.send_signal(signal.SIGTERM)  # a graceful stop (uvicorn re-raises the signal)
+        assert proc.wait(timeout=30) in (0, -signal.SIGTERM)
     assert "interrupted" not in log.read_text()
+    # and the stopped server let the directory go
+    assert read_holder(data) is None
+    DataDirLock.check(data)
 
 
 def test_serve_maps_a_refusal_at_start_up_to_exit_code_2(tmp_path, monkeypatch):
