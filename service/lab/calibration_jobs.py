@@ -74,8 +74,9 @@ class _Run:
     stop: threading.Event = field(default_factory=threading.Event)
     stop_to: str = "cancelled"
     stop_error: str | None = None
-    #: set while the job waits for the operator (real rig)
-    instruction: str | None = None
+    #: (instruction, message) while the job waits for the operator (real rig): one value, so
+    #: that a reader gets the instruction and the message that goes with it together
+    waiting: tuple[str, str] | None = None
     mounted: threading.Event = field(default_factory=threading.Event)
 
 
@@ -88,15 +89,18 @@ class _WaitingOperator:
     def mount(self, objects: Sequence | None, instruction: str) -> None:
         run = self.run
         run.mounted.clear()
-        self.jobs._note(run.job_id, f"waiting for the operator: {instruction}; then POST "
-                        f"/api/v1/calibrations/{run.job_id}/continue")
-        run.instruction = instruction  # after the message: a reader sees both or neither
+        message = (f"waiting for the operator: {instruction}; then POST "
+                   f"/api/v1/calibrations/{run.job_id}/continue")
+        self.jobs._note(run.job_id, message)
+        # Set after the row's message, and read with it (:meth:`CalibrationJobs.live`): a
+        # status that shows the instruction shows its message too, whenever the row was read.
+        run.waiting = (instruction, message)
         try:
             while not run.mounted.wait(0.2):
                 if run.stop.is_set():
                     raise _CancelledError()
         finally:
-            run.instruction = None
+            run.waiting = None
 
 
 class CalibrationJobs:
@@ -144,10 +148,13 @@ class CalibrationJobs:
         return self.root / job_id
 
     def live(self, job_id: str) -> dict[str, Any] | None:
+        """What only the running job knows: the operator's instruction and its message (both
+        None unless it waits for the operator)."""
         run = self._run
         if run is None or run.job_id != job_id:
             return None
-        return {"operator_instruction": run.instruction}
+        instruction, message = run.waiting or (None, None)
+        return {"operator_instruction": instruction, "message": message}
 
     def wait(self, timeout_s: float | None = None) -> None:
         """Block until the running job's thread ends (tests)."""
@@ -227,7 +234,7 @@ class CalibrationJobs:
     def confirm_mounted(self, job_id: str) -> None:
         """The operator has mounted what the job asked for (409 if it asks for nothing)."""
         run = self._run
-        if run is None or run.job_id != job_id or run.instruction is None:
+        if run is None or run.job_id != job_id or run.waiting is None:
             with self.sessions() as s:
                 queries.require_calibration_job(s, job_id)
             raise ConflictError(f"calibration job {job_id} is not waiting for the operator")
@@ -374,8 +381,10 @@ def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
         "activate": bool(row.activate), "steps_done": row.steps_done,
         "steps_total": row.steps_total,
         "progress": 1.0 if row.state == "done" else min(row.steps_done / total, 1.0),
-        "message": row.message, "error": row.error, "calibration_hash": row.calibration_hash,
-        "activated": bool(row.activated), "files": files,
+        # the instruction's own message: the row may have been read before it was written
+        "message": (live or {}).get("message") or row.message, "error": row.error,
+        "calibration_hash": row.calibration_hash, "activated": bool(row.activated),
+        "files": files,
         "operator_instruction": None if live is None else live.get("operator_instruction"),
         "created_at": row.created_at, "started_at": row.started_at,
         "updated_at": row.updated_at, "finished_at": row.finished_at, "links": links,

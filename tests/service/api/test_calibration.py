@@ -21,6 +21,7 @@ import yaml
 from fastapi.testclient import TestClient
 
 from service.api.app import create_app
+from service.lab.calibration_jobs import job_public
 from service.settings import EXAMPLES_DIR
 from service.store import queries
 from sim_core.twin_file import load_calibration, parse_calibration, twin_hash
@@ -371,6 +372,13 @@ def test_on_a_real_rig_the_job_asks_the_operator_and_the_emergency_stop_cancels_
         time.sleep(0.05)
     assert "fixture 'tilt+30@200mm'" in status["operator_instruction"]
     assert f"/api/v1/calibrations/{jid}/continue" in status["message"]
+    # A status read whose row predates the message (a read racing the job, as on a loaded
+    # machine) still gives the instruction with its own message.
+    jobs = client.app.state.lab.calibrations
+    with client.app.state.lab.session() as s:
+        stale = queries.require_calibration_job(s, jid)
+    stale.message = "starting"
+    assert job_public(stale, jobs.live(jid))["message"] == status["message"]
     assert status["state"] == "running" and status["steps_done"] == 0
     res = client.post(f"/api/v1/calibrations/{jid}/continue", headers=AUTH)
     assert res.status_code == 200, res.text
