@@ -48,12 +48,13 @@ def run(client) -> tuple[list[dict], dict[str, np.ndarray]]:
 
 
 def test_a_campaign_on_dask_equals_the_local_executor(make_client, tmp_path, dask_address):
+    # both services first: the local pool's worker and the Dask worker load the renderer at
+    # the same time (a service starts its workers' warm-up when it opens)
     local = make_client(tmp_path / "local", executor="local", workers=1)
-    assert local.get("/api/v1/health").json()["executor"] == "local"
-    rows_local, arrays_local = run(local)
-
     remote = make_client(tmp_path / "dask", executor=dask_address)
+    assert local.get("/api/v1/health").json()["executor"] == "local"
     assert remote.get("/api/v1/health").json()["executor"] == "dask"
+    rows_local, arrays_local = run(local)
     rows_dask, arrays_dask = run(remote)
 
     assert len(rows_local) == len(rows_dask) == 3

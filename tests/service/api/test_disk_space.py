@@ -60,7 +60,8 @@ def test_a_database_that_fills_up_mid_campaign_pauses_it_and_resume_finishes_it(
         if limit["pages"] is not None:
             dbapi_conn.execute(f"PRAGMA max_page_count = {limit['pages']}")
 
-    poses = [{"turntable_deg": a} for a in range(-40, 60, 10)]
+    # capped after the first result, with five still to store: the campaign cannot finish
+    poses = [{"turntable_deg": a} for a in range(-50, 60, 20)]
     cid = start_campaign(client, poses)
     wait_campaign(client, cid, lambda s: s["poses_done"] >= 1)
     with engine.connect() as conn:
