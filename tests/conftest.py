@@ -1,0 +1,22 @@
+"""Session set-up shared by every test directory."""
+
+from __future__ import annotations
+
+import pytest
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile the renderer's kernels (or load them from numba's cache) before the first test.
+
+    In a fresh clone numba compiles them on first use, tens of seconds that would otherwise land
+    on whichever test renders first; here they are a cost of the session, once, and every test's
+    duration is its own. Under pytest-xdist each worker does it (the controller runs no test).
+    """
+    config = session.config
+    if config.option.collectonly:
+        return
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        return
+    from service.compute.jobs import warm_up
+
+    warm_up()
