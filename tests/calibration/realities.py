@@ -5,6 +5,7 @@ Code under test never sees these: it gets frames from the simulated lab built wi
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 
 import numpy as np
@@ -18,6 +19,38 @@ from sim_core.twin_file import CalibrationFile, RealityFile, TwinParameters, par
 PRESET = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
 #: range of a radian of phase at 60.24 MHz [m]
 M_PER_RAD = SPEED_OF_LIGHT_M_S / (4.0 * np.pi * 60.24e6)
+
+
+#: the environment variable that widens (or narrows) a round trip's set of realities
+SEEDS_VARIABLE = "TOFTWIN_REALITY_SEEDS"
+
+
+def reality_seeds(default: Sequence[int], variable: str = SEEDS_VARIABLE) -> list[int]:
+    """The seeds a round trip draws its realities from: ``default`` (what CI runs), or the
+    environment's ``TOFTWIN_REALITY_SEEDS`` as a list of seeds and ranges (``151-160,171``).
+
+    CI's slow suite has a time budget: it runs a few realities per round trip, every run the
+    same; a wider sweep is one variable away, e.g. ``TOFTWIN_REALITY_SEEDS=151-170 pytest -m
+    slow tests/service/api/test_object_fit_realities.py``.
+
+    >>> reality_seeds([1, 2], variable="TOFTWIN_NO_SUCH_VARIABLE")
+    [1, 2]
+    """
+    text = os.environ.get(variable, "").strip()
+    if not text:
+        return list(default)
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
+            first, last = int(lo), int(hi or lo)
+        except ValueError:
+            raise ValueError(
+                f"{variable}: {part!r} is not a seed or a range like 151-160") from None
+        if not 0 <= first <= last or last - first > 10_000:
+            raise ValueError(f"{variable}: {part!r} is not an increasing range of seeds >= 0")
+        seeds.extend(range(first, last + 1))
+    return seeds
 
 
 #: issue 14's object realities: mount offsets up to this per axis [m] and [deg], scales in range

@@ -2,7 +2,7 @@
 
 Issue 13's round trip: realities drawn at random in plausible ranges; the calibration sees only
 the frames. Each takes about 5 minutes (138 board views and their synthesis, noise stacks, solar
-levels).
+levels): CI runs two (``SEEDS``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from sim_core.camera import F_60_24_MHZ
 from sim_core.depth_errors import DepthErrorModel, range_to_phase_rad
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import load_scene_spec
-from tests.calibration.realities import random_reality
+from tests.calibration.realities import random_reality, reality_seeds
 from tests.sim_core.scenes import EXAMPLES
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
@@ -76,7 +76,14 @@ def _depth_model_rms_mm(result, reality) -> float:
 SHARED = pytest.mark.xdist_group("calibration-101")
 
 
-@pytest.mark.parametrize("seed", [pytest.param(101, marks=SHARED), 202, 303, 404, 505])
+#: CI runs two realities within its time budget (5-8 min each on two cores; issue 13 was shown
+#: on 101-505; the service's and the command's full runs calibrate a third):
+#: TOFTWIN_REALITY_SEEDS=101,202,303,404,505 runs all five, any other seeds too
+SEEDS = [pytest.param(s, marks=SHARED) if s == CAMPAIGN_SEED else s
+         for s in reality_seeds([101, 202])]
+
+
+@pytest.mark.parametrize("seed", SEEDS)
 def test_round_trip_recovers_a_random_reality(seed):
     reality, result = _calibrated_reality(seed)
     cal, rc = result.calibration.camera, reality.camera
@@ -125,15 +132,16 @@ def test_round_trip_recovers_a_random_reality(seed):
 
 @SHARED
 def test_the_calibrated_twin_lands_near_the_ceiling_on_a_satellite_campaign():
-    """Issue 13's end to end: nominal twin, calibrated twin, ceiling on 12 satellite poses."""
+    """Issue 13's end to end: nominal twin, calibrated twin, ceiling on 8 satellite poses all
+    round (every 45 deg)."""
     reality, result = _calibrated_reality(CAMPAIGN_SEED)  # a drawn reality has no object diffs
     world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="path", spp=32,
                                                           max_bounces=2), reality=reality)
     with Rig.simulated(frame_source=world, seed=7) as rig:
         res = compare_twins(rig, SPEC, EXAMPLES, result.calibration,
-                            [-165.0 + 30.0 * i for i in range(12)],
+                            [-165.0 + 45.0 * i for i in range(8)],
                             settings=RenderSettings(integrator="path", spp=32, max_bounces=2))
     print(res.to_dict())
-    assert res.poses == 12
+    assert res.poses == 8
     assert res.calibrated_over_ceiling <= 1.25, res.to_dict()
     assert res.nominal["depth_rmse_mm"] > res.calibrated["depth_rmse_mm"]

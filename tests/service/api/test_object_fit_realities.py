@@ -1,8 +1,12 @@
 """The object fit recovers a hidden object reality, and after it a campaign is at the noise
 ceiling (issue 14's first must-show).
 
-Five random realities of the simulated lab (the mount up to 10 mm and 2 deg off, every mounted
-object's reflectance 0.8-1.2, the camera and rig as drawn for issue 13); the rig counts as
+Random realities of the simulated lab (the mount up to 10 mm and 2 deg off, every mounted
+object's reflectance 0.8-1.2, the camera and rig as drawn for issue 13; CI runs the hardest of
+the five the issue was shown on, 154, about 9 min on two cores, within its time budget (the CLI's
+fit and the default lab's campaign, tests/service/cli/test_fit_object.py and test_object_fit.py,
+fit two other realities); ``TOFTWIN_REALITY_SEEDS=151-155`` runs all five, any other seeds too);
+the rig counts as
 calibrated (:func:`tests.calibration.realities.perfect_calibration` is activated: the reality's
 camera and rig keys, never its object keys). A campaign with an object fit (its first five poses'
 frames) runs five poses:
@@ -26,7 +30,12 @@ import pytest
 import yaml
 
 from sim_core.scene_spec import ObjectPose, load_scene_spec
-from tests.calibration.realities import perfect_calibration, pose_errors, random_reality
+from tests.calibration.realities import (
+    perfect_calibration,
+    pose_errors,
+    random_reality,
+    reality_seeds,
+)
 from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
 from tests.sim_core.scenes import EXAMPLES
 
@@ -40,7 +49,7 @@ POSITION_M, ROTATION_DEG, SCALE_REL = 0.001, 0.2, 0.03
 DEPTH_RMSE_RATIO, GREY_PSNR_DB = 1.25, 1.0
 
 
-@pytest.mark.parametrize("seed", [151, 152, 153, 154, 155])
+@pytest.mark.parametrize("seed", reality_seeds([154]))
 def test_after_the_fit_the_campaign_is_at_the_noise_ceiling(make_client, tmp_path, seed):
     reality = random_reality(seed, nominal_power_w=SPEC.illumination.power_w,
                              object_twin_names=MOUNTED)

@@ -35,7 +35,7 @@ def test_fit_object_on_the_simulated_lab_writes_the_object_file(tmp_path):
     out = tmp_path / "fit"
     res = CliRunner().invoke(app, [
         "fit-object", "--simulated", "--reality", str(tmp_path / "reality.yaml"),
-        "--calibration", str(tmp_path / "cal.yaml"), "--angles", "0,30,60", "--frames", "16",
+        "--calibration", str(tmp_path / "cal.yaml"), "--angles", "0,45", "--frames", "8",
         "--out", str(out)])
     assert res.exit_code == 0, res.output
     obj = load_object_twin(out / "object.yaml")
