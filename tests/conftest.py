@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable, Iterator
+
 import pytest
 
 
@@ -20,3 +23,12 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     from service.compute.jobs import warm_up
 
     warm_up()
+
+
+@pytest.fixture
+def umask() -> Iterator[Callable[[int], int]]:
+    """Set the process's umask for one test (``umask(0o077)``); restored afterwards."""
+    old = os.umask(0o022)
+    os.umask(old)
+    yield os.umask
+    os.umask(old)

@@ -15,15 +15,6 @@ from sim_core.files import (
 )
 
 
-@pytest.fixture
-def umask():
-    """Set the process's umask for one test and restore it afterwards."""
-    old = os.umask(0o022)
-    os.umask(old)
-    yield lambda mask: os.umask(mask)
-    os.umask(old)
-
-
 def _mode(path) -> int:
     return stat.S_IMODE(os.stat(path).st_mode)
 

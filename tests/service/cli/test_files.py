@@ -4,7 +4,6 @@ and a refused ``serve`` writes nothing."""
 
 from __future__ import annotations
 
-import os
 import stat
 from pathlib import Path
 
@@ -17,13 +16,6 @@ from service.cli.serve import session_token
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 runner = CliRunner()
 
-
-@pytest.fixture
-def umask():
-    old = os.umask(0o022)
-    os.umask(old)
-    yield lambda mask: os.umask(mask)
-    os.umask(old)
 
 
 def _mode(path: Path) -> int:
