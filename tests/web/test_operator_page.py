@@ -240,12 +240,18 @@ def test_a_bad_form_value_shows_the_apis_message_next_to_the_field(server, page)
 
 
 def test_reading_needs_no_token_and_commands_say_they_need_it(server, page_at):
+    # a campaign of its own (created, not started), whichever tests ran on this server before
+    created = server.post("/api/v1/campaigns", {"name": "read without a token", "poses": [
+        {"turntable_deg": 0, "solar_suns": 1}]})
+    assert created.status_code == 201, created.text
+    cid = created.json()["id"]
     page = page_at(server, DOC_SIZE)
     page.load("rig")
     page.js("sessionStorage.clear()")
     page.load("campaigns")
     assert page.text("#token-state") == "read-only"
-    page.wait(lambda: page.find("#campaign-list table"), "the campaign list")
+    page.wait(lambda: page.find(f'#campaign-list tr[data-campaign-id="{cid}"]'),
+              "the campaign in the list")
     page.load("rig")
     page.fill("#move-angle", "10")
     page.click("#move-btn")

@@ -3,10 +3,9 @@
 A ``distributed.LocalCluster`` of one worker process on loopback stands in for the cluster;
 the service reaches it only through ``--executor dask://HOST:PORT``.
 
-Dask's ``distributed`` is the ``dask`` extra, not a dependency: this module runs where it is
-installed (``pip install -e ".[dev,dask]"``, as CI's main venv is) and is skipped where it is
-not (the fast suite must pass without it; tests/service/compute/test_dask_extra.py checks the
-refusal there).
+Dask's ``distributed`` is the ``dask`` extra, not a dependency of the service; the ``dev`` extra
+includes it, so this module runs in every test venv (tests/service/compute/test_dask_extra.py
+checks the refusal where it is missing).
 """
 
 from __future__ import annotations
@@ -17,8 +16,6 @@ import numpy as np
 import pytest
 
 from tests.service.api.conftest import start_campaign, wait_campaign
-
-pytest.importorskip("distributed", reason="Dask's distributed (the dask extra) is not installed")
 
 pytestmark = pytest.mark.timeout(150)
 
