@@ -3,9 +3,10 @@
 A ``distributed.LocalCluster`` of one worker process on loopback stands in for the cluster;
 the service reaches it only through ``--executor dask://HOST:PORT``.
 
-Dask's ``distributed`` is the ``dask`` extra, not a dependency of the service; the ``dev`` extra
-includes it, so this module runs in every test venv (tests/service/compute/test_dask_extra.py
-checks the refusal where it is missing).
+Dask's ``distributed`` is the ``dask`` extra, not a dependency of the service. These tests are
+marked ``dask``: the README's test command installs the extra and runs them; a venv without it
+(CI's floors venv) deselects them with ``-m 'not slow and not dask'``, and
+tests/service/compute/test_dask_extra.py checks the service's refusal there.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import pytest
 
 from tests.service.api.conftest import start_campaign, wait_campaign
 
-pytestmark = pytest.mark.timeout(150)
+pytestmark = [pytest.mark.dask, pytest.mark.timeout(150)]
 
 POSES = [{"turntable_deg": -30, "repeats": 2}, {"turntable_deg": 20, "solar_suns": 0.9}]
 

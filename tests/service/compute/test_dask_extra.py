@@ -76,8 +76,8 @@ def test_bench_campaign_dask_without_distributed_exits_2_before_any_run(tmp_path
     assert "local executor" not in res.stdout  # refused before the first configuration
 
 
+@pytest.mark.dask
 def test_with_distributed_installed_a_dask_executor_is_a_scheduler_address():
-    """Where the extra is installed (every test venv: ``dev`` includes it) the same value is
-    accepted."""
+    """Where the extra is installed (the README's test venv) the same value is accepted."""
     s = Settings(token=TOKEN, executor="dask://10.0.0.5:8786")
     assert s.dask_address == "tcp://10.0.0.5:8786"
