@@ -13,6 +13,9 @@ Every error is an RFC 9457 problem (:mod:`service.api.problems`): invalid input
 allowed range; device faults (:class:`DeviceError`) 503 with the device's message;
 :mod:`service.errors` their own codes; a request body over ``max_body_bytes`` 413; an unexpected
 exception 500 without its text.
+
+Every response carries the security headers of :mod:`service.api.security_headers`
+(Content-Security-Policy, ``nosniff``, no framing, no referrer).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from service.api.routes import (
     simulate,
 )
 from service.api.schemas import Health
+from service.api.security_headers import SecurityHeaders
 from service.lab.lab import open_lab
 from service.lab.scenes import bundled_scenes
 from service.settings import Settings
@@ -85,6 +89,7 @@ def create_app(settings: Settings) -> FastAPI:
     )
     app.state.stream_slots = StreamSlots(settings.sse_max_streams)
     problems.install(app, settings.max_body_bytes)
+    app.add_middleware(SecurityHeaders)  # outermost: every answer, a 413 too
 
     api = APIRouter(prefix=API_PREFIX)
 

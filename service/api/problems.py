@@ -40,6 +40,7 @@ from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from drivers.errors import DeviceError
+from service.api.security_headers import security_headers
 from service.errors import ServiceError
 from sim_core.errors import InvalidInputError
 from sim_core.json_safe import json_safe
@@ -228,12 +229,13 @@ async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:
 
 async def _server_error(request: Request, exc: Exception) -> JSONResponse:
     # Never the exception's text: it may hold server paths or data. Starlette re-raises the
-    # exception after this answer, so that the server logs its traceback.
+    # exception after this answer, so that the server logs its traceback. Answered outside the
+    # app's middleware: the security headers are added here.
     return problem_response(
         PROBLEM_TYPES["internal-error"], 500,
         f"the service failed on an unexpected error while answering {request.method} "
         f"{request.url.path}; its log has the details. Nothing is known to have changed, "
-        "but check before retrying a call that moves hardware.")
+        "but check before retrying a call that moves hardware.", headers=security_headers())
 
 
 # -- the body limit ----------------------------------------------------------------------------

@@ -57,6 +57,8 @@ from sim_core.twin_file import load_calibration, twin_hash
 _log = logging.getLogger(__name__)
 
 KIND = "calibration job"
+#: what a done job wrote, beside the report's plots (``GET /calibrations/{id}/files/{name}``)
+OUTPUT_FILES = ("calibration.yaml", "report.json", "report.html")
 _PARTIAL = ".partial-"
 #: what a job interrupted by the service's end says
 INTERRUPTED = ("the service stopped while the calibration ran; a calibration cannot be resumed: "
@@ -275,10 +277,7 @@ class CalibrationJobs:
         if row.state != "done":
             raise ConflictError(f"calibration job {job_id} is '{row.state}'; only a 'done' job "
                                 "has a calibration to activate")
-        path = Path(row.out_dir) / "calibration.yaml"
-        if not path.is_file():
-            raise GoneError(f"calibration job {job_id}: {path} is gone from the data directory")
-        cal = load_calibration(path)
+        cal = load_calibration(_output_file(row, "calibration.yaml"))
         out = activate(self.sessions, cal, f"calibration job {job_id}")
         with self.sessions() as s:
             queries.update_calibration_job(s, job_id, activated=True)
@@ -367,10 +366,9 @@ def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
     import json
 
     base = f"/api/v1/calibrations/{row.id}"
-    out = Path(row.out_dir)
     files = {}
-    if row.state == "done":
-        files = {n: str(out / n) for n in ("calibration.yaml", "report.json", "report.html")}
+    if row.state == "done":  # their URLs: where the server keeps them is its own business
+        files = {n: f"{base}/files/{n}" for n in OUTPUT_FILES}
     links = {"self": base, "events": f"{base}/events"}
     if row.state == "done":
         links |= {"activate": f"{base}/activate", "report": f"{base}/files/report.html",
@@ -399,18 +397,35 @@ def job_status(sessions: sessionmaker, jobs: CalibrationJobs, job_id: str) -> di
 
 
 def job_file(sessions: sessionmaker, job_id: str, name: str) -> Path:
-    """One output file of a done job (404 for another name, 410 when it is gone)."""
+    """One output file of a done job (409 before it is done; see :func:`_output_file`)."""
     with sessions() as s:
         row = queries.require_calibration_job(s, job_id)
     if row.state != "done":
         raise ConflictError(f"calibration job {job_id} is '{row.state}'; its files exist once "
                             "it is 'done'")
-    out = Path(row.out_dir)
-    if not out.is_dir():
-        raise GoneError(f"calibration job {job_id}: its folder {out} is gone from the data "
-                        "directory")
-    path = out / name
-    if not path.is_file():
-        raise NotFoundError(f"calibration job {job_id} has no file {name}")
-    return path
+    return _output_file(row, name)
 
+
+def _output_file(row: Any, name: str) -> Path:
+    """The file ``name`` in a job's output folder: 410 when the folder or one of the
+    :data:`OUTPUT_FILES` (a done job has them all) is gone, 404 for another file it does not
+    have, and 404 for a symbolic link (the folder's or the file's): a link could lead anywhere
+    on the server, so none is followed. Messages name the job and the file, never the
+    server's path."""
+    out = Path(row.out_dir)
+    if out.is_symlink():
+        raise NotFoundError(f"calibration job {row.id}: its folder in the data directory is a "
+                            "link, not the folder the job wrote; its files are not served")
+    if not out.is_dir():
+        raise GoneError(f"calibration job {row.id}: its folder ({out.parent.name}/{out.name}) "
+                        "is gone from the data directory")
+    path = out / name
+    if path.is_symlink():
+        raise NotFoundError(f"calibration job {row.id}: {name} is a link, not a file the job "
+                            "wrote; it is not served")
+    if not path.is_file():
+        if name in OUTPUT_FILES:
+            raise GoneError(f"calibration job {row.id}: {name} is gone from its folder in the "
+                            "data directory")
+        raise NotFoundError(f"calibration job {row.id} has no file {name}")
+    return path

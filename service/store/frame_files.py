@@ -51,12 +51,13 @@ class FrameStore:
         return self.root / frame_id
 
     def file(self, frame_id: str, name: str) -> Path:
-        """The path of one of a frame's files; 410 naming the frame if it is not on disk."""
+        """The path of one of a frame's files; 410 naming the frame and the file (relative to
+        the data directory: never the server's path) if it is not on disk."""
         path = self.path(frame_id) / name
         if not path.is_file():
             where = "the frame's folder is gone" if not path.parent.is_dir() else f"{name} is gone"
-            raise GoneError(f"frame {frame_id}: {where} from the data directory ({path}); "
-                            "its database row remains")
+            raise GoneError(f"frame {frame_id}: {where} from the data directory "
+                            f"({self.root.name}/{frame_id}/{name}); its database row remains")
         return path
 
     def exists(self, frame_id: str) -> bool:

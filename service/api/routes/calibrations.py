@@ -22,6 +22,7 @@ from service.api.deps import (
     errors,
 )
 from service.api.schemas import CalibrationJobPublic, CalibrationPublic
+from service.api.security_headers import self_contained_document
 from service.lab.calibration_jobs import job_file, job_public, job_status
 from service.lab.requests import CalibrationCreate
 from service.store import queries
@@ -89,7 +90,7 @@ def activate_calibration_job(job_id: JobId, calibrations: CalibrationsDep, _: To
     return calibrations.activate(job_id)
 
 @router.get("/{job_id}/files/{name}", response_class=FileResponse,
-            responses=errors(404, 409, 410))
+            responses=errors(404, 409, 410), dependencies=[Depends(self_contained_document)])
 def get_calibration_job_file(job_id: JobId, name: FileName, sessions: SessionsDep) -> FileResponse:
     """An output file of a ``done`` job: ``calibration.yaml``, ``report.json``,
     ``report.html`` (its plots load from beside it)."""

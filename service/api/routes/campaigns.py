@@ -26,6 +26,7 @@ from service.api.deps import (
     errors,
 )
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
+from service.api.security_headers import self_contained_document
 from service.export.bluesky import iter_campaign_documents
 from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
@@ -192,7 +193,8 @@ def list_campaign_results(
     return rows
 
 
-@router.get("/{campaign_id}/report", response_class=HTMLResponse, responses=errors(404))
+@router.get("/{campaign_id}/report", response_class=HTMLResponse, responses=errors(404),
+            dependencies=[Depends(self_contained_document)])
 def get_campaign_report(
     campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep,
 ) -> HTMLResponse:
@@ -201,7 +203,8 @@ def get_campaign_report(
 
 
 @router.get("/{campaign_id}/plots/{name}.svg", response_class=Response, responses={
-    200: {"content": {"image/svg+xml": {}}, "description": "An SVG plot"}, **errors(404)})
+    200: {"content": {"image/svg+xml": {}}, "description": "An SVG plot"}, **errors(404)},
+    dependencies=[Depends(self_contained_document)])
 def get_campaign_plot(
     campaign_id: CampaignId,
     name: Annotated[Literal[tuple(PLOTS)], Path(description="Which plot.")],  # type: ignore[valid-type]

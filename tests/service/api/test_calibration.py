@@ -257,8 +257,8 @@ def test_a_short_calibration_job_runs_to_done_with_progress_and_can_be_activated
 
     done = client.get(f"/api/v1/calibrations/{jid}").json()
     assert done["progress"] == 1.0 and done["error"] is None and done["activated"] is False
-    out = Path(done["files"]["calibration.yaml"]).parent
-    assert out == tmp_path / "data" / "calibrations" / jid
+    assert done["files"]["calibration.yaml"] == f"/api/v1/calibrations/{jid}/files/calibration.yaml"
+    out = tmp_path / "data" / "calibrations" / jid
     assert {"calibration.yaml", "report.json", "report.html"} <= {p.name for p in out.iterdir()}
     cal = load_calibration(out / "calibration.yaml")
     assert twin_hash(cal) == done["calibration_hash"]
