@@ -82,6 +82,9 @@ PROBLEM_TYPES: dict[str, ProblemType] = {t.name: t for t in (
                 "that does not allow the call"),
     ProblemType("gone", 410, "Gone",
                 "the resource is known but its files are gone from the data directory"),
+    ProblemType("damaged-file", 410, "Damaged file",
+                "the resource is known but a file of it cannot be read (truncated or corrupt): "
+                "`detail` names the frame and the file inside the data directory"),
     ProblemType("content-too-large", 413, "Content too large",
                 "the request body is larger than `TOFTWIN_MAX_BODY_BYTES`"),
     ProblemType("device-fault", 503, "Device fault",
