@@ -85,12 +85,13 @@ _ADVICE = ("delete old campaigns (DELETE /api/v1/campaigns/{id}) or frames "
            "(DELETE /api/v1/frames/{id}), or free space otherwise")
 
 
-def low_space_message(free: int, min_bytes: int, *, then: str = ", then resume") -> str:
+def low_space_message(free: int, min_bytes: int | None, *, then: str = ", then resume") -> str:
     """What an operator reads when the disk is (nearly) full, and what to do about it.
 
     Below the floor it names both; at or above it (a write found the disk full: the floor is 0,
-    or the write was larger than what was left) it says so. No server path: the data
-    directory is the one the operator configured.
+    or the write was larger than what was left) it says so; ``min_bytes`` None: the floor is
+    not the point (a delete). No server path: the data directory is the one the operator
+    configured.
 
     >>> print(low_space_message(12 * 1024, 10**9).split(";")[0])
     disk space: 12.0 KiB free on the data directory's disk, below the 953.7 MiB kept free
@@ -99,7 +100,9 @@ def low_space_message(free: int, min_bytes: int, *, then: str = ", then resume")
     disk full: 0 B free on the data directory's disk (no space is kept free:
     TOFTWIN_MIN_FREE_BYTES=0, so writes go on until the disk is full)
     """
-    if free < min_bytes:
+    if min_bytes is None:
+        state = f"disk full: {format_bytes(free)} free on the data directory's disk"
+    elif free < min_bytes:
         state = (f"disk space: {format_bytes(free)} free on the data directory's disk, below "
                  f"the {format_bytes(min_bytes)} kept free (TOFTWIN_MIN_FREE_BYTES)")
     elif min_bytes == 0:
@@ -114,10 +117,11 @@ def low_space_message(free: int, min_bytes: int, *, then: str = ", then resume")
 
 
 @contextlib.contextmanager
-def writing(what: str, path: str | Path, min_bytes: int) -> Iterator[None]:
+def writing(what: str, path: str | Path, min_bytes: int | None = None) -> Iterator[None]:
     """Turn a disk-full error inside the block into a 507 naming ``what`` was being written.
 
     The caller removes what it had written (frame files; SQLite rolls its transaction back).
+    ``path``: where the data is (for the free space), ``min_bytes``: the floor kept free.
     """
     try:
         yield
@@ -126,9 +130,13 @@ def writing(what: str, path: str | Path, min_bytes: int) -> Iterator[None]:
     except Exception as exc:
         if not is_disk_full(exc):
             raise
-        raise InsufficientStorageError(
-            f"the disk is full: writing {what} failed, nothing of it was kept; "
-            + low_space_message(_free_or_zero(path), min_bytes, then="")) from exc
+        raise InsufficientStorageError(disk_full_detail(what, path, min_bytes)) from exc
+
+
+def disk_full_detail(what: str, path: str | Path, min_bytes: int | None = None) -> str:
+    """The 507's detail when writing ``what`` found the disk full."""
+    return (f"the disk is full: writing {what} failed, nothing of it was kept; "
+            + low_space_message(_free_or_zero(path), min_bytes, then=""))
 
 
 def _free_or_zero(path: str | Path) -> int:

@@ -18,6 +18,7 @@ place inside the data directory (``frames/<id>/raw.npz``, never the server's abs
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -26,7 +27,7 @@ import struct
 import uuid
 import zipfile
 import zlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -209,6 +210,16 @@ class FrameStore:
 
         self._publish(frame_id, write)
         return frame_id, out["image"], out["full_scale"]
+
+    @contextlib.contextmanager
+    def room_to_delete(self) -> Iterator[None]:
+        """The block (a delete) runs with the disk reserve given back (if one is kept); it is
+        made again afterwards, room permitting (:class:`SpaceReserve`)."""
+        if self.reserve is None:
+            yield
+            return
+        with self.reserve.released():
+            yield
 
     def delete(self, frame_ids: Iterable[str]) -> None:
         """Remove frames (a deleted campaign's or frame's; those of a result that could not be

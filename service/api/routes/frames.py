@@ -39,7 +39,7 @@ def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> di
     return frame_public(store, _row(session, frame_id))
 
 
-@router.delete("/{frame_id}", status_code=204, responses=errors(401, 404, 409))
+@router.delete("/{frame_id}", status_code=204, responses=errors(401, 404, 409, 507))
 def delete_frame(
     frame_id: FrameIdPath, sessions: SessionsDep, store: StoreDep, _: TokenDep
 ) -> Response:
