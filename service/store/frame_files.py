@@ -37,8 +37,8 @@ from PIL import Image
 from service.errors import DamagedFileError, GoneError
 from service.store.disk_space import SpaceReserve
 from sim_core import frame_io
-from sim_core.errors import InvalidInputError
 from sim_core.camera import Camera
+from sim_core.errors import InvalidInputError
 from sim_core.raw import RawFrame
 from sim_core.tof import ToFImage
 

@@ -68,8 +68,8 @@ def get_frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -
     path = store.path(frame_id) / frame_io.RAW_NPZ
     if not path.is_file():
         raise NotFoundError(f"frame {frame_id} has no raw frame (ideal sensor)")
-    return FileResponse(store.checked_file(frame_id, frame_io.RAW_NPZ), media_type="application/octet-stream",
-                        filename=f"{frame_id}-raw.npz")
+    return FileResponse(store.checked_file(frame_id, frame_io.RAW_NPZ),
+                        media_type="application/octet-stream", filename=f"{frame_id}-raw.npz")
 
 
 @router.get("/{frame_id}/preview/{kind}.png", response_class=FileResponse, responses={

@@ -67,9 +67,10 @@ def test_a_full_disk_is_a_507_naming_what_was_written_and_nothing_is_left(
     before = frame_folders(data)
     fill(small_disk)
     for route, body, what in (
-        ("/api/v1/poses", {"turntable_deg": 10.0, "solar_suns": 1.0}, "the pose's measured frame"),
+        ("/api/v1/poses", {"turntable_deg": 10.0, "solar_suns": 1.0},
+         "the pose's measured frame"),
         ("/api/v1/devices/camera/capture", None, "the captured frame"),
-        ("/api/v1/simulate", {"scene": "satellite_ground_test", "turntable_deg": 0.0}, "the simulated frame"),
+        ("/api/v1/simulate", {"scene": "satellite_ground_test"}, "the simulated frame"),
     ):
         detail = problem(client.post(route, headers=AUTH, json=body), 507)["detail"]
         assert f"writing {what} failed" in detail, detail
