@@ -55,6 +55,13 @@ class GoneError(ServiceError):
     title = "Gone"
 
 
+class DamagedFileError(GoneError):
+    """A stored file of the resource is there but cannot be read (truncated, corrupt)."""
+
+    problem = "damaged-file"
+    title = "Damaged file"
+
+
 class InsufficientStorageError(ServiceError):
     """The data directory's disk is (nearly) full."""
 

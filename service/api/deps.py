@@ -138,10 +138,12 @@ ERRORS = {
     401: "Missing or wrong bearer token.",
     404: "No such resource.",
     409: "A campaign or calibration job holds the rig, or the resource is in the wrong state.",
-    410: "The resource is known but its files are gone from the data directory.",
+    410: "The resource is known but its files are gone from the data directory (`gone`) or "
+         "one of them cannot be read (`damaged-file`); `detail` names the frame and the file.",
     503: "A device fault (`fault`: the driver's error class; `detail`: its message), or a "
          "device, the executor or an event stream not available.",
-    507: "Too little free space on the data directory's disk.",
+    507: "Too little free space on the data directory's disk, or a write found it full "
+         "(`detail` names what was being written; nothing of it was kept).",
 }
 
 

@@ -15,7 +15,9 @@ kind's short name, ``status`` the HTTP status, ``detail`` a sentence saying what
 this request. Invalid input (422) adds ``errors``, one ``{field, message}`` per field, the field
 named as a path (``camera.fx_px``, ``poses[3].turntable_deg``; ``body`` for the body as a
 whole); a device fault (503) adds ``fault``, the driver's error class (``DeviceTimeoutError``).
-A server error (500) says only that it happened: its traceback goes to the service's log.
+A server error (500) says only that it happened: its traceback goes to the service's log. A
+file or database error that says the disk is full, wherever it comes from, is the 507 problem
+naming the request whose data could not be written.
 
 :func:`install` registers the handlers on an app and declares the schemas in its OpenAPI
 document (:func:`document`): every operation's error responses, a ``default`` one for the
@@ -35,6 +37,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.json_schema import models_json_schema
+from sqlalchemy.exc import SQLAlchemyError
 from starlette.datastructures import Headers
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -42,6 +45,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from drivers.errors import DeviceError
 from service.api.security_headers import security_headers
 from service.errors import ServiceError
+from service.store.disk_space import disk_full_detail, is_disk_full
 from sim_core.errors import InvalidInputError
 from sim_core.json_safe import json_safe
 
@@ -83,6 +87,9 @@ PROBLEM_TYPES: dict[str, ProblemType] = {t.name: t for t in (
                 "that does not allow the call"),
     ProblemType("gone", 410, "Gone",
                 "the resource is known but its files are gone from the data directory"),
+    ProblemType("damaged-file", 410, "Damaged file",
+                "the resource is known but a file of it cannot be read (truncated or corrupt): "
+                "`detail` names the frame and the file inside the data directory"),
     ProblemType("content-too-large", 413, "Content too large",
                 "the request body is larger than `TOFTWIN_MAX_BODY_BYTES`"),
     ProblemType("device-fault", 503, "Device fault",
@@ -227,6 +234,19 @@ async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:
     return problem_response(kind, status, detail, headers=exc.headers)
 
 
+async def _storage_error(request: Request, exc: Exception) -> JSONResponse:
+    """A file or database error: a 507 if it says the disk is full (a write path that has no
+    handling of its own), else the server error it is."""
+    if not is_disk_full(exc):
+        raise exc
+    lab = getattr(request.app.state, "lab", None)
+    detail = disk_full_detail(
+        f"the data of {request.method} {request.url.path}",
+        lab.store.root if lab is not None else ".",
+        lab.settings.min_free_bytes if lab is not None else None)
+    return problem_response(PROBLEM_TYPES["insufficient-storage"], 507, detail)
+
+
 async def _server_error(request: Request, exc: Exception) -> JSONResponse:
     # Never the exception's text: it may hold server paths or data. Starlette re-raises the
     # exception after this answer, so that the server logs its traceback. Answered outside the
@@ -330,6 +350,8 @@ def install(app: FastAPI, max_body_bytes: int) -> None:
     app.add_exception_handler(DeviceError, _device_error)
     app.add_exception_handler(ServiceError, _service_error)
     app.add_exception_handler(HTTPException, _http_error)
+    for storage_error in (OSError, SQLAlchemyError):
+        app.add_exception_handler(storage_error, _storage_error)
     app.add_exception_handler(Exception, _server_error)
     app.add_middleware(BodyLimit, limit=max_body_bytes)
     generate = app.openapi

@@ -71,7 +71,7 @@ def png_bytes(rgb: np.ndarray) -> bytes:
 
 
 def _load(store: FrameStore, frame_id: str) -> Frame:
-    return frame_io.read_frame(store.path(frame_id))
+    return store.read(frame_id)  # a damaged file: DamagedFileError naming frame and file
 
 
 def grey_panel_scales(mf: Frame, sf: Frame) -> tuple[ColourScale, ColourScale]:
@@ -104,7 +104,8 @@ def pose_panels(store: FrameStore, measured_id: str, simulated_id: str) -> tuple
     """The six panels of a measured and a simulated frame (order: :data:`PANEL_NAMES`).
 
     Frames do not change once stored, so the panels of the last few pairs are kept (a frame
-    whose files have gone is a :class:`GoneError` naming it, cached panels or not).
+    whose files have gone is a :class:`GoneError` naming it, cached panels or not; one with a
+    file that cannot be read a :class:`DamagedFileError` naming the frame and the file).
     """
     for frame_id in (measured_id, simulated_id):
         store.file(frame_id, frame_io.FRAME_NPZ)

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import json
 import uuid
+from collections.abc import Callable
 from typing import Any
 
 from sqlalchemy.orm import sessionmaker
 
 from drivers.rig import Rig
-from service.errors import ConflictError, NotFoundError
+from service.errors import ConflictError, InsufficientStorageError, NotFoundError
 from service.lab.calibration import active_twin, effective_twin
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate
@@ -33,6 +34,7 @@ from service.lab.scenes import (
 )
 from service.settings import Settings
 from service.store import queries
+from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
 from sim_core.errors import InvalidInputError
 
@@ -157,14 +159,18 @@ def delete_campaign(
     sessions: sessionmaker, runner: CampaignRunner, store: FrameStore, campaign_id: str
 ) -> int:
     """Delete a campaign that is not running, its results and its frames; returns how many
-    frames went. The rows go first in one transaction, then the folders: a crash in between
-    leaves folders without rows, which the next start sweeps away."""
+    frames went (see :func:`_delete_rows_and_files` for the order and a full disk)."""
     with sessions() as s:
         row = queries.require_campaign(s, campaign_id)
         if row.state == "running" or runner.live(campaign_id) is not None:
             raise ConflictError(f"campaign {campaign_id} is running; pause or cancel it first")
-        frame_ids = queries.delete_campaign(s, campaign_id)
-    store.delete(frame_ids)
+        frame_ids = queries.campaign_frame_ids(s, campaign_id)
+
+    def rows() -> None:
+        with sessions() as s:
+            queries.delete_campaign(s, campaign_id)
+
+    _delete_rows_and_files(store, rows, frame_ids, f"deleting campaign {campaign_id}")
     return len(frame_ids)
 
 
@@ -178,5 +184,50 @@ def delete_frame(sessions: sessionmaker, store: FrameStore, frame_id: str) -> No
             raise ConflictError(
                 f"frame {frame_id} is compared in pose result(s) {results}; delete its "
                 "campaign instead (DELETE /api/v1/campaigns/{id})")
-        queries.delete_frame(s, frame_id)
-    store.delete([frame_id])
+
+    def rows() -> None:
+        with sessions() as s:
+            queries.delete_frame(s, frame_id)
+
+    _delete_rows_and_files(store, rows, [frame_id], f"deleting frame {frame_id}")
+
+
+def _delete_rows_and_files(
+    store: FrameStore, delete_rows: Callable[[], None], frame_ids: list[str], what: str
+) -> None:
+    """Delete rows (one transaction) and then the frames' folders, also on a full disk.
+
+    Deleting is the remedy for a full disk, but SQLite needs room to delete: every page the
+    transaction changes goes into its write-ahead log first. So:
+
+    1. the disk reserve (a file of allocated bytes the service keeps while there is room,
+       :class:`service.store.disk_space.SpaceReserve`) is given back first: its room takes the
+       log, and the rows go before the folders, as usual (a crash in between leaves folders
+       without rows, which the next start sweeps away);
+    2. if the disk is full all the same (no reserve: the service started on a full disk; or a
+       delete larger than the reserve), the folders go first, their room taking the log, and
+       the rows are deleted again. Should that fail too, the rows remain without their files
+       (reads answer 410 naming them) and a repeated delete completes.
+
+    The reserve is made again afterwards if the room is there. Without any room at all the
+    answer is a 507 naming the deletion.
+    """
+    with store.room_to_delete():
+        try:
+            delete_rows()
+        except Exception as exc:
+            if not is_disk_full(exc):
+                raise
+            store.delete(frame_ids)
+            try:
+                delete_rows()
+            except Exception as again:
+                if not is_disk_full(again):
+                    raise
+                raise InsufficientStorageError(
+                    f"the disk is full: {what} needs room for the database's log, and there is "
+                    f"none even after its frames' files were deleted ({len(frame_ids)}); its "
+                    "rows remain (their frames' reads answer 410); "
+                    + low_space_message(free_bytes(store.root), None,
+                                        then=", then repeat the delete")) from again
+        store.delete(frame_ids)

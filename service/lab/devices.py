@@ -19,6 +19,7 @@ from service.lab.rig_lease import RigLease
 from service.lab.runner import CampaignRunner
 from service.lab.scenes import SceneSource, camera_of, for_use_case
 from service.store import queries
+from service.store.disk_space import require_free, writing
 from service.store.frame_files import FrameStore
 
 
@@ -113,19 +114,30 @@ def set_shutter(lease: RigLease, open_: bool) -> dict[str, Any]:
 
 
 def capture(
-    lease: RigLease, *, store: FrameStore, sessions: sessionmaker, scene: SceneSource
+    lease: RigLease, *, store: FrameStore, sessions: sessionmaker, scene: SceneSource,
+    min_free_bytes: int = 0,
 ) -> dict[str, Any]:
-    """Capture one frame, reconstruct it with ``scene``'s camera (the default), store it."""
+    """Capture one frame, reconstruct it with ``scene``'s camera (the default), store it.
+
+    Below ``min_free_bytes`` free a 507 before the capture; a disk that fills up while the
+    frame is stored a 507 too, and nothing is kept."""
+    require_free(store.root, min_free_bytes)
     with lease.manual() as rig:
         state = rig.state()
         raw = rig.capture(1)[0]
         use_case = rig.camera.use_case
     camera = camera_of(for_use_case(scene.spec, use_case))
     extra = {"rig": state.to_dict(), "use_case": use_case.name, "scene_name": ""}
-    frame_id, image, _ = store.save_measured(raw, camera, extra)
-    with sessions() as s:
-        queries.add_frame(s, queries.frame_row(frame_id, "measured", rig=state.to_dict(),
-                                         summary={"valid_pixels": int(image.valid.sum())}))
+    with writing("the captured frame", store.root, min_free_bytes):
+        frame_id, image, _ = store.save_measured(raw, camera, extra)
+        try:
+            with sessions() as s:
+                queries.add_frame(s, queries.frame_row(
+                    frame_id, "measured", rig=state.to_dict(),
+                    summary={"valid_pixels": int(image.valid.sum())}))
+        except BaseException:
+            store.delete([frame_id])  # no folder without its row
+            raise
     return {"frame_id": frame_id, "rig": state.to_dict(),
             "links": {"self": f"/api/v1/frames/{frame_id}"}}
 

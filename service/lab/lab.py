@@ -2,7 +2,10 @@
 
 :func:`open_lab` builds it (the app's lifespan and the campaign benchmark call it), in this
 order: the data directory's lock (:mod:`service.store.data_lock`: a second service on the same
-directory is refused before it touches anything), the database (migrated to the newest schema,
+directory is refused before it touches anything), the disk reserve given back for the while the
+database opens (:class:`service.store.disk_space.SpaceReserve`: on a full disk its room lets the
+service start, serve reads and delete; it is made again afterwards if there is room), the
+database (migrated to the newest schema,
 and every campaign a crash left ``running`` becomes ``interrupted``), the
 frame store (frames no row names are swept away), the executor, the rig (simulated or real; a
 real rig that cannot be opened leaves the service up with the devices reporting 503), the
@@ -35,7 +38,11 @@ from service.settings import Settings
 from service.store import queries
 from service.store.data_lock import DataDirLock
 from service.store.database import init_db, make_engine
+from service.store.disk_space import SpaceReserve, is_disk_full
 from service.store.frame_files import FrameStore
+
+#: the disk reserve's file in the data directory (:class:`SpaceReserve`)
+RESERVE_NAME = ".space-reserve"
 
 _log = logging.getLogger(__name__)
 
@@ -133,15 +140,34 @@ def open_lab(settings: Settings) -> Lab:
         raise
 
 
+def _recover_campaigns(sessions: sessionmaker) -> list[str]:
+    """Mark the campaigns a crash left ``running`` as ``interrupted``; on a full disk (the
+    service starts to serve reads and deletes) they stay as they are, with a warning, until a
+    start with room."""
+    try:
+        with sessions() as s:
+            return queries.mark_interrupted(s)
+    except Exception as exc:
+        if not is_disk_full(exc):
+            raise
+        _log.warning("disk full: campaigns left running by a crash are not marked interrupted "
+                     "until the service starts with room (%s)", exc)
+        return []
+
+
 def _open_locked(settings: Settings, lock: DataDirLock) -> Lab:
     data = Path(settings.data_dir)
-    engine = make_engine(settings.database)
-    sessions = init_db(engine)
-    with sessions() as s:
-        interrupted = queries.mark_interrupted(s)
-        known = queries.all_frame_ids(s)
-    store = FrameStore(data / "frames")
-    swept = store.sweep(known)
+    reserve = SpaceReserve(data / RESERVE_NAME)
+    # On a full disk the reserve's room lets SQLite open (its shared-memory index and log need
+    # a few pages); it is made again afterwards if the room is there, else left free.
+    with reserve.released():
+        engine = make_engine(settings.database)
+        sessions = init_db(engine)
+        interrupted = _recover_campaigns(sessions)
+        with sessions() as s:
+            known = queries.all_frame_ids(s)
+        store = FrameStore(data / "frames", reserve=reserve)
+        swept = store.sweep(known)
     if interrupted or swept:
         _log.warning("recovered after a crash: interrupted campaigns %s, %d orphan frame(s)",
                      interrupted, len(swept))

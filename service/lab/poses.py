@@ -42,7 +42,7 @@ from service.lab.scenes import (
 )
 from service.settings import Settings
 from service.store import queries
-from service.store.disk_space import require_free
+from service.store.disk_space import require_free, writing
 from service.store.frame_files import FrameStore, new_frame_id
 from service.store.tables import FrameRow, PoseResultRow
 from sim_core.camera import z_over_range as camera_z_over_range
@@ -296,7 +296,10 @@ def run_single_pose(
     req: PoseCreate, *, lease: RigLease, sessions: sessionmaker, store: FrameStore,
     executor: Executor, settings: Settings, mounted: SceneSource,
 ) -> Outcome:
-    """``POST /poses``: the three stages in a row for one pose (of the ``mounted`` scene)."""
+    """``POST /poses``: the three stages in a row for one pose (of the ``mounted`` scene).
+
+    A disk that fills up on the way is a 507 naming what was being written; the frames written
+    so far are removed (:func:`finish` removes its own, this the measured one)."""
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
     rig = lease.require()
@@ -306,11 +309,13 @@ def run_single_pose(
     require_free(store.root, settings.min_free_bytes)  # 507 before anything moves
     plan = PosePlan(scene, req.turntable_deg, req.solar_suns, req.mask, req.seed, spp,
                     twin=effective_twin(active_twin(sessions), scene))
-    with lease.manual() as rig:
+    floor = settings.min_free_bytes
+    with writing("the pose's measured frame", store.root, floor), lease.manual() as rig:
         m = measure(rig, store, plan, settings.solar_stable_timeout_s)
     try:
         jobs = submit(executor, plan, m, settings.threads_per_job)
-        return finish(sessions, store, plan, m, jobs, settings.job_timeout_s)
+        with writing("the pose's simulated frame and its result", store.root, floor):
+            return finish(sessions, store, plan, m, jobs, settings.job_timeout_s)
     except BaseException:
         store.delete([m.row.id])
         raise

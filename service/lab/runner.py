@@ -218,7 +218,7 @@ class CampaignRunner:
             if is_disk_full(exc):  # the operator frees space and resumes: not a failure
                 _log.warning("campaign %s paused: disk full: %s", run.campaign_id, exc)
                 to, error = "paused", low_space_message(
-                    self.store.root, free_bytes(self.store.root), self.settings.min_free_bytes)
+                    free_bytes(self.store.root), self.settings.min_free_bytes)
             else:
                 _log.exception("campaign %s failed", run.campaign_id)
                 to, error = "failed", f"{type(exc).__name__}: {exc}"
@@ -262,8 +262,7 @@ class CampaignRunner:
                     break
                 free = free_bytes(self.store.root)
                 if free < settings.min_free_bytes:
-                    to, error = "paused", low_space_message(self.store.root, free,
-                                                            settings.min_free_bytes)
+                    to, error = "paused", low_space_message(free, settings.min_free_bytes)
                     _log.warning("campaign %s paused: %s", run.campaign_id, error)
                     break
                 plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,

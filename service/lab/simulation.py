@@ -14,6 +14,7 @@ from service.lab.requests import SimulationCreate
 from service.lab.scenes import scene_from_request
 from service.settings import Settings
 from service.store import queries
+from service.store.disk_space import require_free, writing
 from service.store.frame_files import FrameStore, new_frame_id
 from sim_core.json_safe import json_safe
 
@@ -25,7 +26,8 @@ def simulate_frame(
     """Run ``req`` on the executor, store the frame, return its id.
 
     The simulation applies the active calibration (:mod:`service.lab.calibration`); the frame
-    records its hash."""
+    records its hash. Below the free space kept (or when the disk fills up while the frame is
+    stored) a 507; nothing is kept then."""
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
     twin = effective_twin(active_twin(sessions), scene)
@@ -38,15 +40,21 @@ def simulate_frame(
                "turntable_object_ids": scene.turntable_object_ids},
         twin=twin.to_json(),
     )
+    require_free(store.root, settings.min_free_bytes)  # 507 before the render
     result = executor.submit(job).result(timeout=settings.job_timeout_s)
-    store.save_files(frame_id, result.files)
     rig = {"turntable_deg": req.turntable_deg, "solar_suns": req.solar_suns}
-    with sessions() as s:
-        queries.add_frame(s, queries.frame_row(
-            frame_id, "simulated", scene_name=scene.name, scene_hash=result.scene_hash, rig=rig,
-            summary={"valid_pixels": int(result.image.valid.sum())},
-            calibration_hash=twin.hash,
-        ))
+    with writing("the simulated frame", store.root, settings.min_free_bytes):
+        try:
+            store.save_files(frame_id, result.files)
+            with sessions() as s:
+                queries.add_frame(s, queries.frame_row(
+                    frame_id, "simulated", scene_name=scene.name, scene_hash=result.scene_hash,
+                    rig=rig, summary={"valid_pixels": int(result.image.valid.sum())},
+                    calibration_hash=twin.hash,
+                ))
+        except BaseException:
+            store.delete([frame_id])  # no folder without its row
+            raise
     return json_safe({
         "frame_id": frame_id, "scene_name": scene.name, "scene_hash": result.scene_hash,
         "calibration_hash": twin.hash,

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import json
+import logging
 import os
 import socket
 import sys
@@ -25,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 LOCK_NAME = ".lock"
+_log = logging.getLogger(__name__)
 #: Windows locks a byte range: one byte far past the description, so readers can read it
 _WIN_LOCK_OFFSET = 1 << 20
 
@@ -128,6 +130,14 @@ class DataDirLock:
         }
         try:
             _write(fd, json.dumps(holder, sort_keys=True) + "\n")
+        except OSError as exc:
+            # The lock is the OS lock, held; the description only names the holder. On a full
+            # disk it cannot be written, and the service still starts (to serve reads and the
+            # deletes that free space): a refused second service then says "another process".
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)
+            _log.warning("data directory %s locked, but its holder description could not be "
+                         "written: %s", data_dir, exc.strerror or exc)
         except BaseException:
             _unlock(fd)
             os.close(fd)

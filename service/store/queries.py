@@ -299,11 +299,15 @@ def add_result(
 
 
 # -- deleting --------------------------------------------------------------------------------
+def campaign_frame_ids(session: Session, campaign_id: str) -> list[str]:
+    """Ids of the frames of a campaign."""
+    return list(session.scalars(select(FrameRow.id).where(FrameRow.campaign_id == campaign_id)))
+
+
 def delete_campaign(session: Session, campaign_id: str) -> list[str]:
     """Delete a campaign with its planned poses, results and frame rows in one transaction;
     returns the ids of the frames whose folders the caller removes next."""
-    frame_ids = list(session.scalars(select(FrameRow.id).where(
-        FrameRow.campaign_id == campaign_id)))
+    frame_ids = campaign_frame_ids(session, campaign_id)
     session.execute(delete(PoseResultRow).where(PoseResultRow.campaign_id == campaign_id))
     session.execute(delete(FrameRow).where(FrameRow.campaign_id == campaign_id))
     session.execute(delete(PlannedPoseRow).where(PlannedPoseRow.campaign_id == campaign_id))

@@ -72,12 +72,13 @@ def get_campaign(campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerD
     return campaign_status(sessions, runner, campaign_id)
 
 
-@router.delete("/{campaign_id}", status_code=204, responses=errors(401, 404, 409))
+@router.delete("/{campaign_id}", status_code=204, responses=errors(401, 404, 409, 507))
 def delete_campaign(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, store: StoreDep,
     _: TokenDep,
 ) -> Response:
-    """Delete a campaign that is not running, with its results and frames (reclaims space)."""
+    """Delete a campaign that is not running, with its results and frames (reclaims space; works
+    on a full disk, see docs/service.md)."""
     lab_campaigns.delete_campaign(sessions, runner, store, campaign_id)
     return Response(status_code=204)
 

@@ -92,12 +92,16 @@ def set_shutter(body: ShutterIn, lease: LeaseDep, _: TokenDep) -> dict:
     return devices.set_shutter(lease, body.open)
 
 
-@router.post("/camera/capture", response_model=CaptureOut, status_code=201, responses=COMMAND)
+@router.post("/camera/capture", response_model=CaptureOut, status_code=201,
+             responses={**COMMAND, **errors(507)})
 def capture_frame(
-    lease: LeaseDep, store: StoreDep, sessions: SessionsDep, lab_scene: SceneDep, _: TokenDep
+    lease: LeaseDep, store: StoreDep, sessions: SessionsDep, lab_scene: SceneDep,
+    settings: SettingsDep, _: TokenDep,
 ) -> dict:
-    """Capture one frame; returns the id of the stored (measured) frame."""
-    return devices.capture(lease, store=store, sessions=sessions, scene=lab_scene)
+    """Capture one frame; returns the id of the stored (measured) frame (507 below the free
+    space kept)."""
+    return devices.capture(lease, store=store, sessions=sessions, scene=lab_scene,
+                           min_free_bytes=settings.min_free_bytes)
 
 
 @router.post("/stop", response_model=StopOut, responses=errors(401, 503))

@@ -32,13 +32,14 @@ def list_frames(
             for row in queries.list_frames(session, limit, offset)]
 
 
-@router.get("/{frame_id}", response_model=FramePublic, responses=errors(404))
+@router.get("/{frame_id}", response_model=FramePublic, responses=errors(404, 410))
 def get_frame(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> dict:
-    """A frame's metadata (its ``frame.json``: rig state, effect plan, timings, ...)."""
+    """A frame's metadata (its ``frame.json``: rig state, effect plan, timings, ...); 410 if
+    that file cannot be read."""
     return frame_public(store, _row(session, frame_id))
 
 
-@router.delete("/{frame_id}", status_code=204, responses=errors(401, 404, 409))
+@router.delete("/{frame_id}", status_code=204, responses=errors(401, 404, 409, 507))
 def delete_frame(
     frame_id: FrameIdPath, sessions: SessionsDep, store: StoreDep, _: TokenDep
 ) -> Response:
@@ -53,7 +54,7 @@ def delete_frame(
 def get_frame_arrays(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> FileResponse:
     """``frame.npz``: range, depth, amplitude, intensity, phase, valid mask (units in metadata)."""
     _row(session, frame_id)
-    return FileResponse(store.file(frame_id, frame_io.FRAME_NPZ),
+    return FileResponse(store.checked_file(frame_id, frame_io.FRAME_NPZ),
                         media_type="application/octet-stream", filename=f"{frame_id}.npz")
 
 
@@ -67,8 +68,8 @@ def get_frame_raw(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -
     path = store.path(frame_id) / frame_io.RAW_NPZ
     if not path.is_file():
         raise NotFoundError(f"frame {frame_id} has no raw frame (ideal sensor)")
-    return FileResponse(path, media_type="application/octet-stream",
-                        filename=f"{frame_id}-raw.npz")
+    return FileResponse(store.checked_file(frame_id, frame_io.RAW_NPZ),
+                        media_type="application/octet-stream", filename=f"{frame_id}-raw.npz")
 
 
 @router.get("/{frame_id}/preview/{kind}.png", response_class=FileResponse, responses={
@@ -78,7 +79,7 @@ def get_frame_preview(
 ) -> FileResponse:
     """8-bit grey, or 16-bit depth in millimetres (0 where invalid), as the camera tools write."""
     _row(session, frame_id)
-    return FileResponse(store.file(frame_id, f"{kind}.png"), media_type="image/png")
+    return FileResponse(store.checked_file(frame_id, f"{kind}.png"), media_type="image/png")
 
 
 def _row(session, frame_id: str):
@@ -90,10 +91,7 @@ def _row(session, frame_id: str):
 
 def frame_public(store, row, with_metadata: bool = True) -> dict:
     """The public form of a frame row (``metadata``: its frame.json)."""
-    meta = {}
-    if with_metadata:
-        path = store.path(row.id) / frame_io.FRAME_JSON
-        meta = json.loads(path.read_text()) if path.is_file() else {}
+    meta = store.metadata(row.id) if with_metadata else {}
     base = f"/api/v1/frames/{row.id}"
     return json_safe({
         "id": row.id, "kind": row.kind, "created_at": row.created_at,

@@ -20,7 +20,7 @@ from service.api.deps import (
     errors,
 )
 from service.api.schemas import PosePublic
-from service.errors import NotFoundError
+from service.errors import GoneError, NotFoundError
 from service.export.panels import PANEL_NAMES, png_bytes, pose_panels
 from service.lab.poses import run_single_pose
 from service.lab.requests import PoseCreate
@@ -69,7 +69,10 @@ def get_pose_panel_colour_bar(pose_id: PoseId, name: PanelName, session: Session
 
 def _panel(session, store, pose_id: int, name: str):
     row = require_pose(session, pose_id)
-    panels = pose_panels(store, row.measured_frame_id, row.simulated_frame_id)
+    try:
+        panels = pose_panels(store, row.measured_frame_id, row.simulated_frame_id)
+    except GoneError as exc:  # 410 naming the pose too (the detail names frame and file)
+        raise type(exc)(f"pose {pose_id}: {exc.detail}") from exc
     return panels[PANEL_NAMES.index(name)]
 
 

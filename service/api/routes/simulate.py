@@ -13,7 +13,7 @@ router = APIRouter(tags=["simulation"])
 
 
 @router.post("/simulate", response_model=SimulationPublic, status_code=201,
-             responses=errors(401, 503))
+             responses=errors(401, 503, 507))
 def create_simulation(
     body: SimulationCreate, sessions: SessionsDep, store: StoreDep, executor: ExecutorDep,
     settings: SettingsDep, _: TokenDep,

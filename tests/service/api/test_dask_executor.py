@@ -5,7 +5,7 @@ the service reaches it only through ``--executor dask://HOST:PORT``.
 
 Dask's ``distributed`` is the ``dask`` extra, not a dependency of the service. These tests are
 marked ``dask``: the README's test command installs the extra and runs them; a venv without it
-(CI's floors venv) deselects them with ``-m 'not slow and not dask'``, and
+(CI's floors venv) deselects them with ``-m 'not slow and not root and not dask'``, and
 tests/service/compute/test_dask_extra.py checks the service's refusal there.
 """
 

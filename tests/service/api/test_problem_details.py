@@ -193,8 +193,11 @@ def test_an_unexpected_error_is_a_500_problem_without_its_traceback_or_server_pa
         res = client.post("/api/v1/devices/camera/capture", headers=AUTH)
         assert res.status_code == 201, res.text
         frame_id = res.json()["frame_id"]
-        # the frame's metadata file is damaged on disk: reading it fails where nothing expects
-        (data / "frames" / frame_id / "frame.json").write_text('{"cut short')
+        # the frame's row is damaged (a damaged file is a 410 of its own: test_damaged_files):
+        # reading it fails where nothing expects
+        with app.state.lab.engine.begin() as conn:
+            conn.exec_driver_sql("UPDATE frames SET rig_json = '{\"cut short' WHERE id = ?",
+                                 (frame_id,))
         res = client.get(f"/api/v1/frames/{frame_id}")
     body = problem(res, 500)
     assert body["type"] == "urn:toftwin:problem:internal-error"
