@@ -39,9 +39,14 @@ async function call(method, path, body) {
   return {ok: res.ok, status: res.status, data};
 }
 
+// A fragment's answers may arrive out of order (a campaign's events ask for the list again while
+// the last answer is on its way): only the newest request of a target may fill it.
+const fragmentAsked = new WeakMap();
 async function fragment(path, target) {
+  const asked = (fragmentAsked.get(target) || 0) + 1;
+  fragmentAsked.set(target, asked);
   const res = await call("GET", path);
-  if (res.ok) target.innerHTML = res.data;
+  if (res.ok && fragmentAsked.get(target) === asked) target.innerHTML = res.data;
   return res.ok;
 }
 
