@@ -70,7 +70,19 @@ class CalibrationError(DeviceInputError):
 
 
 class DeviceError(ToftwinError):
-    """A device did not do what it was asked, or reported a fault."""
+    """A device did not do what it was asked, or reported a fault.
+
+    Attributes
+    ----------
+    device, target, read_back : str or None
+        Set when the error is a device read back off the state it was asked for
+        (:meth:`drivers.rig.Rig.verify`): the device (``"solar simulator lamp"``), the target
+        and what was read back, each with its unit (``"1 sun"``, ``"0.000 sun"``).
+    """
+
+    device: str | None = None
+    target: str | None = None
+    read_back: str | None = None
 
 
 class DeviceTimeoutError(DeviceError, TimeoutError):

@@ -28,8 +28,10 @@ from typing import Any
 
 from drivers.camera import CameraProtocol, UsbCamera, UsbCameraSettings
 from drivers.errors import (
+    DeviceError,
     DeviceInputError,
     DeviceTimeoutError,
+    InterlockError,
     LampFaultError,
     ProtocolError,
     SolarSimulatorError,
@@ -132,7 +134,12 @@ class Rig:
         self._held_since = 0.0
         self._on_close = list(on_close)
         self._closed = False
-        self._lamp_lit = False  # the lamp burned after the last apply (to log it going out)
+        #: the lamp should be burning: a pose or the operator lit it and nobody put it out since
+        #: (a lamp found out while this holds went out by itself: it is not relit by a pose)
+        self._lamp_wanted = False
+        #: captures that failed in a row, and the last one's error (:meth:`camera_health`)
+        self._capture_failures = 0
+        self._capture_error: str | None = None
         #: the simulators behind a :meth:`simulated` rig (empty for a real rig)
         self.sims: dict[str, Any] = {}
 
@@ -194,75 +201,169 @@ class Rig:
         the shutter. With ``wait_stable_s`` the solar simulator's output is waited for
         (:meth:`SolarSimulatorProtocol.wait_until_stable`) before returning.
 
+        A lamp that went out by itself since a pose (or the operator) lit it, or whose supply
+        reports a fault or its interlock, is *not* relit: that raises :class:`LampFaultError`
+        (:class:`InterlockError`) telling the operator to relight it (:meth:`switch_lamp`,
+        ``POST /api/v1/devices/solar/lamp``) once the cause is fixed.
+
         Then the state is read back and compared with ``target`` (:meth:`verify`): a stage off
         its target, a lamp that went out or reports a fault, a level or a shutter that is not
-        what was asked for raise a :class:`DeviceError` naming it, so that nothing is captured
-        and stored as if the rig were where it was asked to be. A lamp found out when it was
-        lit before is logged.
+        what was asked for raise a :class:`DeviceError` naming the device, the target and what
+        was read back, so that nothing is captured and stored as if the rig were where it was
+        asked to be.
         """
         with self.hold():
-            lamp_was_on = self._lamp_lit
             self.turntable.move_to(target.turntable_angle_deg)
             if target.solar_suns > 0:
                 if not self.solar.is_lamp_on():
-                    if lamp_was_on:
-                        _log.warning("solar simulator: the lamp went out since the last pose; "
-                                     "relighting it")
+                    self._refuse_to_relight(target)
                     self.solar.lamp_on()
+                self._lamp_wanted = True
                 self.solar.set_suns(target.solar_suns)
                 if wait_stable_s is not None:
                     self.solar.wait_until_stable(wait_stable_s)
-            elif self.solar.is_lamp_on():
-                self.solar.lamp_off()
+            else:
+                self._lamp_wanted = False
+                if self.solar.is_lamp_on():
+                    self.solar.lamp_off()
             if target.shutter_open:
                 self.solar.open_shutter()
             else:
                 self.solar.close_shutter()
             state = self.state()
-            self._lamp_lit = state.solar_suns > 0
-            self.verify(target, state)
+            self.verify(target, state, when="after setting it")
             return state
 
-    def verify(self, target: RigState, state: RigState) -> None:
-        """Raise a :class:`DeviceError` if ``state`` (read back) is not ``target``.
+    def _refuse_to_relight(self, target: RigState) -> None:
+        """Raise if the lamp, found out, went out by itself or its supply reports why."""
+        status = self.solar.status()
+        if not (self._lamp_wanted or status.fault or status.interlock):
+            return  # out because it was put out (or never lit): a pose may light it
+        what = ("went out by itself since it was lit" if self._lamp_wanted
+                and not (status.fault or status.interlock) else
+                "went out since it was lit" if self._lamp_wanted else "is out")
+        why = (": its interlock is open or tripped" if status.interlock else
+               ": the supply reports a lamp fault" if status.fault else "")
+        error = InterlockError if status.interlock else LampFaultError
+        raise error(
+            f"solar simulator lamp: {what}{why} ({status.describe()}); "
+            f"a pose at {target.solar_suns:g} sun does not relight it: "
+            f"{'close the interlock, ' if status.interlock else ''}relight the lamp "
+            "(POST /api/v1/devices/solar/lamp) and resume")
+
+    def switch_lamp(self, on: bool) -> None:
+        """The operator's lamp switch: light the lamp (or put it out) on purpose.
+
+        Lighting it is how a lamp that went out is relit (poses do not relight it: see
+        :meth:`apply`); putting it out records that it is out on purpose, so the next lit pose
+        lights it again.
+        """
+        with self.hold():
+            if on:
+                self.solar.lamp_on()
+                self._lamp_wanted = True
+            else:
+                self._lamp_wanted = False
+                self.solar.lamp_off()
+
+    def verify(self, target: RigState, state: RigState, *, when: str = "after setting it") -> None:
+        """Raise a :class:`DeviceError` if ``state`` (read back ``when``) is not ``target``.
 
         Tolerances: the turntable's own ``tolerance_deg`` (else :data:`ANGLE_TOLERANCE_DEG`),
         :data:`SUNS_TOLERANCE` for the level; the lamp must burn without a fault bit exactly
-        when a level above 0 is asked for, and the shutter must be as asked.
+        when a level above 0 is asked for, and the shutter must be as asked. The message names
+        the device, the target and what was read back; the error carries them as ``device``,
+        ``target`` and ``read_back``.
         """
         tol_deg = float(getattr(self.turntable, "tolerance_deg", ANGLE_TOLERANCE_DEG))
         error_deg = abs(state.turntable_angle_deg - target.turntable_angle_deg)
         if not error_deg <= tol_deg:
-            raise TurntableError(
-                f"turntable read back {state.turntable_angle_deg:.4f} deg after a move to "
-                f"{target.turntable_angle_deg:.4f} deg (tolerance {tol_deg:g} deg)"
-            )
+            raise _mismatch(
+                TurntableError(
+                    f"turntable read back {state.turntable_angle_deg:.4f} deg {when}: target "
+                    f"{target.turntable_angle_deg:.4f} deg (tolerance {tol_deg:g} deg)"),
+                "turntable", f"{target.turntable_angle_deg:.4f} deg",
+                f"{state.turntable_angle_deg:.4f} deg")
         if target.solar_suns > 0:
             status = self.solar.status()
-            if status.fault or not status.lamp_on:
-                raise LampFaultError(
-                    f"lamp {'fault' if status.fault else 'out'} after setting "
-                    f"{target.solar_suns:g} sun: {status.describe()}; relight the lamp "
-                    "(POST /api/v1/devices/solar/lamp) and resume"
-                )
+            if status.fault or status.interlock or not status.lamp_on:
+                cause = ("interlock tripped" if status.interlock else
+                         "lamp fault" if status.fault else "lamp out")
+                error = InterlockError if status.interlock else LampFaultError
+                read = state.solar_suns if status.lamp_on else 0.0  # out by now, if not before
+                raise _mismatch(
+                    error(
+                        f"solar simulator lamp: {cause} {when}: target {target.solar_suns:g} "
+                        f"sun, read back {read:.3f} sun ({status.describe()}); "
+                        f"{'close the interlock, ' if status.interlock else ''}relight the lamp "
+                        "(POST /api/v1/devices/solar/lamp) and resume"),
+                    "solar simulator lamp", f"{target.solar_suns:g} sun", f"{read:.3f} sun")
             if not abs(state.solar_suns - target.solar_suns) <= SUNS_TOLERANCE:
-                raise SolarSimulatorError(
-                    f"solar level read back {state.solar_suns:.3f} sun after setting "
-                    f"{target.solar_suns:g} sun (tolerance {SUNS_TOLERANCE:g} sun)"
-                )
+                raise _mismatch(
+                    SolarSimulatorError(
+                        f"solar level read back {state.solar_suns:.3f} sun {when}: target "
+                        f"{target.solar_suns:g} sun (tolerance {SUNS_TOLERANCE:g} sun)"),
+                    "solar simulator lamp", f"{target.solar_suns:g} sun",
+                    f"{state.solar_suns:.3f} sun")
         elif state.solar_suns > 0:
-            raise SolarSimulatorError(
-                f"lamp still burning at {state.solar_suns:.3f} sun after it was put out")
+            raise _mismatch(
+                SolarSimulatorError(
+                    f"lamp still burning at {state.solar_suns:.3f} sun {when}: target 0 sun "
+                    "(lamp out)"),
+                "solar simulator lamp", "0 sun", f"{state.solar_suns:.3f} sun")
         if state.shutter_open != target.shutter_open:
-            want = "open" if target.shutter_open else "closed"
-            raise SolarSimulatorError(f"shutter not {want} after the command")
+            want, got = (("open", "closed") if target.shutter_open else ("closed", "open"))
+            raise _mismatch(
+                SolarSimulatorError(
+                    f"solar simulator shutter: shutter not {want} {when}: target {want}, read "
+                    f"back {got}"),
+                "solar simulator shutter", want, got)
 
-    def capture(self, n: int = 1) -> list[RawFrame]:
-        """Capture ``n`` frames; each frame's ``meta["rig"]`` holds the rig state at capture."""
+    def capture(self, n: int = 1, *, target: RigState | None = None) -> list[RawFrame]:
+        """Capture ``n`` frames; each frame's ``meta["rig"]`` holds the rig state at capture.
+
+        The state is read back before and after the exposure (``meta["rig"]`` and
+        ``meta["rig_after"]``). With ``target`` both are checked against it (:meth:`verify`),
+        and so is the rig state a camera reports in a frame's own metadata (``meta["rig"]`` as
+        the camera delivered it, where it does): a device that was not in its target state at
+        either end of the exposure raises a :class:`DeviceError` naming it, and no frame is
+        returned - a frame is good only if every device was where it was asked to be for the
+        whole exposure.
+        """
         with self.hold():
-            state = self.state().to_dict()
+            before = self.state()
+            if target is not None:
+                self.verify(target, before, when="before the exposure")
+            frames = self._capture_frames(n)
+            after = self.state()
+            if target is not None:
+                self.verify(target, after, when="after the exposure")
+                for frame in frames:
+                    own = _reported_state(frame.meta.get("rig"))
+                    if own is not None:
+                        self.verify(target, own, when="in the camera's frame metadata")
+        meta = {"rig": before.to_dict(), "rig_after": after.to_dict()}
+        return [dataclasses.replace(f, meta={**f.meta, **meta}) for f in frames]
+
+    def _capture_frames(self, n: int) -> list[RawFrame]:
+        """The camera's capture, its outcome recorded for :meth:`camera_health`."""
+        try:
             frames = self.camera.capture(n)
-        return [dataclasses.replace(f, meta={**f.meta, "rig": state}) for f in frames]
+        except DeviceError as exc:
+            self._capture_failures += 1
+            self._capture_error = f"{type(exc).__name__}: {exc}"
+            raise
+        self._capture_failures, self._capture_error = 0, None
+        return frames
+
+    def camera_health(self) -> dict[str, Any]:
+        """How the camera's captures went: ``{"failures_in_row", "last_error"}``.
+
+        ``failures_in_row`` counts the captures that failed since the last one that delivered
+        its frames (0: the last capture worked, or none was tried); ``last_error`` is the last
+        failure's error (class and message), None when ``failures_in_row`` is 0.
+        """
+        return {"failures_in_row": self._capture_failures, "last_error": self._capture_error}
 
     # -- life cycle ---------------------------------------------------------------------------
     def close(self) -> None:
@@ -447,6 +548,23 @@ class Rig:
         rig = cls(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop])
         rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
         return rig
+
+
+def _mismatch(error: DeviceError, device: str, target: str, read_back: str) -> DeviceError:
+    """``error`` with the device, its target and what it read back as attributes."""
+    error.device, error.target, error.read_back = device, target, read_back
+    return error
+
+
+def _reported_state(meta: Any) -> RigState | None:
+    """The rig state a camera put in a frame's metadata, if it did (a mapping of the three)."""
+    if not isinstance(meta, dict):
+        return None
+    try:
+        return RigState(float(meta["turntable_angle_deg"]), float(meta["solar_suns"]),
+                        bool(meta["shutter_open"]))
+    except (KeyError, TypeError, ValueError, DeviceInputError):
+        return None
 
 
 def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], RigState]:

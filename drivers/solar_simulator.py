@@ -498,7 +498,9 @@ class SolarSimulator:
         """Raise :class:`InterlockError` / :class:`LampFaultError` if the supply reports one."""
         status = self.lamp_status()
         if status.interlock:
-            raise InterlockError(f"lamp supply interlock open: {status.describe()}")
+            raise InterlockError(
+                f"lamp supply interlock open (or tripped since the lamp was lit, which puts the "
+                f"lamp out): {status.describe()}; close the interlock, then relight the lamp")
         if status.fault:
             raise LampFaultError(f"lamp supply reports a lamp fault: {status.describe()}")
         return status
@@ -532,10 +534,10 @@ class SolarSimulator:
         the supply reports a fault or the lamp does not light within ``ignition_timeout_s``.
         """
         status = self.lamp_status()
-        if status.interlock:
-            raise InterlockError(f"cannot start the lamp: interlock open ({status.describe()})")
         if status.lamp_on:
             return
+        # An interlock bit here may be a trip latched since the lamp went out (START clears it)
+        # or an interlock still open: then the supply refuses START (InterlockError below).
         self._clear_esr()  # so that the ESR answering START holds START's events only
         self._lamp_command("START")
         deadline = time.monotonic() + self.ignition_timeout_s

@@ -637,7 +637,7 @@ class Turntable:
             if abs(position - target) <= self.tolerance_deg:
                 return position
         raise TurntableError(
-            f"position verification failed: target {target:g} deg, controller reports "
+            f"turntable position verification failed: target {target:g} deg, controller reports "
             f"{position:g} deg (tolerance {self.tolerance_deg:g} deg, {reads} reads)"
         )
 

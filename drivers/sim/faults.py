@@ -45,6 +45,10 @@ FAULTS: dict[str, str] = {
     "stall-hang": "SMC100 move stops half way and stays MOVING forever (event: a move)",
     "lamp-fault": "arc lamp goes out, STB fault bit, ESR device error (event: command, lamp on)",
     "interlock": "lamp supply interlock opens; lamp off, START refused (event: a command)",
+    "shutter-close": "exposure controller: the shutter closes by itself (event: a command while "
+    "it is open)",
+    "drift": "SMC100: the stage creeps 'offset_deg' (default 0.5 deg) off its position and stays "
+    "READY (event: a command at rest)",
 }
 # The camera simulator (drivers.sim.usb_camera) shares the grammar and the injector; its own
 # faults, and what "truncated" and "disconnect" mean for it, are listed in its CAMERA_FAULTS.
@@ -56,8 +60,8 @@ FAULTS.update({
 FAULT_NAMES: tuple[str, ...] = tuple(FAULTS)
 CAMERA_FAULT_NAMES: tuple[str, ...] = ("no-data", "truncated", "corrupt", "drop", "disconnect")
 _COMMON = ("no-reply", "garbled", "truncated", "disconnect")
-TURNTABLE_FAULTS: tuple[str, ...] = (*_COMMON, "stall", "stall-hang")
-SOLAR_FAULTS: tuple[str, ...] = (*_COMMON, "lamp-fault", "interlock")
+TURNTABLE_FAULTS: tuple[str, ...] = (*_COMMON, "stall", "stall-hang", "drift")
+SOLAR_FAULTS: tuple[str, ...] = (*_COMMON, "lamp-fault", "interlock", "shutter-close")
 
 #: the devices of a simulated rig and the faults each can have
 RIG_DEVICE_FAULTS: dict[str, tuple[str, ...]] = {
@@ -83,7 +87,7 @@ class FaultSpec:
         Events let through unaffected before the first one it affects.
     params : dict
         Fault-specific parameters: ``downtime_s`` (disconnect, default 0.5 s), ``at_fraction``
-        (stall, default 0.5 of the move).
+        (stall, default 0.5 of the move), ``offset_deg`` (drift, default 0.5 deg).
     """
 
     name: str

@@ -69,7 +69,11 @@ class LampSupplySim:
     """Simulated 69907-family arc-lamp power supply (one serial port).
 
     Consumes the faults ``lamp-fault`` (event: a command handled while the lamp burns) and
-    ``interlock`` (event: any command; the interlock is open while the fault fires).
+    ``interlock`` (event: any command; the interlock is open while the fault fires). An
+    interlock that opens while the lamp burns puts it out, or refuses a ``START``, and latches the
+    STB interlock bit (the front panel's indicator) until the next ``START``, ``STOP`` or ``RST``
+    (sim choice: a lamp put out by a short interlock opening is reported as such, not as a lamp
+    that is merely off).
     """
 
     reply_terminator = b"\r"
@@ -90,6 +94,9 @@ class LampSupplySim:
         self.lamp_on = False
         self.fault = False
         self.interlock_open = False
+        #: the interlock put the lamp out or refused START: its indicator stays lit until
+        #: START, STOP or RST
+        self.interlock_tripped = False
         self.esr = ESR_POWER_ON
         self._on_since = 0.0
         self._last_t = self.clock.now()
@@ -145,7 +152,7 @@ class LampSupplySim:
             value |= STB_POWER_MODE
         if self.fault:
             value |= STB_FAULT
-        if self.interlock_open:
+        if self.interlock_open or self.interlock_tripped:
             value |= STB_INTERLOCK
         if self.electrical()[3]:
             value |= STB_LIMIT
@@ -163,6 +170,7 @@ class LampSupplySim:
             self.interlock_open = self.faults.fire("interlock") is not None
             if self.interlock_open and self.lamp_on:
                 self._lamp_off()
+                self.interlock_tripped = True
             if self.lamp_on and self.faults.fire("lamp-fault") is not None:
                 self._lamp_off()
                 self.fault = True
@@ -207,7 +215,9 @@ class LampSupplySim:
         if text == "START":
             if self.interlock_open:
                 self.esr |= ESR_EXECUTION_ERROR
+                self.interlock_tripped = True  # the refusal shows on the panel until START
                 return
+            self.interlock_tripped = False
             if not self.lamp_on:
                 self.fault = False
                 self.lamp_on = True
@@ -217,10 +227,12 @@ class LampSupplySim:
         if text == "STOP":
             self._lamp_off()
             self.fault = False
+            self.interlock_tripped = False
             return
         if text == "RST":
             self._lamp_off()
             self.fault = False
+            self.interlock_tripped = False
             self._factory_settings()
             return
         match = _SET.match(text)
@@ -251,7 +263,11 @@ class LampSupplySim:
 
 
 class ShutterControllerSim:
-    """Simulated Oriel 68945 digital exposure controller driving the solar simulator's shutter."""
+    """Simulated Oriel 68945 digital exposure controller driving the solar simulator's shutter.
+
+    Consumes the fault ``shutter-close`` (event: a command received while the shutter is open;
+    the shutter closes before the command is executed, as if its exposure had ended).
+    """
 
     reply_terminator = b"\r\n"
 
@@ -275,6 +291,8 @@ class ShutterControllerSim:
             text = " ".join(line.strip().upper().split())
             if not text:
                 return []
+            if self.is_open and self.faults.fire("shutter-close") is not None:
+                self.is_open = False  # the shutter closes by itself (fault "shutter-close")
             if text == "IDN?":
                 return [self.model_id]
             if text in ("RUN?", "EXPSTATE?"):

@@ -223,7 +223,8 @@ class Smc100Sim:
     clock : SimClock
         Simulated time (``SimClock(instant=True)`` for tests that must not wait).
     faults : FaultInjector
-        Armed faults; this class consumes ``stall`` and ``stall-hang`` (one event per move).
+        Armed faults; this class consumes ``stall`` and ``stall-hang`` (one event per move) and
+        ``drift`` (one event per command received at rest).
     """
 
     reply_terminator = b"\r\n"
@@ -302,12 +303,26 @@ class Smc100Sim:
             self.state = motion.end_state
             self.motion = None
 
+    def _drift(self) -> None:
+        """Fault ``drift``: a stage at rest in READY creeps ``offset_deg`` off its position.
+
+        The controller's encoder sees it (``TP`` reads the new position) but it stays READY and
+        does not pull the stage back (sim choice: a servo that lost its holding torque); the
+        set-point is unchanged, so the next ``PA`` moves from where the stage really is.
+        """
+        if self.motion is not None or self.state not in READY_STATES:
+            return
+        spec = self.faults.fire("drift")
+        if spec is not None:
+            self.position += float(spec.params.get("offset_deg", 0.5))
+
     # -- line handling -----------------------------------------------------------------------
     def handle_line(self, line: str) -> list[str]:
         """Execute one command line; return the reply lines (possibly none)."""
         with self._lock:
             self._advance()
             self.commands_seen += 1
+            self._drift()
             if self._busy_until is not None:
                 return []  # rebooting / saving to flash: deaf
             text = "".join(line.split())  # blanks are ignored anywhere (manual 5.3)

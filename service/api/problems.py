@@ -14,7 +14,8 @@ status with no kind of its own, its ``title`` then the status' reason phrase), `
 kind's short name, ``status`` the HTTP status, ``detail`` a sentence saying what went wrong in
 this request. Invalid input (422) adds ``errors``, one ``{field, message}`` per field, the field
 named as a path (``camera.fx_px``, ``poses[3].turntable_deg``; ``body`` for the body as a
-whole); a device fault (503) adds ``fault``, the driver's error class (``DeviceTimeoutError``).
+whole); a device fault (503) adds ``fault``, the driver's error class (``DeviceTimeoutError``),
+and for a device read back off its target ``device``, ``target`` and ``read_back``.
 A server error (500) says only that it happened: its traceback goes to the service's log. A
 file or database error that says the disk is full, wherever it comes from, is the 507 problem
 naming the request whose data could not be written.
@@ -134,6 +135,12 @@ class Problem(_ProblemFields):
 
     fault: str | None = Field(None, description="Device faults (503): the driver's error class, "
                               "e.g. `DeviceTimeoutError`.")
+    device: str | None = Field(None, description="Device faults (503) of a device read back off "
+                               "its target: the device, e.g. `solar simulator lamp`.")
+    target: str | None = Field(None, description="With `device`: the state asked for, e.g. "
+                               "`1 sun`.")
+    read_back: str | None = Field(None, description="With `device`: the state read back, e.g. "
+                                  "`0.000 sun`.")
 
 
 class ValidationProblem(_ProblemFields):
@@ -208,7 +215,8 @@ async def _invalid_input(_: Request, exc: InvalidInputError) -> JSONResponse:
 
 async def _device_error(_: Request, exc: DeviceError) -> JSONResponse:
     return problem_response(PROBLEM_TYPES["device-fault"], 503, str(exc),
-                            fault=type(exc).__name__)
+                            fault=type(exc).__name__, device=exc.device,
+                            target=exc.target, read_back=exc.read_back)
 
 
 async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:

@@ -13,6 +13,7 @@ from typing import Any
 from sqlalchemy.orm import sessionmaker
 
 from drivers.errors import DeviceError, DeviceTimeoutError
+from drivers.rig import Rig
 from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.poses import check_angle
 from service.lab.rig_lease import RigLease
@@ -42,11 +43,33 @@ def status(lease: RigLease, simulated: bool) -> dict[str, Any]:
                                         "status": rig.turntable.status().describe()}),
             _read("solar_simulator", lambda: {**solar_state(lease),
                                               "status": rig.solar.status().describe()}),
-            _read("camera", lambda: {**rig.camera.identity().to_dict(),
-                                     "use_case": rig.camera.use_case.name}),
+            _camera(rig),
         ]
     return {"simulated": simulated, "campaign_id": lease.campaign_id,
             "calibration_id": lease.calibration_id, "devices": devices}
+
+
+def _camera(rig: Rig) -> dict[str, Any]:
+    """The camera's entry: what its driver has cached, and not ok while its captures fail.
+
+    Its identity is cached at connection, so it alone would show a camera that delivers no
+    frame as ok; the rig's record of the last captures (:meth:`Rig.camera_health`) says
+    whether it delivers (``details.captures``): after a failed capture the entry is not ok and
+    ``error`` names how many captures failed in a row and the last one's error (a
+    ``DeviceTimeoutError``: no frame within the read timeout). The next capture that delivers
+    its frames makes it ok again.
+    """
+    entry = _read("camera", lambda: {**rig.camera.identity().to_dict(),
+                                     "use_case": rig.camera.use_case.name})
+    health = rig.camera_health()
+    failures = health["failures_in_row"]
+    if entry["ok"]:
+        entry["details"]["captures"] = health
+        if failures:
+            entry.update(ok=False, error=(
+                f"CameraFailing: {failures} capture{'s' if failures > 1 else ''} in a row "
+                f"failed; the last: {health['last_error']}"))
+    return entry
 
 
 def turntable_position(lease: RigLease) -> dict[str, Any]:
@@ -90,11 +113,10 @@ def solar_state(lease: RigLease) -> dict[str, Any]:
 
 
 def set_lamp(lease: RigLease, on: bool) -> dict[str, Any]:
+    """The operator's lamp switch; lighting it is how a lamp that went out is relit (a pose
+    does not relight it: :meth:`drivers.rig.Rig.apply`)."""
     with lease.manual() as rig:
-        if on:
-            rig.solar.lamp_on()
-        else:
-            rig.solar.lamp_off()
+        rig.switch_lamp(on)
     return solar_state(lease)
 
 

@@ -76,8 +76,9 @@ def capture_for_fit(
         current(pose, i)
         with rig.hold():
             # The fit reads the camera's own light: the solar simulator's shutter is closed.
-            rig.apply(RigState(pose.turntable_deg, 0.0, shutter_open=False))
-            captures.append(average_frames(rig.capture(frames)))
+            target = RigState(pose.turntable_deg, 0.0, shutter_open=False)
+            rig.apply(target)
+            captures.append(average_frames(rig.capture(frames, target=target)))
     return captures
 
 

@@ -143,13 +143,21 @@ def check_spp(spp: int | None, settings: Settings) -> int:
 def measure(
     rig: Rig, store: FrameStore, plan: PosePlan, stable_timeout_s: float | None
 ) -> Measurement:
-    """Stage 1. Holds the rig for the moves and the capture; device faults propagate."""
+    """Stage 1. Holds the rig for the moves and the capture; device faults propagate.
+
+    The rig state is checked against the plan's target after the moves and before and after
+    the exposure (:meth:`Rig.apply`, :meth:`Rig.capture`): a device that was not in its target
+    state for the whole exposure raises a :class:`~drivers.errors.DeviceError` naming it
+    before anything is stored.
+    """
     t0 = time.perf_counter()
     with rig.hold():
         wait = stable_timeout_s if plan.solar_suns > 0 else None
         state = rig.apply(plan.target, wait_stable_s=wait)
         t1 = time.perf_counter()
-        raws = rig.capture(1 if plan.fitted is None else 2)
+        # read back before and after the exposure: a device off its target raises, nothing
+        # is stored (a lamp that went out, a shutter that closed, a stage that crept away)
+        raws = rig.capture(1 if plan.fitted is None else 2, target=plan.target)
         use_case = rig.camera.use_case
     raw = raws[0]
     t2 = time.perf_counter()

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import re
 import threading
 import time
 
@@ -13,6 +15,8 @@ from drivers.errors import (
     DeviceDisconnectedError,
     DeviceInputError,
     DeviceTimeoutError,
+    InterlockError,
+    LampFaultError,
     LimitError,
     SolarSimulatorError,
     TurntableError,
@@ -253,13 +257,85 @@ def test_a_lamp_fault_after_the_last_lamp_command_is_caught_by_the_read_back(req
     assert any("relight the lamp" in m for m in messages), messages
 
 
-def test_a_lamp_that_went_out_is_relit_by_the_next_apply_and_logged(rig, caplog):
+def test_a_lamp_that_went_out_is_not_relit_by_the_next_apply(rig):
+    """The operator is told and relights it; a pose never does so silently."""
     rig.apply(RigState(10.0, 1.0, True))
     rig.sims["solar"].models["lamp"].lamp_on = False  # the arc dies between two poses
-    with caplog.at_level("WARNING", logger="drivers.rig"):
-        state = rig.apply(RigState(20.0, 1.0, True))
-    assert state.solar_suns == pytest.approx(1.0, abs=0.02)
-    assert any("lamp went out" in r.getMessage() for r in caplog.records)
+    with pytest.raises(LampFaultError, match=r"^solar simulator lamp: went out by itself .*"
+                       r"does not relight it: relight the lamp"):
+        rig.apply(RigState(20.0, 1.0, True))
+    assert not rig.sims["solar"].models["lamp"].lamp_on
+    rig.switch_lamp(True)  # the operator relights it (POST /api/v1/devices/solar/lamp)
+    assert rig.apply(RigState(20.0, 1.0, True)).solar_suns == pytest.approx(1.0, abs=0.02)
+
+
+def test_a_lamp_put_out_on_purpose_is_lit_by_the_next_pose(rig):
+    rig.apply(RigState(10.0, 1.0, True))
+    rig.apply(RigState(10.0, 0.0, False))  # a dark pose puts it out
+    assert rig.apply(RigState(20.0, 1.0, True)).solar_suns == pytest.approx(1.0, abs=0.02)
+    rig.switch_lamp(False)  # the operator puts it out
+    assert rig.apply(RigState(20.0, 1.0, True)).solar_suns == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.parametrize("skip", range(6))
+def test_capture_with_a_target_refuses_a_lamp_that_went_out_around_the_exposure(
+    rig, requests_seen, skip
+):
+    """The lamp goes out at any lamp command of a capture: before the exposure (the frame is
+    exposed in the dark) or after it (unknown when): a device error naming the lamp, target and
+    read-back, never frames."""
+    target = RigState(20.0, 1.0, True)
+    rig.apply(target)
+    rig.sims["solar"].servers["lamp"].faults.inject(f"lamp-fault:1@{skip}")
+    try:
+        frames = rig.capture(1, target=target)
+    except LampFaultError as exc:
+        assert re.search(r"^solar simulator lamp: lamp (fault|out) (before|after) the exposure: "
+                         r"target 1 sun, read back 0\.000 sun", str(exc)), str(exc)
+        assert (exc.device, exc.target, exc.read_back) == ("solar simulator lamp", "1 sun",
+                                                           "0.000 sun")
+        return
+    exposed = requests_seen[-1].rig_state  # what the simulated camera really exposed
+    assert exposed.solar_suns == pytest.approx(1.0, abs=0.02)
+    assert frames[0].meta["rig"]["solar_suns"] == pytest.approx(1.0, abs=0.02)
+    assert frames[0].meta["rig_after"]["solar_suns"] == pytest.approx(1.0, abs=0.02)
+    assert skip >= 4  # the capture's own lamp commands (two reads, two checks) came first
+
+
+def test_capture_checks_the_rig_state_a_camera_puts_in_its_frames(rig):
+    """A camera that reports the rig state in a frame's metadata is held to the target too."""
+    target = RigState(20.0, 1.0, True)
+    rig.apply(target)
+    camera_capture = rig.camera.capture
+
+    def reporting(n):
+        return [dataclasses.replace(f, meta={**f.meta, "rig": {
+            "turntable_angle_deg": 20.0, "solar_suns": 0.0, "shutter_open": True}})
+            for f in camera_capture(n)]
+
+    rig.camera.capture = reporting
+    with pytest.raises(SolarSimulatorError, match=r"read back 0\.000 sun in the camera's frame "
+                       r"metadata: target 1 sun") as info:
+        rig.capture(1, target=target)
+    assert (info.value.device, info.value.read_back) == ("solar simulator lamp", "0.000 sun")
+
+
+def test_the_interlock_is_named_wherever_it_puts_the_lamp_out(rig):
+    """The interlock opens for one command at each lamp command of apply (lighting, setting
+    the level, waiting for stability, reading back): every error names it."""
+    target = RigState(20.0, 1.0, True)
+    lamp = rig.sims["solar"].servers["lamp"].faults
+    named = 0
+    for skip in range(20):
+        lamp.clear()
+        rig.apply(RigState(20.0, 0.0, False))  # a dark pose: the lamp out on purpose
+        lamp.inject(f"interlock:1@{skip}")
+        try:
+            rig.apply(target, wait_stable_s=2.0)
+        except SolarSimulatorError as exc:
+            assert isinstance(exc, InterlockError) and "interlock" in str(exc), (skip, str(exc))
+            named += 1
+    assert named >= 10
 
 
 @pytest.mark.parametrize(

@@ -355,3 +355,19 @@ def test_pysmc100_client_transcript():
                 reply = port.read_until(b"\r\n")
                 assert reply == expected
                 assert all(33 <= b < 127 for b in reply[:-2])
+
+
+# -- the drift fault -------------------------------------------------------------------------
+def test_drift_moves_a_stage_at_rest_off_its_position_and_it_stays_ready():
+    sim, wall = make_sim()
+    home(sim, wall)
+    ask(sim, "1PA20")
+    wall.t += 100.0
+    assert ask(sim, "1TP") == "1TP20"
+    sim.faults.inject("drift:1@1", offset_deg=0.25)
+    assert ask(sim, "1TP") == "1TP20"  # the first command at rest is let through
+    assert ask(sim, "1TP") == "1TP20.25"  # crept off before this one was answered
+    assert ask(sim, "1TS") == "1TS000033" and ask(sim, "1TH") == "1TH20"  # READY, set-point kept
+    ask(sim, "1PA20")  # the next move starts from where the stage really is
+    wall.t += 100.0
+    assert ask(sim, "1TP") == "1TP20"

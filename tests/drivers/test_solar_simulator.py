@@ -201,3 +201,26 @@ def test_disconnect_and_reconnect_of_the_lamp_port(solar_sim):
         solar.set_power_w(410.0)
         assert solar.power_preset_w() == 410.0
         assert server.disconnects == 1
+
+
+def test_shutter_close_fault_closes_an_open_shutter_by_itself(solar_sim):
+    with make_solar(solar_sim) as solar:
+        solar.open_shutter()
+        solar_sim.servers["shutter"].inject("shutter-close:1")
+        assert not solar.shutter_is_open()  # closed before the query was answered
+        assert not solar_sim.models["shutter"].is_open
+        solar.open_shutter()
+        assert solar.shutter_is_open()
+
+
+def test_an_interlock_that_put_the_lamp_out_stays_on_the_status_until_relit(solar_sim):
+    """A short interlock opening (one command) latches the STB interlock bit: a lamp found out
+    afterwards is reported as put out by the interlock, not as merely off."""
+    with make_solar(solar_sim) as solar:
+        solar.lamp_on()
+        solar_sim.servers["lamp"].inject("interlock:1")
+        with pytest.raises(InterlockError, match=r"interlock open \(or tripped"):
+            solar.wait_until_stable(timeout_s=1.0)
+        assert solar.status().interlock and not solar.is_lamp_on()
+        solar.lamp_on()  # the interlock is closed again: START clears the latch and lights
+        assert solar.is_lamp_on() and not solar.status().interlock

@@ -78,8 +78,9 @@ def test_a_lamp_fault_pauses_the_campaign_and_no_pose_is_stored_without_its_ligh
                                                           "solar_suns": 1.0})
     assert res.status_code in (409, 503), res.text
 
-    lamp_faults(client).clear()
-    client.app.state.lab.lease.rig.sims["solar"].models["lamp"].fault = False  # lamp replaced
+    lamp_faults(client).clear()  # the lamp replaced; the operator relights it (a pose won't)
+    res = client.post("/api/v1/devices/solar/lamp", headers=AUTH, json={"on": True})
+    assert res.status_code == 200 and res.json()["lamp_on"] is True, res.text
     res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)
     assert res.status_code == 200, res.text
     status = wait_campaign(client, cid, lambda s: s["state"] != "running")
