@@ -187,7 +187,7 @@ def calibrate_rig(
     def capture(state: RigState, n: int, keep: bool = False) -> AveragedCapture:
         nonlocal done, frames_used
         rig.apply(state)
-        cap = average_frames(rig.capture(n), keep_frames=keep)
+        cap = average_frames(rig.capture(n, target=state), keep_frames=keep)
         frames_used += n
         done += 1
         return cap

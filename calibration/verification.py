@@ -88,8 +88,9 @@ def compare_twins(
     turntable_ids = [i for i, o in enumerate(spec.objects) if o.on_turntable]
     for k, angle in enumerate(angles_deg):
         progress(k, len(angles_deg), f"pose {k + 1} at {angle:+.0f} deg")
-        state = rig.apply(RigState(float(angle), solar_suns, solar_suns > 0.0))
-        first, second = rig.capture(2)
+        target = RigState(float(angle), solar_suns, solar_suns > 0.0)
+        state = rig.apply(target)
+        first, second = rig.capture(2, target=target)  # checked against it for the exposure
         twins = {}
         for name, twin in (("nominal", None), ("calibrated", calibration)):
             scene = build_scene(spec, base_dir, turntable_deg=state.turntable_angle_deg,

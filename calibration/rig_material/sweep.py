@@ -80,7 +80,7 @@ def capture_sweep(rig: Rig, plan: MaterialSweepPlan, progress: Progress = no_pro
 
 def _capture(rig: Rig, state: RigState, n: int) -> AveragedCapture:
     rig.apply(state)
-    return average_frames(rig.capture(n), keep_frames=True)
+    return average_frames(rig.capture(n, target=state), keep_frames=True)
 
 
 def _drop_frames(capture: AveragedCapture) -> AveragedCapture:

@@ -126,8 +126,9 @@ def fit_object_command(
         with rig.hold():
             for a in angle_list:
                 err_console.print(f"capturing {frames} frames at {a:g} deg")
-                rig.apply(RigState(a, 0.0, False))
-                captures.append(average_frames(rig.capture(frames)))
+                target = RigState(a, 0.0, False)
+                rig.apply(target)
+                captures.append(average_frames(rig.capture(frames, target=target)))
     try:
         err_console.print("fitting the object twin")
         fit = fit_object(source.spec, source.base_dir, cal, captures, rig_name=rig_name)
