@@ -191,9 +191,17 @@ class Page:
 
     # -- acting --------------------------------------------------------------------------------
     def click(self, css: str) -> None:
-        el = self.wait(lambda: self.find(css), f"{css} to exist")
-        self.wait(lambda: el.is_enabled() and el.is_displayed(), f"{css} to be clickable")
-        el.click()
+        """Click the element ``css`` names once it is there, enabled and shown; found afresh on
+        every try (a fragment the page fills again replaces its elements), and clicked again
+        if it was replaced between finding and clicking."""
+        def clicked() -> bool:
+            el = self.find(css)
+            if not (el.is_enabled() and el.is_displayed()):
+                return False
+            el.click()  # a StaleElementReferenceException here is one more try
+            return True
+
+        self.wait(clicked, f"{css} to be clicked")
 
     def fill(self, css: str, value: str) -> None:
         el = self.wait(lambda: self.find(css), f"{css} to exist")
