@@ -20,6 +20,8 @@ from sim_core.errors import InvalidInputError
 
 #: cells of the drawn pattern per marker bit when the sizes are not on one grid
 _FINE_CELL_M = 0.002
+#: largest side of a board's drawn pattern [cells] (its quads grow with it)
+MAX_PATTERN_CELLS = 4096
 
 
 def _cv2():
@@ -37,6 +39,66 @@ def aruco_dictionary(name: str):
         raise InvalidInputError("dictionary", f"unknown ArUco dictionary {name!r}; allowed: "
                                 f"{allowed}")
     return cv2.aruco.getPredefinedDictionary(code)
+
+
+def dictionary_names() -> list[str]:
+    """The names of OpenCV's predefined ArUco dictionaries."""
+    cv2 = _cv2()
+    return sorted(n for n in dir(cv2.aruco)
+                  if n.startswith("DICT_") and isinstance(getattr(cv2.aruco, n), int))
+
+
+def markers_needed(squares_x: int, squares_y: int) -> int:
+    """ArUco markers on a ChArUco board: one in every other square (OpenCV's layout).
+
+    >>> markers_needed(5, 5), markers_needed(40, 40)
+    (12, 800)
+    """
+    return squares_x * squares_y // 2
+
+
+def board_problem(board) -> str | None:
+    """Why a ``charuco_board`` mesh spec cannot be drawn, or None (a checkerboard always can).
+
+    Its dictionary must exist and hold a marker for every other square; the pattern is drawn
+    with at most :data:`MAX_PATTERN_CELLS` cells a side, a marker with at least one cell per bit
+    and border bit.
+    """
+    if board.kind != "charuco_board":
+        return None
+    names = dictionary_names()
+    if board.dictionary not in names:
+        return f"dictionary: unknown ArUco dictionary {board.dictionary!r}; allowed: {names}"
+    dictionary = aruco_dictionary(board.dictionary)
+    capacity = int(dictionary.bytesList.shape[0])
+    need = markers_needed(board.squares_x, board.squares_y)
+    if need > capacity:
+        return (f"squares_x, squares_y: a {board.squares_x} x {board.squares_y} board needs "
+                f"{need} markers; {board.dictionary} holds {capacity}: use at most "
+                f"{2 * capacity + 1} squares in all, or a dictionary with more markers (e.g. "
+                "DICT_4X4_1000)")
+    cell, w, h = _pattern_grid(board, dictionary)
+    if max(w, h) > MAX_PATTERN_CELLS:
+        return (f"square_m: the pattern is drawn at {cell * 1e3:.3g} mm cells, {w} x {h} of them; "
+                f"allowed: at most {MAX_PATTERN_CELLS} a side (smaller squares, or a marker_m that "
+                "divides the square into whole cells)")
+    bits = dictionary.markerSize + 2
+    if board.marker_m / cell < bits - 1e-6:
+        return (f"marker_m: {board.marker_m:g} m is drawn with fewer than {bits} cells of "
+                f"{cell * 1e3:.3g} mm (one per bit of {board.dictionary} and its border); allowed:"
+                f" at least {bits * cell:.3g} m")
+    return None
+
+
+def _pattern_grid(board, dictionary) -> tuple[float, int, int]:
+    """Cell size [m] of a ChArUco board's drawn pattern and its width and height [cells]."""
+    cell = board.marker_m / (dictionary.markerSize + 2)
+    per_square = board.square_m / cell
+    margin = (board.square_m - board.marker_m) / 2.0 / cell
+    if abs(per_square - round(per_square)) > 1e-6 or abs(margin - round(margin)) > 1e-6:
+        cell = _FINE_CELL_M
+    return (cell, round(board.squares_x * board.square_m / cell),
+            round(board.squares_y * board.square_m / cell))
 
 
 def cv2_board(board):
@@ -58,14 +120,7 @@ def pattern_cells(board) -> tuple[np.ndarray, float]:
     if board.kind == "checkerboard":
         r, c = np.mgrid[0 : board.squares_y, 0 : board.squares_x]
         return ((r + c) % 2) == 1, board.square_m
-    dictionary = aruco_dictionary(board.dictionary)
-    cell = board.marker_m / (dictionary.markerSize + 2)
-    per_square = board.square_m / cell
-    margin = (board.square_m - board.marker_m) / 2.0 / cell
-    if abs(per_square - round(per_square)) > 1e-6 or abs(margin - round(margin)) > 1e-6:
-        cell = _FINE_CELL_M
-    w = round(board.squares_x * board.square_m / cell)
-    h = round(board.squares_y * board.square_m / cell)
+    cell, w, h = _pattern_grid(board, aruco_dictionary(board.dictionary))
     img = cv2_board(board).generateImage((w, h), marginSize=0, borderBits=1)
     return img > 127, cell
 
