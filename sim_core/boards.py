@@ -77,28 +77,37 @@ def board_problem(board) -> str | None:
                 f"{need} markers; {board.dictionary} holds {capacity}: use at most "
                 f"{2 * capacity + 1} squares in all, or a dictionary with more markers (e.g. "
                 "DICT_4X4_1000)")
-    cell, w, h = _pattern_grid(board, dictionary)
+    cell, per_square, marker_cells = _pattern_grid(board, dictionary)
+    w, h = board.squares_x * per_square, board.squares_y * per_square
     if max(w, h) > MAX_PATTERN_CELLS:
         return (f"square_m: the pattern is drawn at {cell * 1e3:.3g} mm cells, {w} x {h} of them; "
                 f"allowed: at most {MAX_PATTERN_CELLS} a side (smaller squares, or a marker_m that "
                 "divides the square into whole cells)")
     bits = dictionary.markerSize + 2
-    if board.marker_m / cell < bits - 1e-6:
-        return (f"marker_m: {board.marker_m:g} m is drawn with fewer than {bits} cells of "
-                f"{cell * 1e3:.3g} mm (one per bit of {board.dictionary} and its border); allowed:"
-                f" at least {bits * cell:.3g} m")
+    if marker_cells < bits:
+        return (f"marker_m: {board.marker_m:g} m is drawn with {marker_cells} cells of "
+                f"{cell * 1e3:.3g} mm, fewer than the {bits} bits of a {board.dictionary} marker "
+                f"and its border; allowed: at least {(bits + 0.5) * cell:.3g} m")
     return None
 
 
 def _pattern_grid(board, dictionary) -> tuple[float, int, int]:
-    """Cell size [m] of a ChArUco board's drawn pattern and its width and height [cells]."""
+    """How a ChArUco board's pattern is drawn: the cell size [m], cells per square, and cells
+    per marker side.
+
+    One cell per marker bit when the square and its margin are whole numbers of them (the
+    drawing is exact); else cells of about :data:`_FINE_CELL_M`, a whole number per square, and
+    the marker rounded to whole cells (OpenCV's drawing fails on sizes that are not, issue 25).
+    """
     cell = board.marker_m / (dictionary.markerSize + 2)
     per_square = board.square_m / cell
     margin = (board.square_m - board.marker_m) / 2.0 / cell
     if abs(per_square - round(per_square)) > 1e-6 or abs(margin - round(margin)) > 1e-6:
-        cell = _FINE_CELL_M
-    return (cell, round(board.squares_x * board.square_m / cell),
-            round(board.squares_y * board.square_m / cell))
+        per_square = max(1, round(board.square_m / _FINE_CELL_M))
+        cell = board.square_m / per_square
+        margin = (board.square_m - board.marker_m) / 2.0 / cell
+    n, m = round(per_square), max(1, round(margin))  # a marker smaller than its square
+    return cell, n, n - 2 * m
 
 
 def cv2_board(board):
@@ -120,8 +129,13 @@ def pattern_cells(board) -> tuple[np.ndarray, float]:
     if board.kind == "checkerboard":
         r, c = np.mgrid[0 : board.squares_y, 0 : board.squares_x]
         return ((r + c) % 2) == 1, board.square_m
-    cell, w, h = _pattern_grid(board, aruco_dictionary(board.dictionary))
-    img = cv2_board(board).generateImage((w, h), marginSize=0, borderBits=1)
+    dictionary = aruco_dictionary(board.dictionary)
+    cell, per_square, marker_cells = _pattern_grid(board, dictionary)
+    # Drawn in cell units, so that OpenCV's squares and markers are whole pixels.
+    drawing = _cv2().aruco.CharucoBoard((board.squares_x, board.squares_y), float(per_square),
+                                        float(marker_cells), dictionary)
+    img = drawing.generateImage((board.squares_x * per_square, board.squares_y * per_square),
+                                marginSize=0, borderBits=1)
     return img > 127, cell
 
 
