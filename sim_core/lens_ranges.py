@@ -5,9 +5,12 @@ One home of the rules that scene files (``camera``), calibration and reality fil
 passes them renders without an exception or an overflow.
 
 - **Focal lengths** (``fx_px`` with the image's width, ``fy_px`` with its height): the full
-  field of view ``2 atan(n / (2 f))`` of ``n`` pixels must lie within :data:`FIELD_OF_VIEW_DEG`
-  (1 to 170 deg), i.e. ``f`` in ``[n / (2 tan 85 deg), n / (2 tan 0.5 deg)]``; for the
-  224 x 171 pico flexx ``fx_px`` in [9.8, 12834] and ``fy_px`` in [7.48, 9797].
+  field of view ``2 atan(n / (2 f))`` of ``n`` pixels at most :data:`MAX_FIELD_OF_VIEW_DEG`
+  (170 deg: towards 180 the pinhole's ``tan`` and the ``cos^4`` fall-off lose all meaning), and
+  a pixel at least :data:`MIN_PIXEL_ANGLE_RAD` wide (1e-9 rad: float64 ray directions still
+  resolve a millionth of it, for the sub-pixel samples; the hard cases' telephoto views use
+  1e-8). So ``f`` in ``[n / (2 tan 85 deg), 1e9]`` px; ``fx_px`` in [9.8, 1e9] for the pico
+  flexx's 224 pixels and ``fy_px`` in [7.48, 1e9] for its 171.
 - **Principal point**: inside the image, ``cx_px`` in ``[-0.5, width - 0.5]`` and ``cy_px`` in
   ``[-0.5, height - 0.5]`` (the image's outer pixel edges, pixel centres at integers).
 - **Distortion** (OpenCV's k1, k2, p1, p2, k3): each coefficient within
@@ -25,8 +28,10 @@ import numpy as np
 
 from sim_core.camera import CAMERA_PRESETS, distort_normalized, undistort_normalized
 
-#: allowed full field of view along each image axis [deg]
-FIELD_OF_VIEW_DEG = (1.0, 170.0)
+#: largest full field of view along an image axis [deg]
+MAX_FIELD_OF_VIEW_DEG = 170.0
+#: smallest angle a pixel may subtend [rad]: the longest focal length is its inverse [px]
+MIN_PIXEL_ANGLE_RAD = 1e-9
 #: largest magnitude of each distortion coefficient
 DISTORTION_LIMITS = {"k1": 100.0, "k2": 100.0, "p1": 1.0, "p2": 1.0, "k3": 100.0}
 #: largest error of the renderer's inverse distortion at the image's points [px]
@@ -38,14 +43,14 @@ PRESET = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
 
 
 def focal_length_range_px(size_px: int) -> tuple[float, float]:
-    """Focal lengths [px] that give ``size_px`` pixels a field of view in the allowed range.
+    """Focal lengths [px] that give ``size_px`` pixels at most the widest field of view, and
+    each pixel at least the smallest angle.
 
     >>> [round(f, 2) for f in focal_length_range_px(224)]
-    [9.8, 12833.93]
+    [9.8, 1000000000.0]
     """
-    lo_deg, hi_deg = FIELD_OF_VIEW_DEG
-    return (0.5 * size_px / math.tan(math.radians(hi_deg / 2.0)),
-            0.5 * size_px / math.tan(math.radians(lo_deg / 2.0)))
+    return (0.5 * size_px / math.tan(math.radians(MAX_FIELD_OF_VIEW_DEG / 2.0)),
+            1.0 / MIN_PIXEL_ANGLE_RAD)
 
 
 def focal_length_problem(value: float, size_px: int, side: str) -> str | None:
@@ -54,15 +59,15 @@ def focal_length_problem(value: float, size_px: int, side: str) -> str | None:
     >>> focal_length_problem(208.33, 224, "wide") is None
     True
     >>> print(focal_length_problem(1e-300, 224, "wide"))  # doctest: +NORMALIZE_WHITESPACE
-    1e-300 px is outside [9.799, 1.283e+04] px: the focal length that gives a 224 px wide
-    image a field of view of 1 to 170 deg
+    1e-300 px is outside [9.799, 1e+09] px: a 224 px wide image may see at most 170 deg, a
+    pixel at least 1e-09 rad
     """
     lo, hi = focal_length_range_px(size_px)
     if math.isfinite(value) and lo <= value <= hi:
         return None
-    return (f"{value:.6g} px is outside [{lo:.4g}, {hi:.4g}] px: the focal length that gives a "
-            f"{size_px} px {side} image a field of view of {FIELD_OF_VIEW_DEG[0]:g} to "
-            f"{FIELD_OF_VIEW_DEG[1]:g} deg")
+    return (f"{value:.6g} px is outside [{lo:.4g}, {hi:.4g}] px: a {size_px} px {side} image may "
+            f"see at most {MAX_FIELD_OF_VIEW_DEG:g} deg, a pixel at least "
+            f"{MIN_PIXEL_ANGLE_RAD:g} rad")
 
 
 def principal_point_problem(value: float, size_px: int, side: str) -> str | None:

@@ -153,8 +153,9 @@ def _pixel_offset_kind(v: Any) -> str:
 class DepthErrors(_Strict):
     """The camera's systematic phase (depth) errors; see the module docstring for the model.
 
-    Checked where they are parsed: the wiggling's slope (:data:`MAX_WIGGLING_SLOPE`) and that a
-    fixed-pattern grid covers the preset's image (:data:`PRESET_SHAPE`).
+    The wiggling's slope is checked here (:data:`MAX_WIGGLING_SLOPE`); that a fixed-pattern
+    grid covers the image, by the file's camera (:class:`CameraParameters`: the preset's image)
+    and when a simulation builds the model (its image).
     """
 
     phase_offset_rad: list[Annotated[float, Field(ge=-MAX_PHASE_ERROR_RAD, le=MAX_PHASE_ERROR_RAD,
@@ -181,15 +182,6 @@ class DepthErrors(_Strict):
                     "phase)")
         return v
 
-    @field_validator("pixel_offset_m")
-    @classmethod
-    def _grid_covers_the_image(cls, v):
-        if isinstance(v, PixelOffsetGrid):
-            problem = grid_coverage_problem(v, PRESET_SHAPE)
-            if problem is not None:
-                raise range_error(problem)
-        return v
-
 
 class CameraParameters(_Strict):
     """What the camera really is: intrinsics, distortion, depth errors, sensor."""
@@ -207,6 +199,15 @@ class CameraParameters(_Strict):
     def _a_lens_for_the_preset(cls, v, info: ValidationInfo):
         # The preset's 224 x 171 image: the rule and its ranges are the scene's camera's.
         return check_lens(info.field_name, v, info.data)
+
+    @field_validator("depth")
+    @classmethod
+    def _grid_covers_the_preset(cls, v: DepthErrors | None):
+        if v is not None and isinstance(v.pixel_offset_m, PixelOffsetGrid):
+            problem = grid_coverage_problem(v.pixel_offset_m, PRESET_SHAPE)
+            if problem is not None:
+                raise range_error(f"pixel_offset_m.{problem}")
+        return v
 
 
 class IlluminationParameters(_Strict):
