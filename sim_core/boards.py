@@ -20,6 +20,8 @@ from sim_core.errors import InvalidInputError
 
 #: cells of the drawn pattern per marker bit when the sizes are not on one grid
 _FINE_CELL_M = 0.002
+#: largest side of a board's drawn pattern [cells] (its quads grow with it)
+MAX_PATTERN_CELLS = 4096
 
 
 def _cv2():
@@ -37,6 +39,75 @@ def aruco_dictionary(name: str):
         raise InvalidInputError("dictionary", f"unknown ArUco dictionary {name!r}; allowed: "
                                 f"{allowed}")
     return cv2.aruco.getPredefinedDictionary(code)
+
+
+def dictionary_names() -> list[str]:
+    """The names of OpenCV's predefined ArUco dictionaries."""
+    cv2 = _cv2()
+    return sorted(n for n in dir(cv2.aruco)
+                  if n.startswith("DICT_") and isinstance(getattr(cv2.aruco, n), int))
+
+
+def markers_needed(squares_x: int, squares_y: int) -> int:
+    """ArUco markers on a ChArUco board: one in every other square (OpenCV's layout).
+
+    >>> markers_needed(5, 5), markers_needed(40, 40)
+    (12, 800)
+    """
+    return squares_x * squares_y // 2
+
+
+def board_problem(board) -> str | None:
+    """Why a ``charuco_board`` mesh spec cannot be drawn, or None (a checkerboard always can).
+
+    Its dictionary must exist and hold a marker for every other square; the pattern is drawn
+    with at most :data:`MAX_PATTERN_CELLS` cells a side, a marker with at least one cell per bit
+    and border bit.
+    """
+    if board.kind != "charuco_board":
+        return None
+    names = dictionary_names()
+    if board.dictionary not in names:
+        return f"dictionary: unknown ArUco dictionary {board.dictionary!r}; allowed: {names}"
+    dictionary = aruco_dictionary(board.dictionary)
+    capacity = int(dictionary.bytesList.shape[0])
+    need = markers_needed(board.squares_x, board.squares_y)
+    if need > capacity:
+        return (f"squares_x, squares_y: a {board.squares_x} x {board.squares_y} board needs "
+                f"{need} markers; {board.dictionary} holds {capacity}: use at most "
+                f"{2 * capacity + 1} squares in all, or a dictionary with more markers (e.g. "
+                "DICT_4X4_1000)")
+    cell, per_square, marker_cells = _pattern_grid(board, dictionary)
+    w, h = board.squares_x * per_square, board.squares_y * per_square
+    if max(w, h) > MAX_PATTERN_CELLS:
+        return (f"square_m: the pattern is drawn at {cell * 1e3:.3g} mm cells, {w} x {h} of them; "
+                f"allowed: at most {MAX_PATTERN_CELLS} a side (smaller squares, or a marker_m that "
+                "divides the square into whole cells)")
+    bits = dictionary.markerSize + 2
+    if marker_cells < bits:
+        return (f"marker_m: {board.marker_m:g} m is drawn with {marker_cells} cells of "
+                f"{cell * 1e3:.3g} mm, fewer than the {bits} bits of a {board.dictionary} marker "
+                f"and its border; allowed: at least {(bits + 0.5) * cell:.3g} m")
+    return None
+
+
+def _pattern_grid(board, dictionary) -> tuple[float, int, int]:
+    """How a ChArUco board's pattern is drawn: the cell size [m], cells per square, and cells
+    per marker side.
+
+    One cell per marker bit when the square and its margin are whole numbers of them (the
+    drawing is exact); else cells of about :data:`_FINE_CELL_M`, a whole number per square, and
+    the marker rounded to whole cells (OpenCV's drawing fails on sizes that are not, issue 25).
+    """
+    cell = board.marker_m / (dictionary.markerSize + 2)
+    per_square = board.square_m / cell
+    margin = (board.square_m - board.marker_m) / 2.0 / cell
+    if abs(per_square - round(per_square)) > 1e-6 or abs(margin - round(margin)) > 1e-6:
+        per_square = max(1, round(board.square_m / _FINE_CELL_M))
+        cell = board.square_m / per_square
+        margin = (board.square_m - board.marker_m) / 2.0 / cell
+    n, m = round(per_square), max(1, round(margin))  # a marker smaller than its square
+    return cell, n, n - 2 * m
 
 
 def cv2_board(board):
@@ -59,14 +130,12 @@ def pattern_cells(board) -> tuple[np.ndarray, float]:
         r, c = np.mgrid[0 : board.squares_y, 0 : board.squares_x]
         return ((r + c) % 2) == 1, board.square_m
     dictionary = aruco_dictionary(board.dictionary)
-    cell = board.marker_m / (dictionary.markerSize + 2)
-    per_square = board.square_m / cell
-    margin = (board.square_m - board.marker_m) / 2.0 / cell
-    if abs(per_square - round(per_square)) > 1e-6 or abs(margin - round(margin)) > 1e-6:
-        cell = _FINE_CELL_M
-    w = round(board.squares_x * board.square_m / cell)
-    h = round(board.squares_y * board.square_m / cell)
-    img = cv2_board(board).generateImage((w, h), marginSize=0, borderBits=1)
+    cell, per_square, marker_cells = _pattern_grid(board, dictionary)
+    # Drawn in cell units, so that OpenCV's squares and markers are whole pixels.
+    drawing = _cv2().aruco.CharucoBoard((board.squares_x, board.squares_y), float(per_square),
+                                        float(marker_cells), dictionary)
+    img = drawing.generateImage((board.squares_x * per_square, board.squares_y * per_square),
+                                marginSize=0, borderBits=1)
     return img > 127, cell
 
 

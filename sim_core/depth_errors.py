@@ -24,13 +24,20 @@ from scipy import ndimage
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.errors import InvalidInputError
 from sim_core.tof import phase_from_phasor
-from sim_core.twin_file import DepthErrors, PixelOffsetGrid, PixelOffsetPattern
+from sim_core.twin_file import (
+    MAX_WIGGLING_SLOPE,
+    DepthErrors,
+    PixelOffsetGrid,
+    PixelOffsetPattern,
+    grid_coverage_problem,
+)
+
+__all__ = ["MAX_WIGGLING_SLOPE", "DepthErrorModel"]
 
 TWO_PI = 2.0 * np.pi
-#: fixed-point iterations of the inversion; converges as (sum a_j h_j)^n (< 0.5 by the check)
+#: fixed-point iterations of the inversion; converges as (sum a_j h_j)^n (< 0.5: the file's
+#: rule, :class:`sim_core.twin_file.DepthErrors`)
 CORRECTION_ITERATIONS = 30
-#: largest sum of a_j h_j the inversion accepts: beyond it phi -> phi_measured is not monotonic
-MAX_WIGGLING_SLOPE = 0.5
 
 
 def range_to_phase_rad(range_m: np.ndarray | float, frequency_hz: float) -> np.ndarray:
@@ -64,14 +71,10 @@ def grid_pixel_offsets_m(grid: PixelOffsetGrid, shape: tuple[int, int]) -> np.nd
     """A calibration's fixed pattern: its grid interpolated to every pixel (cubic spline)."""
     knots = np.asarray(grid.offsets_mm, dtype=np.float64) * 1e-3
     h, w = shape
-    need = (int(np.ceil((h - 1) / grid.grid_step_px)) + 1, int(np.ceil((w - 1) / grid.grid_step_px))
-            + 1)
-    if knots.shape[0] < need[0] or knots.shape[1] < need[1]:
-        raise InvalidInputError(
-            "camera.depth.pixel_offset_m.offsets_mm",
-            f"a {knots.shape[0]} x {knots.shape[1]} grid at {grid.grid_step_px} px steps does not "
-            f"cover a {h} x {w} image: it needs at least {need[0]} x {need[1]} knots",
-        )
+    problem = grid_coverage_problem(grid, shape)  # the file checked the preset's image
+    if problem is not None:
+        raise InvalidInputError("camera.depth.pixel_offset_m.offsets_mm",
+                                problem.removeprefix("offsets_mm: "))
     rows, cols = np.mgrid[0:h, 0:w].astype(np.float64) / grid.grid_step_px
     order = 3 if min(knots.shape) >= 4 else 1
     return ndimage.map_coordinates(knots, [rows, cols], order=order, mode="nearest")
@@ -156,14 +159,6 @@ class DepthErrorModel:
                     f"{t.frequency_index} is outside [0, {n_f - 1}] for {n_f} frequencies",
                 )
             terms.append((t.frequency_index, t.harmonic, t.amplitude_rad, t.phase_rad))
-        for k in range(n_f):
-            slope = sum(a * h for fi, h, a, _ in terms if fi is None or fi == k)
-            if slope >= MAX_WIGGLING_SLOPE:
-                raise InvalidInputError(
-                    "camera.depth.wiggling",
-                    f"sum of amplitude_rad x harmonic is {slope:.3g} for frequency {k}; it must "
-                    f"stay below {MAX_WIGGLING_SLOPE} (a larger wiggling folds the phase)",
-                )
         pix = spec.pixel_offset_m
         if isinstance(pix, PixelOffsetPattern):
             pixel = random_pixel_offsets_m(pix, shape)

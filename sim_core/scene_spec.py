@@ -7,12 +7,25 @@ spec into a posed :class:`~sim_core.scene.Scene`.
 
 from __future__ import annotations
 
+import math
 from itertools import pairwise
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
+from sim_core import lens_ranges
+from sim_core.boards import board_problem
 from sim_core.errors import SceneError
 from sim_core.files import StructuredFileError, load_structured
 from sim_core.lights import SUNS_RANGE
@@ -21,6 +34,40 @@ from sim_core.sensor import SENSOR_BOUNDS
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
 PositiveLength = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+
+#: allowed length of a direction (normalised when used) [any unit]
+DIRECTION_LENGTH_RANGE = (1e-6, 1e6)
+#: allowed deviation of a unit vector's length from 1 (it is normalised when used)
+UNIT_LENGTH_TOLERANCE = 0.01
+
+
+def range_error(message: str) -> PydanticCustomError:
+    """A validation error whose message is ``message`` as it is (no "Value error, " prefix)."""
+    return PydanticCustomError("out_of_range", "{message}", {"message": message})
+
+
+def _direction(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    length = math.hypot(*v)  # inf when it overflows: refused below
+    lo, hi = DIRECTION_LENGTH_RANGE
+    if not lo <= length <= hi:
+        raise range_error(f"a direction of length {length:.6g} is outside [{lo:g}, {hi:g}] "
+                          "(it is normalised when used)")
+    return v
+
+
+def _unit_vector(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    length = math.hypot(*v)
+    if not abs(length - 1.0) <= UNIT_LENGTH_TOLERANCE:
+        raise range_error(
+            f"a unit vector of length {length:.6g}; allowed: a length of 1 +- "
+            f"{UNIT_LENGTH_TOLERANCE:g} (it is normalised when used)")
+    return v
+
+
+#: a direction: finite, of length in :data:`DIRECTION_LENGTH_RANGE`, normalised when used
+Direction = Annotated[Vec3, AfterValidator(_direction)]
+#: a measured axis: a unit vector within :data:`UNIT_LENGTH_TOLERANCE`, normalised when used
+UnitVector = Annotated[Vec3, AfterValidator(_unit_vector)]
 
 
 class _Strict(BaseModel):
@@ -33,7 +80,7 @@ class PoseLookAt(_Strict):
 
     position_m: Vec3
     look_at_m: Vec3
-    up: Vec3 = (0.0, 0.0, 1.0)
+    up: Direction = (0.0, 0.0, 1.0)
 
 
 class PoseMatrix(_Strict):
@@ -47,14 +94,53 @@ class PoseMatrix(_Strict):
     ]
 
 
-class Distortion(_Strict):
-    """OpenCV radial-tangential distortion coefficients."""
+def _coefficient(name: str):
+    limit = lens_ranges.DISTORTION_LIMITS[name]
+    return Annotated[float, Field(ge=-limit, le=limit, allow_inf_nan=False)]
 
-    k1: Finite = 0.0
-    k2: Finite = 0.0
-    p1: Finite = 0.0
-    p2: Finite = 0.0
-    k3: Finite = 0.0
+
+class Distortion(_Strict):
+    """OpenCV radial-tangential distortion coefficients (bounds:
+    :data:`sim_core.lens_ranges.DISTORTION_LIMITS`; over the image: :func:`check_lens`)."""
+
+    k1: _coefficient("k1") = 0.0
+    k2: _coefficient("k2") = 0.0
+    p1: _coefficient("p1") = 0.0
+    p2: _coefficient("p2") = 0.0
+    k3: _coefficient("k3") = 0.0
+
+
+_INTRINSICS = ("fx_px", "fy_px", "cx_px", "cy_px")
+
+
+def check_lens(name: str, value, data: dict):
+    """Validate intrinsic ``name`` (``fx_px`` ... ``cy_px``, ``distortion``) against the image
+    ``data`` describes: its ``width_px`` and ``height_px`` when it has them (a scene's camera),
+    else the preset's 224 x 171 (a calibration or reality file); the rules and their reasons
+    are :mod:`sim_core.lens_ranges`'. One rule for scenes, calibrations and realities."""
+    if value is None:
+        return value
+    preset = lens_ranges.PRESET
+    width = data.get("width_px") or preset["width_px"]
+    height = data.get("height_px") or preset["height_px"]
+    if name in ("fx_px", "fy_px"):
+        size, side = (width, "wide") if name == "fx_px" else (height, "high")
+        problem = lens_ranges.focal_length_problem(value, size, side)
+    elif name in ("cx_px", "cy_px"):
+        size, side = (width, "wide") if name == "cx_px" else (height, "high")
+        problem = lens_ranges.principal_point_problem(value, size, side)
+    else:
+        if any(k not in data for k in _INTRINSICS):
+            return value  # an intrinsic is invalid: its own error says so
+        cx0, cy0 = lens_ranges.default_principal_point(width, height)
+        problem = lens_ranges.distortion_problem(
+            width, height, data["fx_px"] or preset["fx_px"], data["fy_px"] or preset["fy_px"],
+            cx0 if data["cx_px"] is None else data["cx_px"],
+            cy0 if data["cy_px"] is None else data["cy_px"],
+            (value.k1, value.k2, value.p1, value.p2, value.k3))
+    if problem is not None:
+        raise range_error(problem)
+    return value
 
 
 def _sensor_range(name: str, kind: type = float):
@@ -94,8 +180,8 @@ class CameraSpec(_Strict):
     ) = Field(None, min_length=1, max_length=4)
     width_px: Annotated[int, Field(ge=1, le=4096)] | None = None
     height_px: Annotated[int, Field(ge=1, le=4096)] | None = None
-    fx_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] | None = None
-    fy_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] | None = None
+    fx_px: Finite | None = None
+    fy_px: Finite | None = None
     cx_px: Finite | None = None
     cy_px: Finite | None = None
     distortion: Distortion | None = None
@@ -103,6 +189,11 @@ class CameraSpec(_Strict):
     aperture_diameter_m: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] | None = None
     wavelength_m: Annotated[float, Field(gt=1e-7, lt=1e-5, allow_inf_nan=False)] | None = None
     sensor: SensorOverrides = SensorOverrides()
+
+    @field_validator(*_INTRINSICS, "distortion")
+    @classmethod
+    def _a_lens_for_this_image(cls, v, info: ValidationInfo):
+        return check_lens(info.field_name, v, info.data)
 
 
 # --- illumination ---------------------------------------------------------------------------
@@ -134,7 +225,7 @@ class Illumination(_Strict):
 class SolarSimulatorSpec(_Strict):
     """A collimated solar-simulator beam with a square footprint (Oriel Sol3A 94123A)."""
 
-    direction: Vec3
+    direction: Direction
     irradiance_suns: Annotated[
         float, Field(ge=SUNS_RANGE[0], le=SUNS_RANGE[1], allow_inf_nan=False)
     ] = 1.0
@@ -146,7 +237,7 @@ class SolarSimulatorSpec(_Strict):
 class Sun(_Strict):
     """Direct sunlight, in-band irradiance from the Planck integral (seed eq. 12)."""
 
-    direction: Vec3
+    direction: Direction
     distance_m: Annotated[float, Field(gt=1e9, le=1e14, allow_inf_nan=False)] = 1.495978707e11
     temperature_k: Annotated[float, Field(gt=1000.0, le=20000.0, allow_inf_nan=False)] = 5900.0
 
@@ -154,7 +245,7 @@ class Sun(_Strict):
 class EarthAlbedo(_Strict):
     """Sunlight reflected by the Earth (seed eq. 13)."""
 
-    direction: Vec3
+    direction: Direction
     altitude_m: Annotated[float, Field(ge=1e5, le=1e9, allow_inf_nan=False)]
     sun_angle_deg: Annotated[float, Field(ge=0.0, le=180.0, allow_inf_nan=False)]
     albedo: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.35
@@ -163,7 +254,7 @@ class EarthAlbedo(_Strict):
 class MoonAlbedo(_Strict):
     """Sunlight reflected by the Moon (seed eq. 14)."""
 
-    direction: Vec3
+    direction: Direction
     distance_m: Annotated[float, Field(ge=1.8e6, le=1e10, allow_inf_nan=False)]
     sun_angle_deg: Annotated[float, Field(ge=0.0, le=180.0, allow_inf_nan=False)]
     albedo: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 0.12
@@ -243,6 +334,9 @@ class CharucoBoardMesh(_Strict):
     def _marker_fits(self):
         if self.marker_m >= self.square_m:
             raise ValueError("marker_m must be smaller than square_m")
+        problem = board_problem(self)
+        if problem is not None:
+            raise range_error(problem)
         return self
 
 
@@ -298,15 +392,8 @@ class TurntableSpec(_Strict):
     """Rotation stage; its angle rotates every object marked ``on_turntable``."""
 
     axis_point_m: Vec3 = (0.0, 0.0, 0.0)
-    axis_direction: Vec3 = (0.0, 0.0, 1.0)
+    axis_direction: UnitVector = (0.0, 0.0, 1.0)
     angle_deg: Annotated[float, Field(ge=-360.0, le=360.0, allow_inf_nan=False)] = 0.0
-
-    @field_validator("axis_direction")
-    @classmethod
-    def _axis_nonzero(cls, v):
-        if sum(c * c for c in v) < 1e-18:
-            raise ValueError("axis_direction has zero length")
-        return v
 
 
 class MotionSpec(_Strict):
@@ -400,7 +487,8 @@ def scene_error_from_validation(exc: ValidationError) -> SceneError:
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown field (see docs/scene-format.md for the allowed fields)"
-        elif "input" in err and err["type"] not in ("missing",):
+        elif "input" in err and err["type"] not in ("missing", "out_of_range"):
+            # (a range error of :func:`range_error` states the value it refuses itself)
             msg = f"{msg} (got {err['input']!r})"
         parts.append((field, msg))
     # The first field leads the message (SceneError prefixes it); the others follow by name.

@@ -13,11 +13,13 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
+from sim_core.errors import SceneError
 from sim_core.geometry import rotation_matrix_xyz_deg
 from sim_core.materials import Material
-from sim_core.scene_spec import ObjectPose, SceneSpec
+from sim_core.scene_spec import CameraSpec, ObjectPose, SceneSpec, scene_error_from_validation
 from sim_core.twin_file import ObjectTwinParameters, TwinParameters, has_object_keys
 
 #: material parameters that scale with reflectance (``objects.<name>.reflectance_scale``)
@@ -43,7 +45,7 @@ def apply_to_spec(spec: SceneSpec, twin: TwinParameters) -> SceneSpec:
         cam_update["sensor"] = spec.camera.sensor.model_copy(update=sensor_set)
     update: dict = {}
     if cam_update:
-        update["camera"] = spec.camera.model_copy(update=cam_update)
+        update["camera"] = _checked_camera(spec.camera.model_copy(update=cam_update))
     if twin.illumination.power_w is not None:
         update["illumination"] = spec.illumination.model_copy(
             update={"power_w": twin.illumination.power_w})
@@ -58,6 +60,17 @@ def apply_to_spec(spec: SceneSpec, twin: TwinParameters) -> SceneSpec:
         if objects is not None:
             update["objects"] = objects
     return spec.model_copy(update=update) if update else spec
+
+
+def _checked_camera(camera: CameraSpec) -> CameraSpec:
+    """``camera`` validated again: the twin's intrinsics checked against the scene's image (a
+    file checks them against the preset's; a scene may resize the sensor)."""
+    try:
+        return CameraSpec.model_validate(camera.model_dump())
+    except ValidationError as exc:
+        err = scene_error_from_validation(exc)
+        raise SceneError(f"camera.{err.field}", f"{err.message} (the calibration's value on "
+                         "this scene's camera)") from None
 
 
 def _mounted_objects(spec: SceneSpec, reality: ObjectTwinParameters):

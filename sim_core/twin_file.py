@@ -30,15 +30,29 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
+from sim_core import lens_ranges
 from sim_core.errors import InvalidInputError
 from sim_core.files import StructuredFileError, atomic_write, load_structured
 from sim_core.scene_spec import (
     Distortion,
     ObjectPose,
     SensorOverrides,
+    UnitVector,
     Vec3,
+    check_lens,
+    range_error,
     scene_error_from_validation,
 )
 
@@ -48,6 +62,22 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 MAX_PHASE_ERROR_RAD = 3.141592653589793
 #: largest fixed-pattern offset a calibration may store [mm]
 MAX_PIXEL_OFFSET_MM = 500.0
+#: largest sum of ``amplitude_rad * harmonic`` over a frequency's wiggling terms: the slope of
+#: the phase error; beyond it phi -> phi_measured is not monotonic (the phase folds) and the
+#: correction's fixed-point iteration does not converge
+MAX_WIGGLING_SLOPE = 0.5
+#: the image a calibration or reality file describes: the preset's (height, width) [px]
+PRESET_SHAPE = (lens_ranges.PRESET["height_px"], lens_ranges.PRESET["width_px"])
+
+
+def grid_knots_needed(shape: tuple[int, int], grid_step_px: int) -> tuple[int, int]:
+    """Rows and columns of knots a fixed-pattern grid needs to cover an image of ``shape``.
+
+    >>> grid_knots_needed((171, 224), 4)
+    (44, 57)
+    """
+    h, w = shape
+    return (-(-(h - 1) // grid_step_px) + 1, -(-(w - 1) // grid_step_px) + 1)
 
 
 class _Strict(BaseModel):
@@ -101,26 +131,83 @@ class PixelOffsetGrid(_Strict):
         return v
 
 
+def grid_coverage_problem(grid: PixelOffsetGrid, shape: tuple[int, int]) -> str | None:
+    """Why ``grid`` does not cover an image of ``shape`` (height, width), or None."""
+    rows, cols = len(grid.offsets_mm), len(grid.offsets_mm[0])
+    need = grid_knots_needed(shape, grid.grid_step_px)
+    if rows >= need[0] and cols >= need[1]:
+        return None
+    return (f"offsets_mm: a {rows} x {cols} grid at {grid.grid_step_px} px steps does not cover a "
+            f"{shape[0]} x {shape[1]} image: it needs at least {need[0]} x {need[1]} knots "
+            "(rows x columns)")
+
+
+def _pixel_offset_kind(v: Any) -> str:
+    """Which form a ``pixel_offset_m`` has: a grid (it has ``offsets_mm``) or a pattern; so
+    that an error names the form's own fields, not the other's."""
+    keys = v.keys() if isinstance(v, dict) else type(v).model_fields
+    return "PixelOffsetGrid" if {"offsets_mm", "grid_step_px"} & set(keys) else (
+        "PixelOffsetPattern")
+
+
 class DepthErrors(_Strict):
-    """The camera's systematic phase (depth) errors; see the module docstring for the model."""
+    """The camera's systematic phase (depth) errors; see the module docstring for the model.
+
+    The wiggling's slope is checked here (:data:`MAX_WIGGLING_SLOPE`); that a fixed-pattern
+    grid covers the image, by the file's camera (:class:`CameraParameters`: the preset's image)
+    and when a simulation builds the model (its image).
+    """
 
     phase_offset_rad: list[Annotated[float, Field(ge=-MAX_PHASE_ERROR_RAD, le=MAX_PHASE_ERROR_RAD,
                                                   allow_inf_nan=False)]] = Field(
         default_factory=list, max_length=4)
     wiggling: list[WigglingTerm] = Field(default_factory=list, max_length=16)
-    pixel_offset_m: PixelOffsetPattern | PixelOffsetGrid | None = None
+    pixel_offset_m: Annotated[
+        Annotated[PixelOffsetPattern, Tag("PixelOffsetPattern")]
+        | Annotated[PixelOffsetGrid, Tag("PixelOffsetGrid")],
+        Discriminator(_pixel_offset_kind),
+    ] | None = None
+
+    @field_validator("wiggling")
+    @classmethod
+    def _no_fold(cls, v: list[WigglingTerm]):
+        for k in range(4):  # frequency_index 0-3; a term without one applies to all
+            terms = [t for t in v if t.frequency_index in (None, k)]
+            slope = sum(t.amplitude_rad * t.harmonic for t in terms)
+            if slope >= MAX_WIGGLING_SLOPE:
+                what = " + ".join(f"{t.amplitude_rad:g} x {t.harmonic}" for t in terms)
+                raise range_error(
+                    f"the sum of amplitude_rad x harmonic is {what} = {slope:.3g} for frequency "
+                    f"{k}; allowed: below {MAX_WIGGLING_SLOPE} (a larger wiggling folds the "
+                    "phase)")
+        return v
 
 
 class CameraParameters(_Strict):
     """What the camera really is: intrinsics, distortion, depth errors, sensor."""
 
-    fx_px: Annotated[float, Field(gt=1.0, le=1e5, allow_inf_nan=False)] | None = None
-    fy_px: Annotated[float, Field(gt=1.0, le=1e5, allow_inf_nan=False)] | None = None
-    cx_px: Annotated[float, Field(ge=-1e4, le=1e4, allow_inf_nan=False)] | None = None
-    cy_px: Annotated[float, Field(ge=-1e4, le=1e4, allow_inf_nan=False)] | None = None
+    fx_px: Finite | None = None
+    fy_px: Finite | None = None
+    cx_px: Finite | None = None
+    cy_px: Finite | None = None
     distortion: Distortion | None = None
     depth: DepthErrors | None = None
     sensor: SensorOverrides = SensorOverrides()
+
+    @field_validator("fx_px", "fy_px", "cx_px", "cy_px", "distortion")
+    @classmethod
+    def _a_lens_for_the_preset(cls, v, info: ValidationInfo):
+        # The preset's 224 x 171 image: the rule and its ranges are the scene's camera's.
+        return check_lens(info.field_name, v, info.data)
+
+    @field_validator("depth")
+    @classmethod
+    def _grid_covers_the_preset(cls, v: DepthErrors | None):
+        if v is not None and isinstance(v.pixel_offset_m, PixelOffsetGrid):
+            problem = grid_coverage_problem(v.pixel_offset_m, PRESET_SHAPE)
+            if problem is not None:
+                raise range_error(f"pixel_offset_m.{problem}")
+        return v
 
 
 class IlluminationParameters(_Strict):
@@ -133,15 +220,8 @@ class TurntableParameters(_Strict):
     """The turntable's true axis (world frame) and the error of its zero."""
 
     axis_point_m: Vec3 | None = None
-    axis_direction: Vec3 | None = None
+    axis_direction: UnitVector | None = None
     zero_offset_deg: Annotated[float, Field(ge=-180.0, le=180.0, allow_inf_nan=False)] = 0.0
-
-    @field_validator("axis_direction")
-    @classmethod
-    def _axis_nonzero(cls, v):
-        if v is not None and sum(c * c for c in v) < 1e-18:
-            raise ValueError("axis_direction has zero length")
-        return v
 
 
 class SolarParameters(_Strict):

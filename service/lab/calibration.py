@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from decimal import Decimal
 from typing import Any
 
 from pydantic import ValidationError
@@ -145,19 +146,32 @@ def calibration_public(row: CalibrationActivationRow) -> dict[str, Any]:
             "provenance": provenance, "source": row.source, "activated_at": row.activated_at}
 
 
-def calibration_residuals(provenance: dict[str, Any]) -> list[tuple[str, str, float]]:
+def calibration_residuals(provenance: dict[str, Any]) -> list[tuple[str, str, float | str]]:
     """(procedure, name, value) of every residual a calibration's provenance records: the
     numbers of ``provenance.procedures`` whose name says RMS or residual.
 
+    The provenance is free JSON (never applied): an integer too large for a float is given as
+    text in the table's notation, not refused (issue 25: it made the page a 500).
+
     >>> calibration_residuals({"procedures": {"depth": {"rms_after_mm": 1.5, "n": 3}}})
     [('depth', 'rms_after_mm', 1.5)]
+    >>> calibration_residuals({"procedures": {"depth": {"rms_mm": 10**400}}})
+    [('depth', 'rms_mm', '1.000e+400')]
     """
-    out = []
+    out: list[tuple[str, str, float | str]] = []
     for procedure, values in (provenance.get("procedures") or {}).items():
         if not isinstance(values, dict):
             continue
         for key, v in values.items():
             if ("rms" in key or "residual" in key) and isinstance(v, int | float) \
                     and not isinstance(v, bool):
-                out.append((procedure, key, float(v)))
+                out.append((procedure, key, _as_number(v)))
     return out
+
+
+def _as_number(v: int | float) -> float | str:
+    """``v`` as a float, or an integer beyond a float's range as text (4 significant digits)."""
+    try:
+        return float(v)
+    except OverflowError:
+        return f"{Decimal(v):.4g}"

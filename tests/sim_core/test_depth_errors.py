@@ -16,7 +16,7 @@ from sim_core.depth_errors import (
 )
 from sim_core.errors import InvalidInputError
 from sim_core.tof import phase_from_phasor
-from sim_core.twin_file import DepthErrors, PixelOffsetPattern, WigglingTerm
+from sim_core.twin_file import DepthErrors, PixelOffsetPattern, WigglingTerm, parse_calibration
 
 F = (60.24e6,)
 
@@ -71,8 +71,10 @@ def test_zero_phasor_and_nan_phase_are_safe():
 
 
 def test_wiggling_that_folds_the_phase_is_refused():
-    with pytest.raises(InvalidInputError, match=r"camera\.depth\.wiggling"):
-        _model(terms=((8, 0.1, 0.0),))
+    # Where the file is parsed (issue 25), not first when a simulation builds the model.
+    bad = {"camera": {"depth": {"wiggling": [{"harmonic": 8, "amplitude_rad": 0.1}]}}}
+    with pytest.raises(InvalidInputError, match=r"camera\.depth\.wiggling.*below 0\.5"):
+        parse_calibration(bad)
 
 
 def test_offsets_per_frequency_must_match_the_use_case():

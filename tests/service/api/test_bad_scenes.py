@@ -78,3 +78,39 @@ def test_a_bad_scene_during_a_running_campaign_is_refused_and_the_campaign_compl
     assert problem(res, 422)["detail"].startswith(field)
     status = wait_campaign(client, cid, lambda s: s["state"] != "running")
     assert status["state"] == "completed" and status["poses_done"] == len(poses), status
+
+
+#: values a scene's parser refuses by its physical range (issue 25, item 2): before, the focal
+#: lengths reached the optics (ZeroDivisionError, OverflowError: 500) and the board OpenCV
+#: (cv2.error: 500), and /campaigns accepted all three and failed at start
+BOARD_40 = {"name": "board", "pose": {"position_m": [0.0, 0.0, 1.0]},
+            "mesh": {"kind": "charuco_board", "squares_x": 40, "squares_y": 40,
+                     "square_m": 0.01, "marker_m": 0.006}}
+OUT_OF_RANGE = [
+    ({"camera": {**CAMERA, "fx_px": 1e-300}, "objects": [PLATE]}, "scene.camera.fx_px",
+     ["1e-300", "outside [9.799, 1e+09] px", "at most 170 deg, a pixel at least 1e-09 rad"]),
+    ({"camera": {**CAMERA, "fx_px": 1e300}, "objects": [PLATE]}, "scene.camera.fx_px",
+     ["1e+300", "outside [9.799, 1e+09] px"]),
+    ({"camera": CAMERA, "objects": [BOARD_40]}, "scene.objects[0].mesh",
+     ["squares_x, squares_y", "40 x 40 board needs 800 markers", "DICT_4X4_50 holds 50"]),
+]
+
+
+@pytest.mark.parametrize(("scene", "field", "texts"), OUT_OF_RANGE)
+def test_a_value_out_of_its_physical_range_is_a_422_naming_field_and_range_on_every_call(
+        client, scene, field, texts):
+    before = _angle(client)
+    for path, body in [
+        ("/api/v1/simulate", {"scene": scene, "spp": 1}),
+        ("/api/v1/poses", {"scene": scene, "turntable_deg": before + 30.0, "solar_suns": 1.0}),
+        ("/api/v1/campaigns", {"name": "bad", "scene": scene,
+                               "poses": [{"turntable_deg": before + 30.0}]}),
+    ]:
+        res = client.post(path, headers=AUTH, json=body)
+        detail = problem(res, 422)["detail"]
+        assert detail.startswith(field), (path, detail)
+        for text in texts:
+            assert text in detail, (path, detail)
+    assert _angle(client) == pytest.approx(before, abs=1e-9)
+    assert client.get("/api/v1/campaigns").json() == []
+    assert client.get("/api/v1/frames").json() == []

@@ -123,6 +123,77 @@ def test_a_bad_calibration_is_a_422_naming_the_field_and_keeps_the_active_one(
     assert client.get("/api/v1/calibration").json() == before
 
 
+#: values the docs call out of range that were activated (issue 25, item 3); from then on every
+#: simulation failed (wiggling, grid) or rendered nonsense with overflow warnings (axis, k1)
+GRID_TOO_SMALL = {"grid_step_px": 4, "offsets_mm": [[0.1] * 10] * 8}
+OUT_OF_RANGE = [
+    ({"camera": {"depth": {"wiggling": [{"harmonic": 16, "amplitude_rad": 0.5}]}}},
+     "camera.depth.wiggling", ["0.5 x 16 = 8", "below 0.5"]),
+    ({"camera": {"depth": {"pixel_offset_m": GRID_TOO_SMALL}}}, "camera.depth",
+     ["pixel_offset_m.offsets_mm: a 8 x 10 grid at 4 px steps does not cover a 171 x 224 image",
+      "at least 44 x 57 knots"]),
+    ({"turntable": {"axis_direction": [1e308, 0.0, 0.0]}}, "turntable.axis_direction",
+     ["length 1e+308", "a length of 1 +- 0.01"]),
+    ({"camera": {"distortion": {"k1": 1e300}}}, "camera.distortion.k1",
+     ["less than or equal to 100"]),
+    ({"camera": {"fx_px": 1e300}}, "camera.fx_px", ["outside [9.799, 1e+09] px"]),
+]
+
+
+@pytest.mark.parametrize(("body", "field", "texts"), OUT_OF_RANGE)
+def test_a_value_the_docs_call_out_of_range_is_refused_and_the_active_one_stays(
+        client, body, field, texts):
+    assert client.put("/api/v1/calibration", headers=AUTH, json=CALIBRATION).status_code == 200
+    before = client.get("/api/v1/calibration").json()
+    detail = problem(client.put("/api/v1/calibration", headers=AUTH, json=body), 422)["detail"]
+    assert detail.startswith(field), detail
+    for text in texts:
+        assert text in detail, detail
+    assert client.get("/api/v1/calibration").json() == before
+    # and the simulations still run with the calibration that stays active
+    res = client.post("/api/v1/simulate", headers=AUTH,
+                      json={"turntable_deg": 0.0, "solar_suns": 0.0, "spp": 1})
+    assert res.status_code == 201 and res.json()["calibration_hash"] == before["calibration_hash"]
+
+
+def test_a_calibration_file_gives_the_cli_the_api_s_error(client, tmp_path):
+    """One rule for files, the CLI and the API: the same field and the same range text."""
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    for body, field, _ in OUT_OF_RANGE:
+        detail = problem(client.put("/api/v1/calibration", headers=AUTH, json=body),
+                         422)["detail"]
+        assert detail.startswith(field), detail
+        path = tmp_path / "calibration.yaml"
+        path.write_text(yaml.safe_dump(body))
+        res = CliRunner().invoke(app, ["simulate", str(EXAMPLES_DIR / "plane.yaml"),
+                                       "--out", str(tmp_path / "out"), "--calibration",
+                                       str(path), "-q"])
+        assert res.exit_code == 2, res.output
+        output = " ".join(res.output.split())
+        assert f"calibration.{detail}" in output, (output, detail)
+        assert not (tmp_path / "out").exists()
+
+
+def test_a_huge_integer_in_the_provenance_is_shown_as_text(client):
+    """Issue 25, item 4: a residual of 400 digits made ``/ui/calibration`` a 500 (float()
+    overflowed). The provenance is free JSON (docs/calibration.md): it is accepted, and shown."""
+    huge = int("9" * 400)
+    body = {**CALIBRATION, "provenance": {"rig": "x", "frames_used": huge,
+                                          "procedures": {"intrinsics": {"rms_px": huge,
+                                                                        "residual_mm": 0.25}}}}
+    res = client.put("/api/v1/calibration", headers=AUTH, json=body)
+    assert res.status_code == 200, res.text
+    assert res.json()["provenance"]["procedures"]["intrinsics"]["rms_px"] == huge
+    page = client.get("/ui/calibration")
+    assert page.status_code == 200, page.text
+    assert "1.000e+400" in page.text  # the residual, in the table's notation
+    assert "0.25" in page.text
+    assert "9" * 400 in page.text  # frames used, as it is
+
+
 def test_a_bad_number_in_the_raw_body_is_a_422_and_nothing_is_activated(client):
     for text in ("NaN", "Infinity", "1e309"):
         raw = '{"illumination": {"power_w": ' + text + "}}"

@@ -64,7 +64,7 @@ def test_serve_refuses_a_bad_reality_with_exit_code_2_naming_the_field(tmp_path,
                                    "--reality", str(bad)])
     assert res.exit_code == 2, res.output
     text = " ".join(res.output.split())
-    assert "reality.camera.fx_px" in text and "greater than 1" in text, text
+    assert "reality.camera.fx_px" in text and "outside [9.799, 1e+09] px" in text, text
     good = tmp_path / "good.yaml"
     good.write_text("turntable: {zero_offset_deg: 0.7}\n")
     res = CliRunner().invoke(app, ["serve", "--data-dir", str(tmp_path / "e"), "--reality",
