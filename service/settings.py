@@ -22,10 +22,8 @@ from drivers.errors import DeviceInputError
 from drivers.sim.faults import parse_rig_fault
 from sim_core.adaptive import NOISE_FRACTION_RANGE
 from sim_core.errors import InvalidInputError
+from sim_core.scene_spec import EXAMPLES_DIR
 from sim_core.twin_file import load_reality
-
-#: the bundled example scenes (``scene: "satellite_ground_test"`` names one of them)
-EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
 #: tokens that are documentation placeholders, never real secrets
 PLACEHOLDER_TOKENS = frozenset(

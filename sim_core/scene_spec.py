@@ -31,6 +31,10 @@ from sim_core.files import StructuredFileError, load_structured
 from sim_core.lights import SUNS_RANGE
 from sim_core.sensor import SENSOR_BOUNDS
 
+#: the bundled example scenes, ``examples/NAME.yaml`` in the repository (the service's
+#: ``scene: "satellite_ground_test"`` and the benchmarks' default scenes name them)
+EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
 PositiveLength = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]

@@ -1,12 +1,13 @@
-"""The ``toftwin`` command line: one module per command group beside this one.
+"""The service's commands of the ``toftwin`` command line: one module per command group beside
+this one.
 
-Exit codes: 0 success, 2 invalid input (the message names the field and the allowed range),
-1 anything else.
+:func:`build_app` assembles them; :mod:`toftwin_cli`, above the service, adds the command groups
+that sit above it (``toftwin bench``) and is the console script. Exit codes: 0 success, 2 invalid
+input (the message names the field and the allowed range), 1 anything else.
 """
 
 from __future__ import annotations
 
-import sys
 from typing import Annotated
 
 import typer
@@ -21,12 +22,7 @@ from service.cli import (
     serve,
     simulate,
 )
-from service.cli.bench import bench_app
-from service.cli.common import command_group, print_error
-from sim_core.errors import InvalidInputError
-
-app = command_group("toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera.",
-                    add_completion=False)
+from service.cli.common import command_group
 
 
 def _print_version(value: bool) -> None:
@@ -37,7 +33,6 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
 def _root(
     version: Annotated[
         bool, typer.Option("--version", is_eager=True, callback=_print_version,
@@ -47,23 +42,24 @@ def _root(
     """toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera."""
 
 
-app.command("simulate")(simulate.simulate)
-app.command("preview")(simulate.preview)
-app.command("serve")(serve.serve)
-app.command("compare")(compare.compare)
-app.command("correct")(correct.correct)
-app.add_typer(devices.devices_app, name="devices")
-app.command("sim-device")(devices.sim_device)
-app.add_typer(bench_app, name="bench")
-app.add_typer(schema.schema_app, name="schema")
-app.add_typer(calibrate.calibrate_app, name="calibrate")
-app.command("fit-object")(fit_object.fit_object_command)
+def build_app() -> typer.Typer:
+    """A new ``toftwin`` app holding the service's commands; the caller may add command groups
+    (:mod:`toftwin_cli` adds ``bench``)."""
+    app = command_group("toftwin: hardware-in-the-loop twin of a PMD time-of-flight camera.",
+                        add_completion=False)
+    app.callback()(_root)
+    app.command("simulate")(simulate.simulate)
+    app.command("preview")(simulate.preview)
+    app.command("serve")(serve.serve)
+    app.command("compare")(compare.compare)
+    app.command("correct")(correct.correct)
+    app.add_typer(devices.devices_app, name="devices")
+    app.command("sim-device")(devices.sim_device)
+    app.add_typer(schema.schema_app, name="schema")
+    app.add_typer(calibrate.calibrate_app, name="calibrate")
+    app.command("fit-object")(fit_object.fit_object_command)
+    return app
 
 
-def main() -> None:
-    """Console-script entry point."""
-    try:
-        app()
-    except InvalidInputError as exc:  # pragma: no cover - commands catch their own
-        print_error(str(exc))
-        sys.exit(2)
+#: the service's commands (the whole ``toftwin`` command is :data:`toftwin_cli.app`)
+app = build_app()

@@ -78,12 +78,12 @@ def read_holder(data_dir: str | Path) -> dict[str, Any] | None:
 
 
 def _command() -> str:
-    """``toftwin serve`` for the CLI (script or ``python -m service.cli``), else the program."""
+    """``toftwin serve`` for the CLI (script or ``python -m toftwin_cli``), else the program."""
     argv = sys.argv
     if not argv or not argv[0]:
         return "python"
     path = Path(argv[0])
-    if path.name == "toftwin" or path.parts[-3:] == ("service", "cli", "__main__.py"):
+    if path.name == "toftwin" or path.parts[-2:] == ("toftwin_cli", "__main__.py"):
         words = [w for w in argv[1:2] if not w.startswith("-")]
         return " ".join(["toftwin", *words])
     if path.name == "__main__.py":  # python -m PACKAGE

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from service.cli import app
+from toftwin_cli import app
 
 ROOT = Path(__file__).resolve().parents[2]
 

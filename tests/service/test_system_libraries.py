@@ -37,7 +37,7 @@ ctypes.util.find_library = lambda name: None if "usb" in name else _find(name)
 """
 
 SERVE = PRELUDE + f"""
-import service.cli
+import toftwin_cli
 from fastapi.testclient import TestClient
 from service.api.app import create_app
 from service.settings import Settings

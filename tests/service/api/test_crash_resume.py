@@ -1,6 +1,6 @@
 """A real server process killed (SIGKILL) mid-campaign, restarted, resumed: nothing lost.
 
-The server runs as ``python -m service.cli serve --simulated`` on a free loopback port with the
+The server runs as ``python -m toftwin_cli serve --simulated`` on a free loopback port with the
 default executor (a local process pool); it is killed with its whole process group, pool
 workers included, as a crash or ``docker kill`` would. The restart is the service's own
 start-up (``open_lab``: the lock, the recovery, the runner) on the same data directory, in this
@@ -47,7 +47,7 @@ def server(data_dir: Path, log: Path, **settings: str
     env = {**os.environ, "TOFTWIN_TOKEN": TOKEN, "TOFTWIN_SIM_SPP": "1",
            "TOFTWIN_CAMERA_SPP": "1", "TOFTWIN_CAMERA_INTEGRATOR": "direct",
            "TOFTWIN_WORKERS": "2", **settings}
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--simulated", "--port", str(port),
+    cmd = [sys.executable, "-m", "toftwin_cli", "serve", "--simulated", "--port", str(port),
            "--data-dir", str(data_dir), "--log-level", "warning"]
     with open(log, "ab") as out:
         proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT,

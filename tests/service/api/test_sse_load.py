@@ -1,6 +1,6 @@
 """Fifty browsers following a campaign of 30,000 results do not slow the service down.
 
-A real server (``python -m service.cli serve --simulated``) on a database holding one paused
+A real server (``python -m toftwin_cli serve --simulated``) on a database holding one paused
 campaign with 30,000 results; fifty clients follow its event stream while ``/health`` is timed.
 A stream sends the status when it changes and otherwise asks the database one small question
 per interval, so the followers cost next to nothing.

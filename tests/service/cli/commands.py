@@ -13,7 +13,7 @@ import typer
 from typer.models import OptionInfo
 from typer.utils import get_params_from_function
 
-from service.cli import app
+from toftwin_cli import app
 
 
 def commands(t: typer.Typer = app, path: tuple[str, ...] = ()) -> Iterator[

@@ -32,7 +32,7 @@ def test_devices_list_shows_the_simulated_pico_flexx():
 @pytest.mark.timeout(60)
 def test_sim_device_prints_its_port_first_and_a_real_driver_drives_it():
     proc = subprocess.Popen(
-        [sys.executable, "-m", "service.cli", "sim-device", "turntable", "--instant"],
+        [sys.executable, "-m", "toftwin_cli", "sim-device", "turntable", "--instant"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:

@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner
 from typer.utils import get_params_from_function
 
-from service.cli import app
 from tests.service.cli.commands import commands, groups
+from toftwin_cli import app
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 BRACKETS = re.compile(r"\[[^\]\[]+\]")

@@ -11,9 +11,9 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from service.cli import app
 from service.cli.common import Range
 from tests.service.cli.commands import NumericOption, numeric_options
+from toftwin_cli import app
 
 OPTIONS = numeric_options()
 #: the app as click runs it, built once (typer builds it anew for every CliRunner call)

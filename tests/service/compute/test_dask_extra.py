@@ -24,7 +24,7 @@ ADDRESS = "dask://127.0.0.1:8786"
 ROOT = Path(__file__).resolve().parents[3]
 #: run the CLI with Dask's distributed unimportable
 NO_DASK = ("import sys; sys.modules['distributed'] = None; sys.argv = ['toftwin'] + sys.argv[1:]; "
-           "from service.cli import main; main()")
+           "from toftwin_cli import main; main()")
 
 
 @pytest.fixture

@@ -1,4 +1,10 @@
-"""``toftwin bench ...``: benchmarks that print figures (one module each beside this one)."""
+"""``toftwin bench ...``: the command group of the benchmarks, which print figures.
+
+One module per benchmark: the renderer's in :mod:`benchmarks.renderer` (sim_core only), the
+campaign's in :mod:`benchmarks.campaign` (the service's). Each is imported when its command runs,
+so ``--help`` answers without loading the renderer. The group is added to the ``toftwin`` app
+by :mod:`toftwin_cli`; it takes its option ranges and printing from :mod:`service.cli.common`.
+"""
 
 from __future__ import annotations
 
@@ -40,7 +46,7 @@ def bench_render(
     ] = None,
 ) -> None:
     """Seconds per frame, rays per second and the share of time inside Embree."""
-    from service.cli.bench.render import run_render_benchmark
+    from benchmarks.renderer.render import run_render_benchmark
 
     try:
         run_render_benchmark(
@@ -61,7 +67,7 @@ def bench_accuracy(
     ] = None,
 ) -> None:
     """Accuracy against time: error of every setting against a high-quality reference."""
-    from service.cli.bench.accuracy import SCENES, run_accuracy_benchmark
+    from benchmarks.renderer.accuracy import SCENES, run_accuracy_benchmark
 
     try:
         run_accuracy_benchmark(out, quick, console, tuple(scene) if scene else SCENES)
@@ -89,7 +95,7 @@ def bench_mitsuba(
     ] = None,
 ) -> None:
     """Our renderer against Mitsuba 3 on the corner: time ratio, image agreement, time to 2 %."""
-    from service.cli.bench.mitsuba import run_mitsuba_comparison
+    from benchmarks.renderer.mitsuba import run_mitsuba_comparison
 
     try:
         spps = int_list("--spp", spp or ["16,64,256"], ranges.SPP.lo, ranges.SPP.hi)
@@ -116,7 +122,7 @@ def bench_ground_test(
     seed: Annotated[int, number_option("--seed", help="Random seed.", allowed=ranges.SEED)] = 0,
 ) -> None:
     """Seed Fig. 14: grey and depth statistics with and without solar simulator and SBI."""
-    from service.cli.bench.ground_test import run_ground_test
+    from benchmarks.renderer.ground_test import run_ground_test
 
     run_ground_test(spp, seed, console)
 
@@ -145,7 +151,7 @@ def bench_campaign(
     out: Annotated[Path | None, typer.Option("--out", help="JSON file of the figures.")] = None,
 ) -> None:
     """Poses per minute of a simulated campaign, and where the time goes per pose."""
-    from service.cli.bench.campaign import run_campaign_benchmark
+    from benchmarks.campaign import run_campaign_benchmark
 
     run_campaign_benchmark(poses, repeats, spp, camera_spp, workers or [1, 2], dask, out,
                            console, rounds)

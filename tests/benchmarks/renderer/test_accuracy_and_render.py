@@ -10,10 +10,10 @@ import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
-from service.cli import app
-from service.cli.bench import accuracy, render
-from service.settings import EXAMPLES_DIR
+from benchmarks.renderer import accuracy, render
 from sim_core.errors import InvalidInputError
+from sim_core.scene_spec import EXAMPLES_DIR
+from toftwin_cli import app
 
 #: the smallest sweep that still has a path integrator row: seconds, not minutes
 TINY = {"spp": (2,), "bounces": (1, 2), "reference_spp": 4}

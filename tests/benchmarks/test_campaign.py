@@ -8,7 +8,7 @@ import json
 import pytest
 from rich.console import Console
 
-from service.cli.bench.campaign import STAGES, run_campaign_benchmark
+from benchmarks.campaign import STAGES, run_campaign_benchmark
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -63,11 +63,10 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from service.settings import EXAMPLES_DIR
 from sim_core.materials.lambertian import Lambertian
 from sim_core.render import RenderSettings, render
 from sim_core.scene import Scene, build_scene
-from sim_core.scene_spec import load_scene_spec
+from sim_core.scene_spec import EXAMPLES_DIR, load_scene_spec
 from sim_core.tracing import RayTracer
 
 CORNER_SCENE = EXAMPLES_DIR / "corner.yaml"

@@ -16,12 +16,11 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from service.settings import EXAMPLES_DIR
 from sim_core.metrics import depth_mm_16bit, grey_8bit, mask_from_objects
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
 from sim_core.scene import build_scene
-from sim_core.scene_spec import load_scene_spec
+from sim_core.scene_spec import EXAMPLES_DIR, load_scene_spec
 
 EXAMPLE = EXAMPLES_DIR / "satellite_ground_test.yaml"
 SATELLITE_PARTS = ("body", "panel_left", "panel_right")

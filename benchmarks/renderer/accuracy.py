@@ -27,13 +27,12 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from service.settings import EXAMPLES_DIR
 from sim_core.errors import InvalidInputError
 from sim_core.files import atomic_write
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
 from sim_core.scene import build_scene
-from sim_core.scene_spec import load_scene_spec
+from sim_core.scene_spec import EXAMPLES_DIR, load_scene_spec
 from sim_core.tof import ambiguity_range_m
 from sim_core.tracing import RayTracer
 

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from service.cli.bench import mitsuba as bm
+from benchmarks.renderer import mitsuba as bm
 
-ROOT = Path(__file__).resolve().parents[4]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _mitsuba_loads() -> tuple[bool, str]:
@@ -87,7 +87,7 @@ def test_missing_mitsuba_raises_clear_error(monkeypatch):
 def test_unloadable_libllvm_raises_clear_error(tmp_path):
     """A fresh process with a wrong DRJIT_LIBLLVM_PATH: Dr.Jit cannot start its LLVM backend."""
     code = (
-        "from service.cli.bench.mitsuba import load_mitsuba\n"
+        "from benchmarks.renderer.mitsuba import load_mitsuba\n"
         "try:\n    load_mitsuba()\nexcept RuntimeError as e:\n    print('RTE:', e)\n"
         "else:\n    print('LOADED')\n"
     )
@@ -104,7 +104,7 @@ def test_unloadable_libllvm_raises_clear_error(tmp_path):
 def test_the_install_hint_names_the_bench_extra_from_the_clone(monkeypatch):
     from typer.testing import CliRunner
 
-    from service.cli import app
+    from toftwin_cli import app
 
     assert 'pip install -c requirements/lock.txt -e ".[bench]"' in bm.INSTALL_HINT
     monkeypatch.setitem(sys.modules, "mitsuba", None)  # makes `import mitsuba` fail
@@ -144,7 +144,7 @@ def test_a_backend_that_cannot_run_is_an_error_naming_the_library_not_a_crash(tm
     fake.write_bytes(b"not a shared library")
     env = {**os.environ, "DRJIT_LIBLLVM_PATH": str(fake)}
     proc = subprocess.run(
-        [sys.executable, "-m", "service.cli", "bench", "mitsuba", "--spp", "1", "--bounces", "1",
+        [sys.executable, "-m", "toftwin_cli", "bench", "mitsuba", "--spp", "1", "--bounces", "1",
          "--no-convergence"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 1, proc.stderr
     assert proc.stdout == "" and "Traceback" not in proc.stderr
@@ -225,7 +225,7 @@ def test_cli_speed_table_as_json_or_clear_error(tmp_path):
     install hint where Mitsuba does not load."""
     from typer.testing import CliRunner
 
-    from service.cli import app
+    from toftwin_cli import app
 
     out = tmp_path / "mitsuba.json"
     res = CliRunner().invoke(app, ["bench", "mitsuba", "--spp", "1,2", "--bounces", "1",
@@ -249,7 +249,7 @@ def test_cli_speed_table_as_json_or_clear_error(tmp_path):
 def test_cli_refuses_bad_lists_before_loading_anything(args):
     from typer.testing import CliRunner
 
-    from service.cli import app
+    from toftwin_cli import app
 
     res = CliRunner().invoke(app, ["bench", "mitsuba", *args])
     assert res.exit_code == 2

@@ -1,5 +1,0 @@
-"""``python -m service.cli``: the ``toftwin`` command."""
-
-from service.cli import main
-
-main()
