@@ -17,43 +17,16 @@ its LLVM backend on all cores), and the benchmark reports:
    high-spp Mitsuba reference, then both renderers swept over spp and the time each needs to
    reach a target relative RMSE against that reference, interpolated in log-log.
 
-What is matched
----------------
-- geometry: ``scene.triangles_m`` as one triangle mesh per material (written to a temporary
-  binary PLY and loaded with face normals), so both trace the same float32 triangles;
-- camera: ``perspective`` sensor with ``to_world`` = our ``world_from_camera`` with x and y
-  negated (Mitsuba's camera frame is x left, y up; ours x right, y down), horizontal field of
-  view ``2 atan(W / (2 fx))`` on ``fov_axis = x``, principal point offset from ``cx, cy`` (0 for a
-  centred one), the same resolution; checked by comparing Mitsuba's primary ray directions to
-  ours at pixel centres and corners. Mitsuba has square pixels and no lens distortion, so
-  ``fx != fy`` or distortion are refused;
-- pixel filter: Mitsuba's ``box`` reconstruction filter (radius 0.5 px, a sample only counts in
-  its own pixel) with the ``independent`` sampler = our uniform jitter over the pixel footprint;
-- light: ``point`` emitter at the light position with intensity ``P / (4 pi)`` W/sr;
-- material: ``twosided`` ``diffuse`` with the object's albedo (ours is two-sided Lambertian);
-- integrator: ``path`` with ``max_depth = bounces + 1`` (Mitsuba counts the camera vertex) and
-  ``rr_depth = russian_roulette_from_bounce - 1``: both then apply Russian roulette at the same
-  vertices with the same survival probability for this scene (min(throughput, 0.95) vs.
-  min(1, max(0.05, throughput))), i.e. with the default (5) only when continuing to a fifth
-  bounce: never within the benchmark's 1-3 bounces.
-
-What differs
-------------
-- ours also computes the modulation phasor (path lengths) and per-pixel variances, and traces
-  one extra primary ray per pixel for the ground-truth images; Mitsuba computes radiance only;
-- ours does float64 shading arithmetic on float32 rays; Mitsuba is float32 throughout;
-- Mitsuba starts camera rays at its near clip plane (0.01 m; the walls are > 1 m away).
-
-Mitsuba is a benchmark dependency only (extra ``bench``); nothing else in the product imports it,
-and this module imports it lazily, so the CLI works without it.
+How the scene is matched in Mitsuba (and what differs): :mod:`benchmarks.renderer.mitsuba_scene`;
+how Mitsuba is loaded (its LLVM backend proven in a child process first):
+:mod:`benchmarks.renderer.mitsuba_backend`. Mitsuba is a benchmark dependency only (extra
+``bench``), imported lazily, so the CLI works without it.
 """
 
 from __future__ import annotations
 
-import glob
 import math
 import os
-import re
 import tempfile
 import time
 from dataclasses import dataclass
@@ -63,64 +36,18 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from sim_core.materials.lambertian import Lambertian
+from benchmarks.renderer.mitsuba_backend import MITSUBA_VARIANT, load_mitsuba
+from benchmarks.renderer.mitsuba_scene import (
+    camera_mismatch_deg,
+    mitsuba_integrator,
+    mitsuba_scene_dict,
+)
 from sim_core.render import RenderSettings, render
 from sim_core.scene import Scene, build_scene
 from sim_core.scene_spec import EXAMPLES_DIR, load_scene_spec
 from sim_core.tracing import RayTracer
 
 CORNER_SCENE = EXAMPLES_DIR / "corner.yaml"
-MITSUBA_VARIANT = "llvm_ad_mono"
-
-#: where Debian and the LLVM apt repository put the shared library; version 19 first
-LIBLLVM_GLOBS = (
-    "/usr/lib/x86_64-linux-gnu/libLLVM-19.so*",
-    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so*",
-    "/usr/lib/llvm-19/lib/libLLVM*.so*",
-    "/usr/lib/*-linux-gnu/libLLVM-*.so*",
-    "/usr/lib/*-linux-gnu/libLLVM.so.*",
-    "/usr/lib/llvm-*/lib/libLLVM*.so*",
-    "/usr/local/lib/libLLVM*.so*",
-)
-#: Dr.Jit 1.x refuses LLVM before 15 (opaque pointers); with LLVM 15 and 16 its kernels stop in
-#: LLVM's x86 instruction selection ("Cannot select: fminimum", an abort that takes the process
-#: down). LLVM 19 runs them; Debian 12 ships it as libllvm19 (17 and 18 are not in Debian 12).
-DRJIT_MIN_LLVM = 15
-RECOMMENDED_LLVM = 19
-
-INSTALL_HINT = (
-    "Install the benchmark's dependencies from the clone: `pip install -c "
-    'requirements/lock.txt -e ".[bench]"` (Mitsuba 3 and Dr.Jit, pinned), and LLVM 19\'s '
-    "library: `apt-get update && apt-get install -y libllvm19` (Debian 12); if Dr.Jit still "
-    "does not find it, set DRJIT_LIBLLVM_PATH to it, e.g. "
-    "DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so"
-)
-
-#: the probe run in a child process before anything else: select the variant, evaluate a
-#: small Dr.Jit kernel (with the min() the path integrator's Russian roulette compiles to)
-#: and path-trace a sphere on an 8 x 8 film; an LLVM abort then ends the child, not the CLI
-BACKEND_PROBE = """
-import sys
-import drjit as dr
-import mitsuba as mi
-mi.set_variant(sys.argv[1])
-from drjit.llvm import Float
-x = dr.arange(Float, 1024)
-total = dr.sum(dr.minimum(x * 0.001, 0.95)) + dr.sum(x)
-scene = mi.load_dict({
-    "type": "scene",
-    "integrator": {"type": "path", "max_depth": 4, "rr_depth": 1},
-    "sensor": {"type": "perspective", "sampler": {"type": "independent", "sample_count": 2},
-               "film": {"type": "hdrfilm", "width": 8, "height": 8,
-                        "pixel_format": "luminance", "rfilter": {"type": "box"}}},
-    "ball": {"type": "sphere", "center": [0, 0, 5], "radius": 1.0, "bsdf": {"type": "diffuse"}},
-    "light": {"type": "point", "position": [0, 0, 0], "intensity": 1.0},
-})
-image = mi.render(scene)
-dr.eval(image)
-print("backend ok", total, dr.mean(image.array))
-"""
-PROBE_TIMEOUT_S = 300.0
 
 
 @dataclass(frozen=True)
@@ -136,325 +63,10 @@ class _Plan:
     target_rel_rmse: float
 
 
-# -------------------------------------------------------------------------------------------
-# Loading Mitsuba
-# -------------------------------------------------------------------------------------------
-def llvm_version(path: str) -> int | None:
-    """The LLVM major version of a libLLVM file, from its name or the name it links to
-    (``libLLVM-15.so.1``, ``libLLVM.so.19.1``, ``/usr/lib/llvm-16/lib/libLLVM.so``); None if
-    the names do not say.
-
-    >>> llvm_version("/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1")
-    15
-    >>> llvm_version("/usr/lib/llvm-16/lib/libLLVM.so"), llvm_version("/tmp/libfoo.so")
-    (16, None)
-    """
-    for name in (path, os.path.realpath(path)):
-        base = os.path.basename(name)
-        m = (re.match(r"libLLVM-(\d+)", base) or re.match(r"libLLVM\.so\.(\d+)", base)
-             or re.search(r"llvm-(\d+)", name))
-        if m:
-            return int(m.group(1))
-    return None
-
-
-def _ldconfig_libllvm() -> list[str]:
-    """libLLVM files the dynamic linker's cache knows (``ldconfig -p``), if it can be asked."""
-    import shutil
-    import subprocess
-
-    exe = shutil.which("ldconfig") or next(
-        (p for p in ("/sbin/ldconfig", "/usr/sbin/ldconfig") if os.path.isfile(p)), None)
-    if exe is None:
-        return []
-    try:
-        out = subprocess.run([exe, "-p"], capture_output=True, text=True, timeout=10).stdout
-    except (OSError, subprocess.SubprocessError):
-        return []
-    return [line.rsplit("=>", 1)[1].strip() for line in out.splitlines()
-            if "libLLVM" in line and "=>" in line]
-
-
-def libllvm_candidates() -> list[str]:
-    """Every libLLVM shared library found (the globs of :data:`LIBLLVM_GLOBS`, then the linker
-    cache), one path per real file, the newest LLVM first."""
-    paths = [p for pattern in LIBLLVM_GLOBS for p in sorted(glob.glob(pattern))]
-    seen: dict[str, str] = {}
-    for p in [*paths, *_ldconfig_libllvm()]:
-        if os.path.isfile(p):
-            seen.setdefault(os.path.realpath(p), p)
-    return sorted(seen.values(), key=lambda p: (-(llvm_version(p) or 0), len(p)))
-
-
-def find_libllvm() -> str | None:
-    """Path of a libLLVM shared library, the newest found (LLVM 19 where installed); or None."""
-    found = libllvm_candidates()
-    return found[0] if found else None
-
-
-def _describe(path: str | None) -> str:
-    if not path:
-        return "none"
-    version = llvm_version(path)
-    return f"{path} (LLVM {version if version is not None else 'of unknown version'})"
-
-
-def probe_backend(variant: str, libllvm: str | None, timeout_s: float = PROBE_TIMEOUT_S,
-                  code: str = BACKEND_PROBE) -> tuple[bool, str]:
-    """Run the probe ``code`` (:data:`BACKEND_PROBE`) in a child process with
-    ``DRJIT_LIBLLVM_PATH=libllvm`` and ``variant`` as its argument.
-
-    Returns ``(True, "")`` if it printed "backend ok", else ``(False, what happened)``: the
-    signal or exit code and the first line of LLVM's or Dr.Jit's complaint.
-    """
-    import subprocess
-    import sys
-
-    env = dict(os.environ)
-    if libllvm:
-        env["DRJIT_LIBLLVM_PATH"] = libllvm
-    try:
-        proc = subprocess.run([sys.executable, "-c", code, variant], env=env,
-                              capture_output=True, text=True, timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        return False, f"the probe did not finish in {timeout_s:g} s"
-    if proc.returncode == 0 and "backend ok" in proc.stdout:
-        return True, ""
-    return False, probe_failure(proc.returncode, proc.stderr)
-
-
-def probe_failure(returncode: int, stderr: str) -> str:
-    """What a failed probe says, in one line: how it ended and the first line of the complaint.
-
-    >>> probe_failure(-6, "LLVM ERROR: Cannot select: 0x55d: f32 = fminimum 0x1, 0x2\\n  0x1: ...")
-    'the probe was killed by SIGABRT: LLVM ERROR: Cannot select: 0x55d: f32 = fminimum 0x1, 0x2'
-    """
-    import signal
-
-    if returncode < 0:
-        try:
-            how = f"the probe was killed by {signal.Signals(-returncode).name}"
-        except ValueError:
-            how = f"the probe was killed by signal {-returncode}"
-    else:
-        how = f"the probe exited with code {returncode}"
-    lines = [ln.strip() for ln in stderr.splitlines() if ln.strip()]
-    key = next((ln for ln in lines if ln.startswith("LLVM ERROR")), None)
-    if key is None:  # Dr.Jit's own complaint, else the exception that ended the probe
-        key = next((ln for ln in lines if "too old" in ln or "could not be found" in ln),
-                   lines[-1] if lines else "")
-    key = key[:300].rstrip(". ")
-    return f"{how}: {key}" if key else how
-
-
-def backend_failure_message(libllvm: str | None, how_found: str, detail: str) -> str:
-    """The error of a backend that does not run: which libLLVM was tried, what happened, which
-    LLVM Dr.Jit needs and how to install it.
-
-    >>> m = backend_failure_message("/usr/lib/x86_64-linux-gnu/libLLVM-15.so", "found", "x")
-    >>> "LLVM 15" in m and "libllvm19" in m and "DRJIT_LIBLLVM_PATH" in m
-    True
-    """
-    version = llvm_version(libllvm) if libllvm else None
-    if libllvm is None:
-        why = "no libLLVM shared library was found on this machine"
-    elif version is not None and version < DRJIT_MIN_LLVM:
-        why = f"Dr.Jit needs LLVM {DRJIT_MIN_LLVM} or newer"
-    elif version is not None and version < RECOMMENDED_LLVM:
-        why = (f"Dr.Jit's kernels stop in LLVM {version}'s instruction selection (LLVM 15 and "
-               f"16 cannot select 'fminimum' on x86); LLVM {RECOMMENDED_LLVM} runs them")
-    elif version is None:
-        why = (f"it is not a libLLVM Dr.Jit can load; LLVM {RECOMMENDED_LLVM} is known to "
-               "work")
-    else:
-        why = f"LLVM {RECOMMENDED_LLVM} is known to work"
-    others = [p for p in libllvm_candidates()
-              if libllvm is None or os.path.realpath(p) != os.path.realpath(libllvm)]
-    also = f" Other libLLVM found: {', '.join(_describe(p) for p in others)}." if others else ""
-    return (f"Mitsuba 3 is installed but Dr.Jit's LLVM backend does not run with the libLLVM "
-            f"{how_found}: {_describe(libllvm)}; {detail}. {why}.{also} {INSTALL_HINT}")
-
-
-def load_mitsuba(variant: str = MITSUBA_VARIANT):
-    """Import Mitsuba 3 and Dr.Jit and select ``variant``, once a child process has shown that
-    Dr.Jit's LLVM backend runs (:func:`probe_backend`): with an LLVM too old for Dr.Jit's
-    kernels, LLVM aborts the process that compiles them.
-
-    Sets ``DRJIT_LIBLLVM_PATH`` (if unset) to the library :func:`find_libllvm` finds.
-
-    Returns
-    -------
-    (mitsuba module, drjit module, libLLVM path or None)
-
-    Raises
-    ------
-    RuntimeError
-        If Mitsuba is not installed or its LLVM backend does not run, saying which libLLVM was
-        tried and what to install.
-    """
-    llvm = os.environ.get("DRJIT_LIBLLVM_PATH")
-    how_found = "DRJIT_LIBLLVM_PATH names"
-    if not llvm:
-        llvm = find_libllvm()
-        how_found = "found"
-        if llvm:
-            os.environ["DRJIT_LIBLLVM_PATH"] = llvm
-    try:
-        import drjit as dr
-        import mitsuba as mi
-    except ImportError as exc:
-        raise RuntimeError(
-            f"The Mitsuba comparison needs Mitsuba 3, which is not installed ({exc}). "
-            f"{INSTALL_HINT}"
-        ) from exc
-    ok, detail = probe_backend(variant, llvm)
-    if not ok:
-        raise RuntimeError(backend_failure_message(llvm, how_found, detail))
-    try:
-        mi.set_variant(variant)
-        ok = bool(dr.has_backend(dr.JitBackend.LLVM))
-    except Exception as exc:  # ImportError from Dr.Jit's LLVM init, AttributeError, ...
-        raise RuntimeError(
-            f"Mitsuba is installed but its variant {variant!r} could not be loaded "
-            f"(DRJIT_LIBLLVM_PATH={os.environ.get('DRJIT_LIBLLVM_PATH')!r}): {exc}. "
-            f"{INSTALL_HINT}"
-        ) from exc
-    if not ok:
-        raise RuntimeError(
-            "Mitsuba is installed but Dr.Jit's LLVM backend is inactive (libLLVM not loaded, "
-            f"DRJIT_LIBLLVM_PATH={os.environ.get('DRJIT_LIBLLVM_PATH')!r}). {INSTALL_HINT}"
-        )
-    return mi, dr, os.environ.get("DRJIT_LIBLLVM_PATH")
-
-
 #: block size of the noise-suppressing comparison [px]
 BLOCK_PX = 8
 #: pixels darker than this fraction of the brightest are left out of the max relative error
 MAX_REL_FLOOR = 1e-3
-
-
-# -------------------------------------------------------------------------------------------
-# The Mitsuba scene
-# -------------------------------------------------------------------------------------------
-def write_ply(path: Path, triangles: np.ndarray) -> None:
-    """Binary little-endian PLY of unshared float32 triangles ``(n, 3, 3)``."""
-    tris = np.asarray(triangles, dtype="<f4").reshape(-1, 3)
-    n = tris.shape[0] // 3
-    faces = np.empty(n, dtype=[("k", "u1"), ("i", "<i4", (3,))])
-    faces["k"] = 3
-    faces["i"] = np.arange(3 * n, dtype="<i4").reshape(n, 3)
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        f"element vertex {3 * n}\nproperty float x\nproperty float y\nproperty float z\n"
-        f"element face {n}\nproperty list uchar int vertex_indices\nend_header\n"
-    )
-    with open(path, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        fh.write(tris.tobytes())
-        fh.write(faces.tobytes())
-
-
-def mitsuba_sensor_dict(mi, scene: Scene, spp: int = 16) -> dict:
-    """Perspective sensor matching our pinhole camera (see the module docstring)."""
-    intr = scene.camera.intrinsics
-    if intr.has_distortion:
-        raise ValueError("Mitsuba's perspective sensor has no lens distortion; use k = 0")
-    if not math.isclose(intr.fx_px, intr.fy_px, rel_tol=1e-9):
-        raise ValueError(
-            f"Mitsuba's perspective sensor has square pixels; fx = {intr.fx_px} != "
-            f"fy = {intr.fy_px}"
-        )
-    w, h = intr.width_px, intr.height_px
-    # Mitsuba's camera frame: x left, y up, z forward; ours: x right, y down, z forward.
-    to_world = scene.camera.world_from_camera @ np.diag([-1.0, -1.0, 1.0, 1.0])
-    return {
-        "type": "perspective",
-        "fov": float(2.0 * np.degrees(np.arctan(0.5 * w / intr.fx_px))),
-        "fov_axis": "x",
-        # film position (u + 0.5) / W of our pixel u; Mitsuba adds the offset to it
-        "principal_point_offset_x": float(0.5 - (intr.cx_px + 0.5) / w),
-        "principal_point_offset_y": float(0.5 - (intr.cy_px + 0.5) / h),
-        "to_world": mi.ScalarTransform4f(to_world.tolist()),
-        "sampler": {"type": "independent", "sample_count": int(spp)},
-        "film": {
-            "type": "hdrfilm",
-            "width": w,
-            "height": h,
-            "pixel_format": "luminance",
-            "component_format": "float32",
-            "rfilter": {"type": "box"},
-        },
-    }
-
-
-def mitsuba_scene_dict(mi, scene: Scene, workdir: Path) -> dict:
-    """Mitsuba scene dictionary of ``scene`` (Lambertian materials, isotropic light only).
-
-    The meshes are written as PLY files into ``workdir``, which must exist until the
-    dictionary has been loaded.
-    """
-    light = scene.light
-    if light.profile_angle_rad is not None:
-        raise ValueError("only an isotropic point source is translated to Mitsuba")
-    d: dict = {
-        "type": "scene",
-        "sensor": mitsuba_sensor_dict(mi, scene),
-        "light": {
-            "type": "point",
-            "position": [float(x) for x in light.position_m],
-            "intensity": float(light.power_w / (4.0 * np.pi)),
-        },
-    }
-    for m_idx, material in enumerate(scene.materials):
-        sel = scene.material_index == m_idx
-        if not sel.any():
-            continue
-        if not isinstance(material, Lambertian):
-            raise ValueError(
-                f"material {m_idx} is {type(material).__name__}; only Lambertian is translated"
-            )
-        path = Path(workdir) / f"material_{m_idx}.ply"
-        write_ply(path, scene.triangles_m[sel])
-        d[f"mesh_{m_idx}"] = {
-            "type": "ply",
-            "filename": str(path),
-            "face_normals": True,
-            "bsdf": {
-                "type": "twosided",
-                "material": {"type": "diffuse", "reflectance": float(material.albedo)},
-            },
-        }
-    return d
-
-
-def mitsuba_integrator(mi, bounces: int, rr_from_bounce: int):
-    """Mitsuba ``path`` integrator equivalent to our ``bounces`` and Russian roulette start."""
-    return mi.load_dict(
-        {
-            "type": "path",
-            "max_depth": int(bounces) + 1,
-            "rr_depth": max(1, int(rr_from_bounce) - 1),
-        }
-    )
-
-
-def camera_mismatch_deg(mi, mscene, scene: Scene) -> float:
-    """Largest angle between Mitsuba's and our primary rays at pixel centres and corners [deg]."""
-    intr = scene.camera.intrinsics
-    w, h = intr.width_px, intr.height_px
-    us = np.array([-0.5, 0.0, w / 2 - 0.5, w - 1.0, w - 0.5])
-    vs = np.array([-0.5, 0.0, h / 2 - 0.5, h - 1.0, h - 0.5])
-    u, v = (a.ravel() for a in np.meshgrid(us, vs))
-    sensor = mscene.sensors()[0]
-    pos = mi.Point2f(((u + 0.5) / w).astype(np.float32), ((v + 0.5) / h).astype(np.float32))
-    ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
-    dm = np.asarray(ray.d, dtype=np.float64)
-    if dm.shape[0] == 3 and dm.shape[1] != 3:
-        dm = dm.T
-    do = scene.camera.pixel_directions_world(u, v)
-    # atan2 of |cross| and dot: accurate for tiny angles, unlike arccos of the dot
-    ang = np.arctan2(np.linalg.norm(np.cross(dm, do), axis=1), np.einsum("ij,ij->i", dm, do))
-    return float(np.degrees(ang.max()))
 
 
 # -------------------------------------------------------------------------------------------

@@ -18,6 +18,8 @@ import pytest
 from rich.console import Console
 
 from benchmarks.renderer import mitsuba as bm
+from benchmarks.renderer import mitsuba_backend as backend
+from benchmarks.renderer import mitsuba_scene
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -25,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[3]
 def _mitsuba_loads() -> tuple[bool, str]:
     """(True, "") if Mitsuba and its LLVM backend load; else (False, the RuntimeError text)."""
     try:
-        bm.load_mitsuba()
+        backend.load_mitsuba()
     except RuntimeError as exc:
         return False, str(exc)
     return True, ""
@@ -87,7 +89,7 @@ def test_missing_mitsuba_raises_clear_error(monkeypatch):
 def test_unloadable_libllvm_raises_clear_error(tmp_path):
     """A fresh process with a wrong DRJIT_LIBLLVM_PATH: Dr.Jit cannot start its LLVM backend."""
     code = (
-        "from benchmarks.renderer.mitsuba import load_mitsuba\n"
+        "from benchmarks.renderer.mitsuba_backend import load_mitsuba\n"
         "try:\n    load_mitsuba()\nexcept RuntimeError as e:\n    print('RTE:', e)\n"
         "else:\n    print('LOADED')\n"
     )
@@ -106,7 +108,7 @@ def test_the_install_hint_names_the_bench_extra_from_the_clone(monkeypatch):
 
     from toftwin_cli import app
 
-    assert 'pip install -c requirements/lock.txt -e ".[bench]"' in bm.INSTALL_HINT
+    assert 'pip install -c requirements/lock.txt -e ".[bench]"' in backend.INSTALL_HINT
     monkeypatch.setitem(sys.modules, "mitsuba", None)  # makes `import mitsuba` fail
     res = CliRunner().invoke(app, ["bench", "mitsuba", "--spp", "1", "--bounces", "1",
                                    "--no-convergence"])
@@ -117,9 +119,9 @@ def test_the_install_hint_names_the_bench_extra_from_the_clone(monkeypatch):
 
 
 def test_a_probe_that_aborts_is_reported_and_the_caller_goes_on():
-    ok, detail = bm.probe_backend(bm.MITSUBA_VARIANT, None, timeout_s=60,
-                                  code="import os, sys\nsys.stderr.write('LLVM ERROR: Cannot "
-                                  "select: f32 = fminimum\\n  more\\n')\nos.abort()\n")
+    ok, detail = backend.probe_backend(backend.MITSUBA_VARIANT, None, timeout_s=60,
+                                       code="import os, sys\nsys.stderr.write('LLVM ERROR: Cannot "
+                                       "select: f32 = fminimum\\n  more\\n')\nos.abort()\n")
     assert not ok
     assert detail == "the probe was killed by SIGABRT: LLVM ERROR: Cannot select: f32 = fminimum"
 
@@ -130,7 +132,7 @@ def test_the_failure_message_names_the_library_its_version_and_what_to_install()
                        ("/usr/lib/llvm-14/lib/libLLVM.so", "needs LLVM 15 or newer"),
                        ("/tmp/libfoo.so", "not a libLLVM Dr.Jit can load"),
                        (None, "no libLLVM shared library was found")):
-        msg = bm.backend_failure_message(path, "found", detail)
+        msg = backend.backend_failure_message(path, "found", detail)
         assert says in msg and detail in msg, msg
         assert path is None or path in msg
         _assert_clear(msg)
@@ -188,7 +190,7 @@ def test_loglog_crossing():
 def test_ply_writer_and_camera_refusals(tmp_path):
     tris = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 1], [1, 0, 1], [0, 1, 1]]], float)
     path = tmp_path / "m.ply"
-    bm.write_ply(path, tris)
+    mitsuba_scene.write_ply(path, tris)
     data = path.read_bytes()
     head, body = data.split(b"end_header\n")
     assert b"element vertex 6" in head and b"element face 2" in head
@@ -208,15 +210,15 @@ def test_ply_writer_and_camera_refusals(tmp_path):
         cam = Camera(intr, pose)
         bad = type(scene)(**{**scene.__dict__, "camera": cam})
         with pytest.raises(ValueError, match=what):
-            bm.mitsuba_sensor_dict(None, bad)
+            mitsuba_scene.mitsuba_sensor_dict(None, bad)
 
 
 def test_find_libllvm_returns_the_newest_library_found_or_none():
-    path = bm.find_libllvm()
+    path = backend.find_libllvm()
     assert path is None or Path(path).is_file()
-    found = bm.libllvm_candidates()
+    found = backend.libllvm_candidates()
     assert (path is None) == (not found)
-    versions = [bm.llvm_version(p) or 0 for p in found]
+    versions = [backend.llvm_version(p) or 0 for p in found]
     assert versions == sorted(versions, reverse=True)
 
 
