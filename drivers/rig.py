@@ -5,13 +5,9 @@
 threads (the service's pose loop, a status poll). Rig methods take the lock themselves unless the
 calling thread already holds it, so they work both inside and outside ``hold()``.
 
-:meth:`Rig.open` connects the real devices on their ports (and the camera on USB).
-:meth:`Rig.simulated` starts the three simulators - the SMC100 and the Oriel units on
-pseudo-terminals (:func:`drivers.sim.pty_server.start_simulator`), the camera as a pyusb backend
-(:class:`drivers.sim.usb_camera.UsbCameraSim`) - and returns a rig whose *real* drivers are
-connected to them. The simulated camera's frame source receives, with every request, the rig
-state read from the simulators' physical models (``CameraRequest.rig_state``), so a renderer
-plugged in as ``frame_source`` renders for the current turntable angle and illumination.
+:meth:`Rig.open` connects the real devices on their ports (and the camera on USB). The
+simulated rig - the same real drivers connected to the three simulators - is assembled beside
+the simulators (:func:`drivers.sim.rig.simulated_rig`): this module imports no simulator.
 """
 
 from __future__ import annotations
@@ -26,7 +22,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from drivers.camera import CameraProtocol, UsbCamera, UsbCameraSettings
+from drivers.camera import CameraProtocol, UsbCamera
 from drivers.errors import (
     DeviceError,
     DeviceInputError,
@@ -37,15 +33,8 @@ from drivers.errors import (
     SolarSimulatorError,
     TurntableError,
 )
-from drivers.sim.pty_server import SimHandle, start_simulator
-from drivers.sim.usb_camera import FrameSource, UsbCameraSim
-from drivers.solar_simulator import (
-    LAMP_SETTINGS,
-    SHUTTER_SETTINGS,
-    SolarSimulator,
-    SolarSimulatorProtocol,
-)
-from drivers.turntable import SMC100_SETTINGS, Turntable, TurntableProtocol
+from drivers.solar_simulator import SolarSimulator, SolarSimulatorProtocol
+from drivers.turntable import Turntable, TurntableProtocol
 from sim_core.raw import RawFrame
 
 __all__ = ["Rig", "RigState"]
@@ -109,7 +98,8 @@ class Rig:
 
     Examples
     --------
-    >>> rig = Rig.simulated(seed=1)
+    >>> from drivers.sim.rig import simulated_rig
+    >>> rig = simulated_rig(seed=1)
     >>> with rig.hold():
     ...     state = rig.apply(RigState(30.0, 1.0, True))
     ...     frames = rig.capture(2)
@@ -140,7 +130,8 @@ class Rig:
         #: captures that failed in a row, and the last one's error (:meth:`camera_health`)
         self._capture_failures = 0
         self._capture_error: str | None = None
-        #: the simulators behind a :meth:`simulated` rig (empty for a real rig)
+        #: the simulators behind a simulated rig (:func:`drivers.sim.rig.simulated_rig`; empty
+        #: for a real rig)
         self.sims: dict[str, Any] = {}
 
     # -- locking ------------------------------------------------------------------------------
@@ -442,113 +433,6 @@ class Rig:
             raise
         return cls(turntable, solar, camera)
 
-    # -- the simulated rig --------------------------------------------------------------------
-    @classmethod
-    def simulated(
-        cls,
-        frame_source: FrameSource | None = None,
-        *,
-        seed: int = 0,
-        use_case: str = "MODE_5_45FPS_500",
-        instant: bool = True,
-        time_scale: float = 1.0,
-        turntable_instant: bool | None = None,
-        transport: str = "pty",
-        turntable_faults: Iterable[str] = (),
-        solar_faults: Iterable[str] = (),
-        camera_faults: Iterable[str] = (),
-        camera_settings: UsbCameraSettings | None = None,
-    ) -> Rig:
-        """Start the three simulators and return a rig with real drivers connected to them.
-
-        Parameters
-        ----------
-        frame_source : callable or None
-            ``CameraRequest -> RawFrame`` for the simulated camera (a plane at 1 m when None);
-            ``request.rig_state`` is the :class:`RigState` of the simulated devices.
-        seed : int
-            The camera simulator's noise seed.
-        use_case : str
-            Use case the camera is configured with.
-        instant : bool
-            Motions, warm-up and frame timing complete at once (fast tests); otherwise the
-            simulators run in (scaled) real time.
-        time_scale : float
-            Simulated seconds per wall-clock second for the serial simulators.
-        turntable_instant : bool or None
-            The turntable's own ``instant`` (None: ``instant``): ``False`` with an instant rig
-            gives a stage that moves at its speed (20 deg/s) while the lamp and camera stay
-            instant, so that a move can be watched and stopped.
-        transport : {"pty", "tcp"}
-            Where the serial simulators are served.
-        turntable_faults, solar_faults, camera_faults : iterable of str
-            Faults armed at start (``"stall:1"``, ``"lamp-fault"``, ``"drop:1@3"``).
-        camera_settings : UsbCameraSettings or None
-            Driver settings for the camera.
-        """
-        started: list[Callable[[], None]] = []
-        try:
-            tt_instant = instant if turntable_instant is None else turntable_instant
-            tt_sim = start_simulator(
-                "turntable",
-                turntable_faults,
-                transport=transport,
-                instant=tt_instant,
-                time_scale=time_scale,
-            )
-            started.append(tt_sim.stop)
-            solar_sim = start_simulator(
-                "solar-simulator",
-                solar_faults,
-                transport=transport,
-                instant=instant,
-                time_scale=time_scale,
-            )
-            started.append(solar_sim.stop)
-            cam_sim = UsbCameraSim(
-                frame_source,
-                seed=seed,
-                instant=instant,
-                faults=camera_faults,
-                state_provider=_physical_state(tt_sim, solar_sim),
-            )
-            fast = instant or time_scale > 1
-            tt_fast = tt_instant or time_scale > 1
-            turntable = Turntable(
-                tt_sim.ports[0],
-                settle_s=0.0 if tt_fast else 0.2,
-                poll_interval_s=0.005 if tt_fast else 0.05,
-                stall_timeout_s=0.5 if tt_fast else 2.0,
-                settings=dataclasses.replace(
-                    SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
-                ),
-            )
-            turntable.connect()
-            started.append(turntable.close)
-            solar = SolarSimulator(
-                *solar_sim.ports,
-                warmup_s=0.0 if instant else 1800.0 / time_scale,
-                poll_interval_s=0.01 if fast else 0.5,
-                lamp_settings=dataclasses.replace(
-                    LAMP_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
-                ),
-                shutter_settings=dataclasses.replace(
-                    SHUTTER_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
-                ),
-            )
-            solar.connect()
-            started.append(solar.close)
-            camera = UsbCamera(backend=cam_sim, use_case=use_case, settings=camera_settings)
-            camera.connect()
-        except BaseException:
-            for stop in reversed(started):
-                with contextlib.suppress(Exception):
-                    stop()
-            raise
-        rig = cls(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop])
-        rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
-        return rig
-
 
 def _mismatch(error: DeviceError, device: str, target: str, read_back: str) -> DeviceError:
     """``error`` with the device, its target and what it read back as attributes."""
@@ -565,24 +449,3 @@ def _reported_state(meta: Any) -> RigState | None:
                         bool(meta["shutter_open"]))
     except (KeyError, TypeError, ValueError, DeviceInputError):
         return None
-
-
-def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], RigState]:
-    """Read the rig state from the simulators' models (not through the drivers or the lock)."""
-    smc = tt_sim.models["turntable"]
-    solar = solar_sim.models["rig"]
-
-    def state() -> RigState:
-        lamp = solar.lamp
-        suns = (
-            solar.calibration.suns_for(lamp.electrical()[2], extrapolate=True)
-            if lamp.lamp_on
-            else 0.0
-        )
-        return RigState(
-            turntable_angle_deg=smc.current_position(),
-            solar_suns=max(0.0, suns),
-            shutter_open=bool(solar.shutter.is_open),
-        )
-
-    return state

@@ -44,7 +44,8 @@ from calibration.object_twin.pose import (
     register_mount,
     sample_model,
 )
-from drivers.rig import Rig, RigState
+from drivers.rig import RigState
+from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import load_scene_spec
@@ -67,7 +68,7 @@ def cloud(seed: int, frames: int, spp: int, cache: Path) -> tuple[np.ndarray, np
     world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="path", spp=spp,
                                                           max_bounces=2), reality=reality)
     captures = []
-    with Rig.simulated(frame_source=world, seed=seed) as rig, rig.hold():
+    with simulated_rig(frame_source=world, seed=seed) as rig, rig.hold():
         for a in ANGLES_DEG:
             rig.apply(RigState(a, 0.0, False))
             captures.append(average_frames(rig.capture(frames)))

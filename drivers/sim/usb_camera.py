@@ -89,7 +89,7 @@ class CameraRequest:
     timestamp_s : float
         Capture time, seconds since the epoch.
     rig_state : object or None
-        Whatever the simulator's ``state_provider`` returns (``Rig.simulated`` passes a
+        Whatever the simulator's ``state_provider`` returns (``simulated_rig`` passes a
         :class:`drivers.rig.RigState` read from the simulated devices' physical state).
     """
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated
@@ -19,6 +18,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from service.cli import ranges
+from service.cli.command_settings import open_command_rig, rig_settings
 from service.cli.common import (
     check_rig_options,
     command_group,
@@ -26,7 +26,6 @@ from service.cli.common import (
     err_console,
     fail_invalid,
     number_option,
-    print_error,
     print_warning,
     rig_scene,
 )
@@ -84,10 +83,6 @@ def rig_command(
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
     from calibration.report import write_report
     from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
-    from drivers.rig import Rig
-    from drivers.sim.world import SimulatedWorld
-    from sim_core.render import RenderSettings
-    from sim_core.twin_file import load_reality
 
     try:
         check_rig_options(out, reality, simulated)
@@ -97,19 +92,16 @@ def rig_command(
                                   sweep_deg=tuple(-55.0 + i * sweep_step_deg
                                                   for i in range(n_angles)),
                                   solar_reference_suns=solar_reference_suns)
-        world = None
-        if simulated:
-            world = SimulatedWorld(source.spec, source.base_dir,
-                                   RenderSettings(integrator="direct", spp=camera_spp),
-                                   reality=None if reality is None else load_reality(reality))
     except InvalidInputError as exc:
         fail_invalid(exc)
+    settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
+                            camera_integrator="direct", camera_seed=seed)
     with contextlib.ExitStack() as stack:
+        rig, world = open_command_rig(settings, source)
+        stack.enter_context(rig)
         if world is not None:
-            rig = stack.enter_context(Rig.simulated(frame_source=world, seed=seed))
             operator, rig_name = SimulatedOperator(world), "simulated"
         else:
-            rig = stack.enter_context(_real_rig())
             operator, rig_name = ConsoleOperator(), "lab"
         bar = stack.enter_context(Progress(
             TextColumn("{task.description}", markup=False), BarColumn(),
@@ -197,11 +189,9 @@ def material_command(
         parse_angles,
         prior_material,
     )
+    from calibration.rig_material.plan import SAMPLE_NAME
     from calibration.rig_sequence import SimulatedOperator
-    from drivers.rig import Rig
-    from drivers.sim.world import SimulatedWorld
-    from sim_core.render import RenderSettings
-    from sim_core.twin_file import load_calibration, load_reality
+    from sim_core.twin_file import load_calibration
 
     try:
         if reality is not None and not simulated:
@@ -214,26 +204,20 @@ def material_command(
         prior_mat = prior_material(model, _material_arg(prior, "--prior"))
         cal = load_calibration(calibration) if calibration is not None else None
         source = rig_scene(scene)
-        world = truth = None
-        if simulated:
-            from calibration.rig_material.plan import SAMPLE_NAME
-
-            truth = _material_arg(sample_material, "--sample-material")
-            truth = truth if truth is not None else prior_mat
-            if not isinstance(truth, str):
-                truth = _spec_dict(truth)
-            world = SimulatedWorld(source.spec, source.base_dir,
-                                   RenderSettings(integrator="direct", spp=camera_spp),
-                                   reality=None if reality is None else load_reality(reality))
-            truth = {SAMPLE_NAME: truth}
+        # the simulated lab's sample (if the rig is the simulated lab's)
+        truth = _material_arg(sample_material, "--sample-material")
+        truth = truth if truth is not None else prior_mat
+        truth = {SAMPLE_NAME: truth if isinstance(truth, str) else _spec_dict(truth)}
     except InvalidInputError as exc:
         fail_invalid(exc)
+    settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
+                            camera_integrator="direct", camera_seed=seed)
     with contextlib.ExitStack() as stack:
+        rig, world = open_command_rig(settings, source)
+        stack.enter_context(rig)
         if world is not None:
-            rig = stack.enter_context(Rig.simulated(frame_source=world, seed=seed))
             operator = SimulatedOperator(world, materials=truth)
         else:
-            rig = stack.enter_context(_real_rig())
             operator = ConsoleOperator()
         bar = stack.enter_context(Progress(
             TextColumn("{task.description}", markup=False), BarColumn(),
@@ -297,19 +281,6 @@ def _write_json(path: Path, data: dict) -> None:
     from sim_core.files import atomic_write
 
     atomic_write(path, json.dumps(data, indent=2, allow_nan=False))
-
-
-def _real_rig():
-    from drivers.rig import Rig
-
-    env = os.environ
-    missing = [k for k in ("TOFTWIN_TURNTABLE_PORT", "TOFTWIN_LAMP_PORT", "TOFTWIN_SHUTTER_PORT")
-               if not env.get(k)]
-    if missing:
-        print_error(f"no {', '.join(missing)} set (or use --simulated)")
-        raise typer.Exit(code=2)
-    return Rig.open(env["TOFTWIN_TURNTABLE_PORT"], env["TOFTWIN_LAMP_PORT"],
-                    env["TOFTWIN_SHUTTER_PORT"], camera_serial=env.get("TOFTWIN_CAMERA_SERIAL"))
 
 
 BRDF_MODELS = ("seed-microfacet", "cook-torrance", "lambertian", "hapke")

@@ -18,6 +18,7 @@ from typing import Annotated
 import typer
 
 from service.cli import ranges
+from service.cli.command_settings import open_command_rig, rig_settings
 from service.cli.common import (
     check_rig_options,
     console,
@@ -92,13 +93,10 @@ def fit_object_command(
     """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
     from calibration.captures import average_frames
     from calibration.object_twin.fit import fit_object
-    from drivers.rig import Rig, RigState
-    from drivers.sim.world import SimulatedWorld
-    from service.cli.calibrate import _real_rig
+    from drivers.rig import RigState
     from sim_core.files import atomic_write
-    from sim_core.render import RenderSettings
     from sim_core.scene import scene_twin
-    from sim_core.twin_file import load_calibration, load_reality, write_object_twin
+    from sim_core.twin_file import load_calibration, write_object_twin
 
     try:
         check_rig_options(out, reality, simulated)
@@ -107,21 +105,14 @@ def fit_object_command(
         cal = (load_calibration(calibration) if calibration is not None
                else scene_twin(source.spec.model_copy(update={"object_twin": None}),
                                source.base_dir))
-        world = None
-        if simulated:
-            world = SimulatedWorld(source.spec, source.base_dir,
-                                   RenderSettings(integrator="path", spp=camera_spp,
-                                                  max_bounces=2),
-                                   reality=None if reality is None else load_reality(reality))
     except InvalidInputError as exc:
         fail_invalid(exc)
+    settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
+                            camera_integrator="path", camera_seed=seed)
     with contextlib.ExitStack() as stack:
-        if world is not None:
-            rig = stack.enter_context(Rig.simulated(frame_source=world, seed=seed))
-            rig_name = "simulated"
-        else:
-            rig = stack.enter_context(_real_rig())
-            rig_name = "lab"
+        rig, world = open_command_rig(settings, source)
+        stack.enter_context(rig)
+        rig_name = "lab" if world is None else "simulated"
         captures = []
         with rig.hold():
             for a in angle_list:

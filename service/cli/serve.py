@@ -62,10 +62,9 @@ def serve(
 ) -> None:
     """Start the REST API (uvicorn); --simulated runs on the simulators and the satellite scene."""
     import uvicorn
-    from pydantic import ValidationError
 
     from service.api.app import create_app
-    from service.settings import Settings
+    from service.cli.command_settings import load_settings
 
     # A simulated rig started without a token gets a session token; it is written only once
     # every setting is known to be valid and the data directory free (a refused start writes
@@ -75,17 +74,7 @@ def serve(
     given = {"host": host, "port": port, "data_dir": data_dir, "simulated": simulated or None,
              "executor": executor, "workers": workers, "faults": fault or None,
              "reality": reality}
-    try:
-        settings = Settings.load(settings_file, token=token, **given)
-    except ValidationError as exc:
-        for e in exc.errors():
-            field = ".".join(str(p) for p in e["loc"]) or "settings"
-            name = f"TOFTWIN_{field.upper()}"
-            top = str(e["loc"][0]) if e["loc"] else ""
-            if given.get(top) is not None and top in OPTION_OF_FIELD:
-                name = f"{OPTION_OF_FIELD[top]}{field[len(top):]} ({name})"
-            print_error(f"{name}: {e['msg']}")
-        raise typer.Exit(code=2) from None
+    settings = load_settings(settings_file, OPTION_OF_FIELD, token=token, **given)
     refuse_if_in_use(settings.data_dir)
     if session:
         session_token(settings.data_dir, token)

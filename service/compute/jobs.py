@@ -26,10 +26,10 @@ from sim_core.scene_spec import RUSSIAN_ROULETTE_FROM_BOUNCE, SceneSpec
 
 #: One render at a time per process: every render in this process - jobs on a threaded executor
 #: or a multi-threaded Dask worker, and the simulated camera's frames
-#: (:func:`service.lab.lab.open_rig`) - takes this lock. A render already uses all cores, so two
-#: at once would only compete. (sim_core is thread-safe on its own: its few parallel numba
-#: kernels, which numba's ``workqueue`` layer cannot run from two threads at once, take
-#: :data:`sim_core.numba_runtime.PARALLEL_KERNEL_LOCK`.)
+#: (:func:`service.lab.rig_builder.open_rig`) - takes this lock. A render already uses all
+#: cores, so two at once would only compete. (sim_core is thread-safe on its own: its few
+#: parallel numba kernels, which numba's ``workqueue`` layer cannot run from two threads at
+#: once, take :data:`sim_core.numba_runtime.PARALLEL_KERNEL_LOCK`.)
 RENDER_LOCK = threading.Lock()
 
 

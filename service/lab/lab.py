@@ -7,8 +7,9 @@ database opens (:class:`service.store.disk_space.SpaceReserve`: on a full disk i
 service start, serve reads and delete; it is made again afterwards if there is room), the
 database (migrated to the newest schema,
 and every campaign a crash left ``running`` becomes ``interrupted``), the
-frame store (frames no row names are swept away), the executor, the rig (simulated or real; a
-real rig that cannot be opened leaves the service up with the devices reporting 503), the
+frame store (frames no row names are swept away), the executor, the rig (simulated or real,
+:func:`service.lab.rig_builder.open_rig`; a real rig that cannot be opened leaves the service
+up with the devices reporting 503), the
 campaign runner and the calibration jobs (a job a crash left running becomes ``failed``).
 Each part gets what it uses, not the lab: the runner its sessions, rig lease, store, executor
 and settings; the routes ask for the one part they need.
@@ -21,16 +22,15 @@ import logging
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from drivers.errors import DeviceError
-from drivers.rig import Rig
 from service.compute.executors import Executor, make_executor
 from service.errors import UnavailableError
 from service.lab.calibration_jobs import CalibrationJobs
+from service.lab.rig_builder import open_rig
 from service.lab.rig_lease import RigLease
 from service.lab.runner import CampaignRunner
 from service.lab.scenes import SceneSource, resolve_scene
@@ -82,48 +82,6 @@ class Lab:
         finally:
             if self.lock is not None:
                 self.lock.release()
-
-
-def open_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, Any]:
-    """The simulated rig (rendering ``scene``) or the real one on the configured ports, and the
-    simulated lab's world (:class:`drivers.sim.world.SimulatedWorld`; None for the real rig),
-    which calibration jobs ask to mount the board."""
-    if settings.simulated:
-        from drivers.sim.world import SimulatedWorld
-        from service.compute.jobs import RENDER_LOCK
-        from sim_core.render import RenderSettings
-        from sim_core.twin_file import load_reality
-
-        source = SimulatedWorld(
-            scene.spec, scene.base_dir,
-            RenderSettings(integrator=settings.camera_integrator, spp=settings.camera_spp,
-                           max_bounces=2),
-            reality=None if settings.reality is None else load_reality(settings.reality),
-            noise_fraction=settings.camera_noise_fraction,
-        )
-
-        def frame_source(request):
-            with RENDER_LOCK:  # never two renders at once in this process (see RENDER_LOCK)
-                return source(request)
-
-        armed: dict[str, list[str]] = {"turntable": [], "solar-simulator": [], "camera": []}
-        for text in settings.faults:  # validated by Settings: DEVICE:name[:count][@skip]
-            device, _, spec = text.strip().partition(":")
-            armed[device].append(spec)
-        return Rig.simulated(frame_source=frame_source, seed=settings.camera_seed,
-                             turntable_instant=settings.sim_motion == "instant",
-                             turntable_faults=armed["turntable"],
-                             solar_faults=armed["solar-simulator"],
-                             camera_faults=armed["camera"]), source
-    missing = [n for n in ("turntable_port", "lamp_port", "shutter_port")
-               if getattr(settings, n) is None]
-    if missing:
-        raise UnavailableError(
-            f"no {', '.join('TOFTWIN_' + m.upper() for m in missing)} set (or use --simulated)"
-        )
-    return Rig.open(settings.turntable_port, settings.lamp_port, settings.shutter_port,
-                    turntable_address=settings.turntable_address,
-                    camera_serial=settings.camera_serial), None
 
 
 def open_lab(settings: Settings) -> Lab:

@@ -30,7 +30,7 @@ from calibration.rig_material import (
 from calibration.rig_material.reference import PlateGeometry, ReferenceView
 from calibration.rig_material.sweep import SampleCaptures
 from calibration.rig_sequence import SimulatedOperator
-from drivers.rig import Rig
+from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from service.cli import app
 from sim_core.errors import InvalidInputError
@@ -69,7 +69,7 @@ def _measure(true: dict[str, float], reality_seed: int, plan: MaterialSweepPlan)
                            reality=reality)
     operator = SimulatedOperator(world, {SAMPLE_NAME: {"kind": "cook-torrance",
                                                        "params": true}})
-    with Rig.simulated(frame_source=world, seed=reality_seed) as rig:
+    with simulated_rig(frame_source=world, seed=reality_seed) as rig:
         return calibrate_material(rig, operator, SPEC, EXAMPLES, perfect_calibration(reality),
                                   plan, "cook-torrance", PRIOR, seed=reality_seed)
 

@@ -12,7 +12,7 @@ import pytest
 
 from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
 from calibration.verification import compare_twins
-from drivers.rig import Rig
+from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from sim_core.camera import F_60_24_MHZ
 from sim_core.depth_errors import DepthErrorModel, range_to_phase_rad
@@ -34,7 +34,7 @@ SPEC = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
 def _calibrate(reality, seed, frames_per_view=4):
     world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="direct", spp=32),
                            reality=reality)
-    with Rig.simulated(frame_source=world, seed=seed) as rig:
+    with simulated_rig(frame_source=world, seed=seed) as rig:
         return calibrate_rig(rig, SimulatedOperator(world), SPEC, EXAMPLES,
                              RigCalibrationPlan(frames_per_view=frames_per_view))
 
@@ -137,7 +137,7 @@ def test_the_calibrated_twin_lands_near_the_ceiling_on_a_satellite_campaign():
     reality, result = _calibrated_reality(CAMPAIGN_SEED)  # a drawn reality has no object diffs
     world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="path", spp=32,
                                                           max_bounces=2), reality=reality)
-    with Rig.simulated(frame_source=world, seed=7) as rig:
+    with simulated_rig(frame_source=world, seed=7) as rig:
         res = compare_twins(rig, SPEC, EXAMPLES, result.calibration,
                             [-165.0 + 45.0 * i for i in range(8)],
                             settings=RenderSettings(integrator="path", spp=32, max_bounces=2))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from calibration.verification import compare_twins
-from drivers.rig import Rig
+from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import load_scene_spec
@@ -23,7 +23,7 @@ def test_a_perfect_calibration_reaches_the_ceiling_and_the_nominal_twin_does_not
     perfect = CalibrationFile.model_validate(reality.model_dump(exclude={"mount", "objects"}))
     settings = RenderSettings(integrator="direct", spp=16)
     world = SimulatedWorld(spec, EXAMPLES, settings, reality=reality)
-    with Rig.simulated(frame_source=world, seed=2) as rig:
+    with simulated_rig(frame_source=world, seed=2) as rig:
         res = compare_twins(rig, spec, EXAMPLES, perfect, [-30.0, 30.0, 90.0], settings=settings)
     assert res.poses == 3
     assert res.calibrated_over_ceiling < 1.15, res.to_dict()

@@ -22,6 +22,7 @@ from drivers.errors import (
     TurntableError,
 )
 from drivers.rig import Rig, RigState
+from drivers.sim.rig import simulated_rig
 from drivers.sim.usb_camera import CameraRequest, UsbCameraSim, plane_source
 from drivers.solar_simulator import SolarSimulator
 from drivers.turntable import Turntable
@@ -42,7 +43,7 @@ def rig(requests_seen):
         requests_seen.append(request)
         return source(request)
 
-    rig = Rig.simulated(recording, seed=4)
+    rig = simulated_rig(recording, seed=4)
     yield rig
     rig.close()
 
@@ -141,14 +142,14 @@ def test_rig_state_checks_its_fields():
 
 
 def test_camera_faults_reach_the_rig_camera():
-    with Rig.simulated(camera_faults=["drop:1@1"]) as rig:
+    with simulated_rig(camera_faults=["drop:1@1"]) as rig:
         frames = rig.capture(3)
         assert [f.meta["sequence"] for f in frames] == [0, 2, 3]
         assert rig.camera.stats.dropped == 1
 
 
 def test_close_tears_everything_down_and_is_idempotent():
-    rig = Rig.simulated()
+    rig = simulated_rig()
     ports = [*rig.sims["turntable"].ports, *rig.sims["solar"].ports]
     assert all(os.path.exists(p) for p in ports)
     rig.close()
@@ -247,7 +248,7 @@ def test_a_lamp_fault_after_the_last_lamp_command_is_caught_by_the_read_back(req
     """Fault points after the level is set are seen only by comparing the read-back."""
     messages = []
     for skip in range(8):
-        with Rig.simulated(plane_source(1.0), seed=4) as rig:
+        with simulated_rig(plane_source(1.0), seed=4) as rig:
             rig.apply(RigState(10.0, 1.0, True))
             rig.sims["solar"].servers["lamp"].faults.inject(f"lamp-fault:1@{skip}")
             try:

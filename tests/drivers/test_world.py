@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from drivers.camera.wire import get_use_case
-from drivers.rig import Rig, RigState
+from drivers.rig import RigState
+from drivers.sim.rig import simulated_rig
 from drivers.sim.usb_camera import CameraRequest
 from drivers.sim.world import SimulatedWorld, default_reality
 from sim_core.camera import Intrinsics, z_over_range
@@ -38,7 +39,7 @@ def _nominal_z_over_range(frame):
 
 @pytest.fixture(scope="module")
 def rig():
-    r = Rig.simulated(frame_source=_world(), seed=3)
+    r = simulated_rig(frame_source=_world(), seed=3)
     yield r
     r.close()
 

@@ -1,0 +1,165 @@
+"""The simulated rig: the three simulators started, and the rig's *real* drivers connected to them.
+
+:func:`simulated_rig` starts the SMC100 and the Oriel units on pseudo-terminals (or TCP;
+:func:`drivers.sim.pty_server.start_simulator`) and the camera as a pyusb backend
+(:class:`drivers.sim.usb_camera.UsbCameraSim`), and returns a :class:`drivers.rig.Rig` whose
+:class:`~drivers.turntable.Turntable`, :class:`~drivers.solar_simulator.SolarSimulator` and
+:class:`~drivers.camera.UsbCamera` speak the devices' bytes to them. The simulated camera's frame
+source receives, with every request, the rig state read from the simulators' physical models
+(``CameraRequest.rig_state``), so a renderer plugged in as ``frame_source`` renders for the
+current turntable angle and illumination.
+
+It lives beside the simulators so that :mod:`drivers.rig` (and the real drivers) import none of
+them (an import-linter contract).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from collections.abc import Callable, Iterable
+
+from drivers.camera import UsbCamera, UsbCameraSettings
+from drivers.rig import Rig, RigState
+from drivers.sim.pty_server import SimHandle, start_simulator
+from drivers.sim.usb_camera import FrameSource, UsbCameraSim
+from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
+from drivers.turntable import SMC100_SETTINGS, Turntable
+
+__all__ = ["simulated_rig"]
+
+
+def simulated_rig(
+    frame_source: FrameSource | None = None,
+    *,
+    seed: int = 0,
+    use_case: str = "MODE_5_45FPS_500",
+    instant: bool = True,
+    time_scale: float = 1.0,
+    turntable_instant: bool | None = None,
+    transport: str = "pty",
+    turntable_faults: Iterable[str] = (),
+    solar_faults: Iterable[str] = (),
+    camera_faults: Iterable[str] = (),
+    camera_settings: UsbCameraSettings | None = None,
+) -> Rig:
+    """Start the three simulators and return a rig with real drivers connected to them.
+
+    Closing the rig closes the drivers and stops the simulators; ``rig.sims`` holds them
+    (``"turntable"``, ``"solar"``: :class:`~drivers.sim.pty_server.SimHandle`; ``"camera"``:
+    the :class:`~drivers.sim.usb_camera.UsbCameraSim`).
+
+    Parameters
+    ----------
+    frame_source : callable or None
+        ``CameraRequest -> RawFrame`` for the simulated camera (a plane at 1 m when None);
+        ``request.rig_state`` is the :class:`~drivers.rig.RigState` of the simulated devices.
+    seed : int
+        The camera simulator's noise seed.
+    use_case : str
+        Use case the camera is configured with.
+    instant : bool
+        Motions, warm-up and frame timing complete at once (fast tests); otherwise the
+        simulators run in (scaled) real time.
+    time_scale : float
+        Simulated seconds per wall-clock second for the serial simulators.
+    turntable_instant : bool or None
+        The turntable's own ``instant`` (None: ``instant``): ``False`` with an instant rig
+        gives a stage that moves at its speed (20 deg/s) while the lamp and camera stay
+        instant, so that a move can be watched and stopped.
+    transport : {"pty", "tcp"}
+        Where the serial simulators are served.
+    turntable_faults, solar_faults, camera_faults : iterable of str
+        Faults armed at start (``"stall:1"``, ``"lamp-fault"``, ``"drop:1@3"``).
+    camera_settings : UsbCameraSettings or None
+        Driver settings for the camera.
+
+    Examples
+    --------
+    >>> with simulated_rig(seed=1) as rig:
+    ...     rig.apply(RigState(30.0, 0.0, False)).turntable_angle_deg
+    30.0
+    """
+    started: list[Callable[[], None]] = []
+    try:
+        tt_instant = instant if turntable_instant is None else turntable_instant
+        tt_sim = start_simulator(
+            "turntable",
+            turntable_faults,
+            transport=transport,
+            instant=tt_instant,
+            time_scale=time_scale,
+        )
+        started.append(tt_sim.stop)
+        solar_sim = start_simulator(
+            "solar-simulator",
+            solar_faults,
+            transport=transport,
+            instant=instant,
+            time_scale=time_scale,
+        )
+        started.append(solar_sim.stop)
+        cam_sim = UsbCameraSim(
+            frame_source,
+            seed=seed,
+            instant=instant,
+            faults=camera_faults,
+            state_provider=_physical_state(tt_sim, solar_sim),
+        )
+        fast = instant or time_scale > 1
+        tt_fast = tt_instant or time_scale > 1
+        turntable = Turntable(
+            tt_sim.ports[0],
+            settle_s=0.0 if tt_fast else 0.2,
+            poll_interval_s=0.005 if tt_fast else 0.05,
+            stall_timeout_s=0.5 if tt_fast else 2.0,
+            settings=dataclasses.replace(
+                SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
+            ),
+        )
+        turntable.connect()
+        started.append(turntable.close)
+        solar = SolarSimulator(
+            *solar_sim.ports,
+            warmup_s=0.0 if instant else 1800.0 / time_scale,
+            poll_interval_s=0.01 if fast else 0.5,
+            lamp_settings=dataclasses.replace(
+                LAMP_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
+            ),
+            shutter_settings=dataclasses.replace(
+                SHUTTER_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
+            ),
+        )
+        solar.connect()
+        started.append(solar.close)
+        camera = UsbCamera(backend=cam_sim, use_case=use_case, settings=camera_settings)
+        camera.connect()
+    except BaseException:
+        for stop in reversed(started):
+            with contextlib.suppress(Exception):
+                stop()
+        raise
+    rig = Rig(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop])
+    rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
+    return rig
+
+
+def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], RigState]:
+    """Read the rig state from the simulators' models (not through the drivers or the lock)."""
+    smc = tt_sim.models["turntable"]
+    solar = solar_sim.models["rig"]
+
+    def state() -> RigState:
+        lamp = solar.lamp
+        suns = (
+            solar.calibration.suns_for(lamp.electrical()[2], extrapolate=True)
+            if lamp.lamp_on
+            else 0.0
+        )
+        return RigState(
+            turntable_angle_deg=smc.current_position(),
+            solar_suns=max(0.0, suns),
+            shutter_open=bool(solar.shutter.is_open),
+        )
+
+    return state
