@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import asyncio
-import time
 from collections.abc import AsyncIterator
+from contextlib import aclosing
+from functools import partial
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path, Query
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
@@ -21,6 +20,7 @@ from service.api.deps import (
     TokenDep,
     errors,
 )
+from service.api.events import status_events
 from service.api.schemas import CalibrationJobPublic, CalibrationPublic
 from service.api.security_headers import self_contained_document
 from service.lab.calibration_jobs import job_file, job_public, job_status
@@ -114,22 +114,10 @@ async def get_calibration_job_events(
 ) -> AsyncIterator[ServerSentEvent]:
     """Server-sent events: the job's status (as ``GET``) whenever it changes (every step of the
     sequence), until it is done, failed or cancelled. Bounded like the campaigns' streams."""
-    try:
-        deadline = time.monotonic() + settings.sse_max_s
-        last = None
-        seq = 0
-        while True:
-            key = await run_in_threadpool(_key, sessions, job_id)
-            if key != last:
-                last = key
-                status = await run_in_threadpool(job_status, sessions, calibrations, job_id)
-                seq += 1
-                yield ServerSentEvent(data=status, event="status", id=str(seq),
-                                      retry=int(settings.sse_interval_s * 4000))
-                if status["state"] in queries.CALIBRATION_TERMINAL:
-                    return
-            if time.monotonic() > deadline:
-                return
-            await asyncio.sleep(settings.sse_interval_s)
-    finally:
-        slots.give_back()
+    events = status_events(partial(_key, sessions, job_id),
+                           partial(job_status, sessions, calibrations, job_id),
+                           terminal=queries.CALIBRATION_TERMINAL, settings=settings,
+                           slots=slots)
+    async with aclosing(events):
+        async for event in events:
+            yield event

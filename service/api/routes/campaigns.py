@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
 import json
-import time
 from collections.abc import AsyncIterator
+from contextlib import aclosing
+from functools import partial
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Response
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse, StreamingResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
@@ -25,6 +24,7 @@ from service.api.deps import (
     TokenDep,
     errors,
 )
+from service.api.events import status_events
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.api.security_headers import self_contained_document
 from service.export.bluesky import iter_campaign_documents
@@ -119,6 +119,11 @@ def cancel_campaign(
     return campaign_status(sessions, runner, campaign_id)
 
 
+def _poses_done(status: dict, sent: int) -> str:
+    """A campaign's event id: the poses done when it was sent."""
+    return str(status["poses_done"])
+
+
 def _stream_slot(
     campaign_id: CampaignId, sessions: SessionsDep, runner: RunnerDep, slots: StreamSlotsDep
 ) -> None:
@@ -141,23 +146,13 @@ async def get_campaign_events(
     failed); a browser follows it with ``new EventSource(url)``. At most ``sse_max_streams``
     streams are open at once (503 beyond).
     """
-    try:
-        deadline = time.monotonic() + settings.sse_max_s
-        last = None
-        while True:
-            key = await run_in_threadpool(status_key, sessions, runner, campaign_id)
-            if key != last:
-                last = key
-                status = await run_in_threadpool(campaign_status, sessions, runner, campaign_id)
-                yield ServerSentEvent(data=status, event="status", id=str(status["poses_done"]),
-                                      retry=int(settings.sse_interval_s * 4000))
-                if status["state"] in queries.TERMINAL:
-                    return
-            if time.monotonic() > deadline:
-                return
-            await asyncio.sleep(settings.sse_interval_s)
-    finally:
-        slots.give_back()
+    events = status_events(partial(status_key, sessions, runner, campaign_id),
+                           partial(campaign_status, sessions, runner, campaign_id),
+                           terminal=queries.TERMINAL, settings=settings, slots=slots,
+                           event_id=_poses_done)
+    async with aclosing(events):
+        async for event in events:
+            yield event
 
 
 #: results a page of ``GET /campaigns/{id}/results`` holds unless ``limit`` says otherwise
