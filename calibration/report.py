@@ -1,8 +1,9 @@
 """The calibration's outputs: ``calibration.yaml``, ``report.json`` and ``report.html``.
 
-The HTML page (a Jinja2 template, ``calibration/templates/report.html.j2``) lists each
-procedure's result and residual next to its typical value (docs/calibration.md), the views that
-were not used and why, and the residual plots (matplotlib, written as PNG files beside it).
+The HTML page (a Jinja2 template, ``calibration/templates/report.html.j2``, in the project's one
+environment: :func:`sim_core.html.jinja_environment`) lists each procedure's result and residual
+next to its typical value (docs/calibration.md), the views that were not used and why, and the
+residual plots (matplotlib, written as PNG files beside it).
 """
 
 from __future__ import annotations
@@ -11,8 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-import jinja2
-
+from sim_core.html import jinja_environment, number
 from sim_core.twin_file import dump_yaml, twin_hash, write_calibration
 
 #: typical residuals on this rig, for the summary (docs/calibration.md, "What each residual means")
@@ -26,18 +26,10 @@ TYPICAL = {
 }
 
 
-def _env() -> jinja2.Environment:
-    return jinja2.Environment(
-        loader=jinja2.PackageLoader("calibration", "templates"),
-        autoescape=jinja2.select_autoescape(["html", "j2"]),
-        undefined=jinja2.StrictUndefined,
-    )
-
-
 def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return str(v)
+    """A provenance value in a summary cell: a float to four digits (as the operator page's
+    calibration screen shows it), anything else as it is."""
+    return number(v, "{:.4g}") if isinstance(v, float) else str(v)
 
 
 def summary_rows(procedures: dict[str, dict]) -> list[dict[str, str]]:
@@ -99,7 +91,7 @@ def write_report(out_dir: str | Path, result) -> dict[str, Path]:
     rejected = list(prov.procedures.get("views", {}).get("not_detected", []))
     intr = prov.procedures.get("intrinsics", {})
     rejected += [r for r in intr.get("rejected", []) if isinstance(r, dict)]
-    html = _env().get_template("report.html.j2").render(
+    html = jinja_environment("calibration").get_template("report.html.j2").render(
         rig=prov.rig, created_utc=prov.created_utc, software=prov.software,
         frames_used=prov.frames_used, calibration_hash=data["calibration_hash"],
         summary=summary_rows(prov.procedures), rejected=rejected,
