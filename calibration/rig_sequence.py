@@ -34,6 +34,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from calibration.angles import (
+    SWEEP_FIELDS,
+    SWEEP_FROM_DEG,
+    SWEEP_STEP_DEG,
+    SWEEP_TO_DEG,
+    sweep_angles,
+)
 from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
 from calibration.fixtures import BoardFixture, board_object, world_from_board
 from calibration.photometry import fit_source_power
@@ -98,7 +105,7 @@ class RigCalibrationPlan:
 
     board: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_BOARD))
     fixtures: tuple[BoardFixture, ...] = DEFAULT_FIXTURES
-    sweep_deg: tuple[float, ...] = tuple(float(a) for a in range(-55, 56, 5))
+    sweep_deg: tuple[float, ...] = sweep_angles()
     frames_per_view: int = 4
     noise_frames: int = 24
     solar_levels_suns: tuple[float, ...] = (0.8, 1.0, 1.2)
@@ -122,6 +129,53 @@ class RigCalibrationPlan:
         """Rig states the sequence visits (for progress)."""
         return (len(self.fixtures) * len(self.sweep_deg) + 2
                 + len(self.solar_levels_suns) + 1)
+
+    def summary(self) -> dict[str, Any]:
+        """The plan as JSON values: the fixtures by name, the rest as given (what
+        ``toftwin calibrate rig --print-plan`` prints)."""
+        return {"board": dict(self.board), "fixtures": [f.name for f in self.fixtures],
+                "sweep_deg": list(self.sweep_deg), "frames_per_view": self.frames_per_view,
+                "noise_frames": self.noise_frames,
+                "solar_levels_suns": list(self.solar_levels_suns),
+                "solar_frames": self.solar_frames,
+                "solar_reference_suns": self.solar_reference_suns}
+
+
+def build_rig_plan(
+    *,
+    fixtures: Sequence[str] | None = None,
+    sweep_from_deg: float = SWEEP_FROM_DEG,
+    sweep_to_deg: float = SWEEP_TO_DEG,
+    sweep_step_deg: float = SWEEP_STEP_DEG,
+    frames_per_view: int = RigCalibrationPlan.frames_per_view,
+    noise_frames: int = RigCalibrationPlan.noise_frames,
+    solar_levels_suns: Sequence[float] = RigCalibrationPlan.solar_levels_suns,
+    solar_frames: int = RigCalibrationPlan.solar_frames,
+    solar_reference_suns: float | None = None,
+    fields: Mapping[str, str] = SWEEP_FIELDS,
+) -> RigCalibrationPlan:
+    """The calibration sequence's plan from its inputs: the one builder of the command line
+    (``toftwin calibrate rig``) and the service (``POST /calibrations``).
+
+    ``fixtures`` names board fixtures of :data:`DEFAULT_FIXTURES` (None: all of them); the sweep
+    is :func:`calibration.angles.sweep_angles` (its rule, and ``fields``: how the caller names
+    the sweep's inputs in the errors); the rest goes to :class:`RigCalibrationPlan` as given.
+    """
+    by_name = {f.name: f for f in DEFAULT_FIXTURES}
+    unknown = [n for n in fixtures or () if n not in by_name]
+    if unknown:
+        raise InvalidInputError("fixtures", f"'{unknown[0]}' is not a fixture; allowed: "
+                                f"{', '.join(by_name)}")
+    chosen = DEFAULT_FIXTURES if fixtures is None else tuple(by_name[n] for n in fixtures)
+    angles = sweep_angles(sweep_from_deg, sweep_to_deg, sweep_step_deg, fields=fields)
+    try:
+        return RigCalibrationPlan(
+            fixtures=chosen, sweep_deg=angles, frames_per_view=frames_per_view,
+            noise_frames=noise_frames, solar_levels_suns=tuple(solar_levels_suns),
+            solar_frames=solar_frames, solar_reference_suns=solar_reference_suns)
+    except InvalidInputError as exc:  # the plan's own checks, named as the caller names them
+        raise InvalidInputError(exc.field.replace("sweep_deg", fields["sweep"]),
+                                exc.message) from None
 
 class Operator(Protocol):
     """Whoever swaps what stands on the turntable: the operator, or the simulated lab."""

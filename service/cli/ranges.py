@@ -12,6 +12,7 @@ every such copy against its home.
 
 from __future__ import annotations
 
+from calibration.angles import SWEEP_STEP_RANGE_DEG
 from drivers.turntable import ADDRESS_RANGE
 from service.cli.common import Range, field_range
 from sim_core.lights import SUNS_RANGE
@@ -22,6 +23,8 @@ SPP = field_range(RenderSpec, "spp")
 MAX_BOUNCES = field_range(RenderSpec, "max_bounces")
 SEED = field_range(RenderSpec, "seed")
 TURNTABLE_ADDRESS = Range(*ADDRESS_RANGE)
+#: the board sweep's step (calibration.angles: the command line's and the service's rule)
+SWEEP_STEP = Range(*SWEEP_STEP_RANGE_DEG, unit="deg")
 #: a solar simulator level, or 0 for off
 SOLAR_SUNS_OR_OFF = Range(*SUNS_RANGE, unit="sun", also=(0.0,))
 
@@ -55,7 +58,6 @@ BENCH_SPP = Range(1, 256)
 EFFECT_TOLERANCE = Range(0.0, 1e4, lo_open=True, unit="mm")
 PREVIEW_SCALE = Range(1, 8)
 FRAMES_PER_VIEW = Range(1, 64)
-SWEEP_STEP = Range(1.0, 30.0, unit="deg")
 #: calibration.solar: a reference cell's reading at a set level of 1 sun
 REFERENCE_SUNS = Range(0.0, 5.0, lo_open=True, unit="sun")
 #: calibration.rig_material.MaterialSweepPlan: size_m and frames_per_state
