@@ -31,8 +31,18 @@ from calibration.angles import (
     SWEEP_TO_DEG,
     sweep_angles,
 )
-from calibration.rig_sequence import DEFAULT_FIXTURES, RigCalibrationPlan, build_rig_plan
+from calibration.rig_sequence import (
+    DEFAULT_FIXTURES,
+    FRAMES_PER_VIEW_RANGE,
+    NOISE_FRAMES_RANGE,
+    SOLAR_FRAMES_RANGE,
+    SOLAR_LEVELS_COUNT,
+    RigCalibrationPlan,
+    build_rig_plan,
+)
+from calibration.solar import REFERENCE_SUNS_RANGE, check_reference_suns
 from sim_core.adaptive import NOISE_FRACTION_RANGE
+from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 
 SUNS_LOW, SUNS_HIGH = SUNS_RANGE
@@ -58,6 +68,13 @@ def _check_suns(v: float) -> float:
     raise ValueError(
         f"got {v!r} sun; allowed: {SUNS_LOW:g} to {SUNS_HIGH:g} sun, or 0 (lamp off)"
     )
+
+
+def _reference_suns(v: float) -> float:
+    try:
+        return check_reference_suns(v)
+    except InvalidInputError as exc:
+        raise ValueError(exc.message) from None
 
 
 def _check_level(v: float) -> float:
@@ -286,20 +303,26 @@ class CalibrationCreate(RequestBody):
         "principal point: the upright board alone is a degenerate set and is refused.")
     sweep: SweepIn = SweepIn()
     frames_per_view: Annotated[int, Strict()] = Field(
-        4, ge=1, le=64, description="Frames averaged per board view.")
+        4, ge=FRAMES_PER_VIEW_RANGE[0], le=FRAMES_PER_VIEW_RANGE[1],
+        description="Frames averaged per board view.")
     noise_frames: Annotated[int, Strict()] = Field(
-        24, ge=2, le=256, description="Frames of the noise stack (16 or more for gain within 2 %).")
+        24, ge=NOISE_FRAMES_RANGE[0], le=NOISE_FRAMES_RANGE[1],
+        description="Frames of the noise stack (16 or more for gain within 2 %).")
     solar_levels_suns: list[Level] = Field(
-        default_factory=lambda: [0.8, 1.0, 1.2], min_length=1, max_length=8,
+        default_factory=lambda: [0.8, 1.0, 1.2], min_length=SOLAR_LEVELS_COUNT[0],
+        max_length=SOLAR_LEVELS_COUNT[1],
         description="Set levels of the solar simulator for its scale.")
     solar_frames: Annotated[int, Strict()] = Field(
-        8, ge=1, le=64, description="Frames averaged per solar level.")
+        8, ge=SOLAR_FRAMES_RANGE[0], le=SOLAR_FRAMES_RANGE[1],
+        description="Frames averaged per solar level.")
     solar_reference_suns: Annotated[
         float, Strict(),
         Field(description="A reference cell's reading at a set level of 1 sun [sun], used when "
-              "the frames do not determine the solar simulator's scale; 0.01 to 10.",
-              json_schema_extra={"minimum": 0.01, "maximum": 10}),
-        AfterValidator(_in_range(0.01, 10.0, "sun")),
+              "the frames do not determine the solar simulator's scale; above "
+              f"{REFERENCE_SUNS_RANGE[0]:g}, up to {REFERENCE_SUNS_RANGE[1]:g}.",
+              json_schema_extra={"exclusiveMinimum": REFERENCE_SUNS_RANGE[0],
+                                 "maximum": REFERENCE_SUNS_RANGE[1]}),
+        AfterValidator(_reference_suns),
     ] | None = None
     activate: StrictBool = Field(
         False, description="Make the result the active calibration when the job is done.")
