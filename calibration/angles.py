@@ -105,7 +105,8 @@ def angle_range(
     max_count: int = MAX_ANGLES,
 ) -> tuple[float, ...]:
     """``start_deg``, ``start_deg + step_deg``, ... up to ``stop_deg`` [deg], the end included
-    when a step reaches it (within 1e-9 of a step); each rounded to 1e-9 deg.
+    when a step reaches it (within 1e-9 of a step); each rounded to 1e-9 deg, none past
+    ``stop_deg``.
 
     The range form of :func:`parse_angles` and the board sweep (:func:`sweep_angles`).
 
@@ -120,11 +121,14 @@ def angle_range(
     if stop_deg < start_deg:
         raise InvalidInputError(field, f"TO ({stop_deg:g}) is below FROM ({start_deg:g}) deg; "
                                 "allowed: TO >= FROM")
-    n = math.floor((stop_deg - start_deg) / step_deg + 1e-9) + 1
-    if n > max_count:  # before the list is made: a tiny step must not fill the memory
+    steps = (stop_deg - start_deg) / step_deg + 1e-9  # inf when the span overflows
+    if not steps < max_count:  # before the list is made: a tiny step must not fill the memory
+        many = f"{math.floor(steps) + 1}" if math.isfinite(steps) else "too many"
         raise InvalidInputError(field, f"{start_deg:g} to {stop_deg:g} every {step_deg:g} deg is "
-                                f"{n} angles; allowed: at most {max_count} (a coarser step)")
-    return tuple(round(start_deg + i * step_deg, 9) + 0.0 for i in range(n))
+                                f"{many} angles; allowed: at most {max_count} (a coarser step)")
+    n = math.floor(steps) + 1
+    # rounded to 1e-9 deg, never past the end (the last step may reach it within 1e-9 step)
+    return tuple(min(round(start_deg + i * step_deg, 9), stop_deg) + 0.0 for i in range(n))
 
 
 def check_angles(
