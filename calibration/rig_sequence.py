@@ -34,13 +34,21 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from calibration.angles import (
+    SWEEP_FIELDS,
+    SWEEP_FROM_DEG,
+    SWEEP_STEP_DEG,
+    SWEEP_TO_DEG,
+    sweep_angles,
+)
 from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
 from calibration.fixtures import BoardFixture, board_object, world_from_board
 from calibration.photometry import fit_source_power
-from calibration.solar import fit_solar_scale
+from calibration.solar import check_reference_suns, fit_solar_scale
 from calibration.twin_prediction import mounted_spec, predict_view
 from drivers.rig import Rig, RigState
 from sim_core.errors import InvalidInputError
+from sim_core.lights import SUNS_RANGE
 from sim_core.scene import build_camera
 from sim_core.scene_spec import ObjectSpec, SceneSpec
 from sim_core.twin_file import (
@@ -68,6 +76,14 @@ DEFAULT_FIXTURES = tuple(
                  towards_camera_m=off_mm * 1e-3)
     for off_mm in (200, 400) for tilt_name, tilt in (("tilt+30", 30.0), ("tilt-30", -30.0),
                                                       ("tilt0", 0.0)))
+#: frames averaged per board view
+FRAMES_PER_VIEW_RANGE = (1, 64)
+#: frames of the noise stack: two for a variance, 16 or more for a gain within 1-2 %
+NOISE_FRAMES_RANGE = (2, 256)
+#: how many set levels of the solar simulator, each in sim_core.lights.SUNS_RANGE
+SOLAR_LEVELS_COUNT = (1, 8)
+#: frames averaged per solar level
+SOLAR_FRAMES_RANGE = (1, 64)
 #: rounds of the corner-bias synthesis (each renders every view at the poses the turntable
 #: model places it, with the calibrated camera)
 DEBIAS_ROUNDS = 1
@@ -98,7 +114,7 @@ class RigCalibrationPlan:
 
     board: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_BOARD))
     fixtures: tuple[BoardFixture, ...] = DEFAULT_FIXTURES
-    sweep_deg: tuple[float, ...] = tuple(float(a) for a in range(-55, 56, 5))
+    sweep_deg: tuple[float, ...] = sweep_angles()
     frames_per_view: int = 4
     noise_frames: int = 24
     solar_levels_suns: tuple[float, ...] = (0.8, 1.0, 1.2)
@@ -108,20 +124,83 @@ class RigCalibrationPlan:
     def __post_init__(self) -> None:
         if len(self.fixtures) < 1:
             raise InvalidInputError("fixtures", "at least one board fixture is needed")
+        names = [f.name for f in self.fixtures]
+        if len(set(names)) != len(names):
+            raise InvalidInputError("fixtures", f"{names} names a fixture twice; each once")
         if len(self.sweep_deg) < 3:
             raise InvalidInputError("sweep_deg", f"{len(self.sweep_deg)} angles; at least 3 "
                                     "distinct angles are needed to determine the axis")
-        if self.frames_per_view < 1:
-            raise InvalidInputError("frames_per_view", f"{self.frames_per_view} is below 1")
-        if self.noise_frames < 2:
-            raise InvalidInputError("noise_frames", f"{self.noise_frames} frames are too few "
-                                    "for a variance; at least 2 (better 16 or more)")
+        _count("frames_per_view", self.frames_per_view, *FRAMES_PER_VIEW_RANGE,
+               "frames averaged per view")
+        _count("noise_frames", self.noise_frames, *NOISE_FRAMES_RANGE,
+               "frames: two for a variance, 16 or more for the gain within 1-2 %")
+        _count("solar_levels_suns", len(self.solar_levels_suns), *SOLAR_LEVELS_COUNT, "levels")
+        lo, hi = SUNS_RANGE
+        for i, level in enumerate(self.solar_levels_suns):
+            if not (np.isfinite(level) and lo <= level <= hi):
+                raise InvalidInputError(f"solar_levels_suns[{i}]", f"got {level!r} sun; "
+                                        f"allowed: {lo:g} to {hi:g} sun")
+        _count("solar_frames", self.solar_frames, *SOLAR_FRAMES_RANGE, "frames per level")
+        if self.solar_reference_suns is not None:
+            check_reference_suns(self.solar_reference_suns)
 
     @property
     def n_captures(self) -> int:
         """Rig states the sequence visits (for progress)."""
         return (len(self.fixtures) * len(self.sweep_deg) + 2
                 + len(self.solar_levels_suns) + 1)
+
+    def summary(self) -> dict[str, Any]:
+        """The plan as JSON values: the fixtures by name, the rest as given (what
+        ``toftwin calibrate rig --print-plan`` prints)."""
+        return {"board": dict(self.board), "fixtures": [f.name for f in self.fixtures],
+                "sweep_deg": list(self.sweep_deg), "frames_per_view": self.frames_per_view,
+                "noise_frames": self.noise_frames,
+                "solar_levels_suns": list(self.solar_levels_suns),
+                "solar_frames": self.solar_frames,
+                "solar_reference_suns": self.solar_reference_suns}
+
+
+def build_rig_plan(
+    *,
+    fixtures: Sequence[str] | None = None,
+    sweep_from_deg: float = SWEEP_FROM_DEG,
+    sweep_to_deg: float = SWEEP_TO_DEG,
+    sweep_step_deg: float = SWEEP_STEP_DEG,
+    frames_per_view: int = RigCalibrationPlan.frames_per_view,
+    noise_frames: int = RigCalibrationPlan.noise_frames,
+    solar_levels_suns: Sequence[float] = RigCalibrationPlan.solar_levels_suns,
+    solar_frames: int = RigCalibrationPlan.solar_frames,
+    solar_reference_suns: float | None = None,
+    fields: Mapping[str, str] = SWEEP_FIELDS,
+) -> RigCalibrationPlan:
+    """The calibration sequence's plan from its inputs: the one builder of the command line
+    (``toftwin calibrate rig``) and the service (``POST /calibrations``).
+
+    ``fixtures`` names board fixtures of :data:`DEFAULT_FIXTURES` (None: all of them); the sweep
+    is :func:`calibration.angles.sweep_angles` (its rule, and ``fields``: how the caller names
+    the sweep's inputs in the errors); the rest goes to :class:`RigCalibrationPlan` as given.
+    """
+    by_name = {f.name: f for f in DEFAULT_FIXTURES}
+    unknown = [n for n in fixtures or () if n not in by_name]
+    if unknown:
+        raise InvalidInputError("fixtures", f"'{unknown[0]}' is not a fixture; allowed: "
+                                f"{', '.join(by_name)}")
+    chosen = DEFAULT_FIXTURES if fixtures is None else tuple(by_name[n] for n in fixtures)
+    angles = sweep_angles(sweep_from_deg, sweep_to_deg, sweep_step_deg, fields=fields)
+    try:
+        return RigCalibrationPlan(
+            fixtures=chosen, sweep_deg=angles, frames_per_view=frames_per_view,
+            noise_frames=noise_frames, solar_levels_suns=tuple(solar_levels_suns),
+            solar_frames=solar_frames, solar_reference_suns=solar_reference_suns)
+    except InvalidInputError as exc:  # the plan's own checks, named as the caller names them
+        raise InvalidInputError(exc.field.replace("sweep_deg", fields["sweep"]),
+                                exc.message) from None
+
+def _count(field_name: str, n: int, lo: int, hi: int, what: str) -> None:
+    if not lo <= n <= hi:
+        raise InvalidInputError(field_name, f"got {n}; allowed: {lo} to {hi} {what}")
+
 
 class Operator(Protocol):
     """Whoever swaps what stands on the turntable: the operator, or the simulated lab."""

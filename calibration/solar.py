@@ -14,6 +14,7 @@ and the scale must come from a reference-cell reading the operator enters; the r
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -32,6 +33,8 @@ HUBER = 3.0
 FLAT_VARIATION = 0.05
 #: the scale is searched in this range
 SCALE_BOUNDS = (0.2, 5.0)
+#: a reference cell's reading at a set level of 1 sun [sun]: above 0, up to 5
+REFERENCE_SUNS_RANGE = (0.0, 5.0)
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,16 @@ class SolarScaleResult:
         return {"irradiance_scale": self.irradiance_scale, "std_error": self.std_error,
                 "method": self.method, "n_pixels": self.n_pixels,
                 "residual_rms_dn": self.residual_rms_dn, "reason": self.reason}
+
+
+def check_reference_suns(value: float, field: str = "solar_reference_suns") -> float:
+    """``value`` if it is a reference cell's reading in :data:`REFERENCE_SUNS_RANGE`, else an
+    input error naming ``field``."""
+    lo, hi = REFERENCE_SUNS_RANGE
+    if not (math.isfinite(value) and lo < value <= hi):
+        raise InvalidInputError(field, f"got {value!r} sun; allowed: above {lo:g} up to {hi:g} "
+                                "sun")
+    return float(value)
 
 
 def _flat(image: np.ndarray) -> np.ndarray:
@@ -176,7 +189,5 @@ def fit_solar_scale(
             f"the frames do not determine it: {reason}; measure the beam with a reference cell "
             "at a set level of 1 sun and enter the reading (--solar-reference-suns)",
         )
-    if not (np.isfinite(reference_cell_suns) and 0.0 < reference_cell_suns <= 5.0):
-        raise InvalidInputError("solar_reference_suns",
-                                f"{reference_cell_suns} is outside (0, 5] sun")
+    check_reference_suns(reference_cell_suns)
     return SolarScaleResult(float(reference_cell_suns), 0.0, "reference-cell", 0, 0.0, reason)

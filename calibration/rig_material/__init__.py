@@ -23,7 +23,7 @@ from calibration.rig_material.fit import (
 from calibration.rig_material.plan import (
     SAMPLE_NAME,
     MaterialSweepPlan,
-    parse_angles,
+    sample_angles,
     sample_object,
 )
 from calibration.rig_material.procedure import MaterialCalibration, calibrate_material
@@ -40,7 +40,7 @@ __all__ = [
     "calibrate_material",
     "extract_slices",
     "fit_slices",
-    "parse_angles",
     "prior_material",
+    "sample_angles",
     "sample_object",
 ]

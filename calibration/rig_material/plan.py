@@ -11,11 +11,13 @@ level, with the solar simulator's shutter open.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from calibration.angles import MAX_ANGLES, angle_range, check_angles, parse_angles
 from calibration.fixtures import BoardFixture, fixture_object
 from drivers.rig import RigState
 from sim_core.errors import InvalidInputError
@@ -25,7 +27,9 @@ from sim_core.scene_spec import ObjectSpec, SceneSpec
 #: the sample's object name in the scene (the simulated lab's operator mounts it by this name)
 SAMPLE_NAME = "material_sample"
 #: default sweep: -70 ... 70 deg every 5 deg
-DEFAULT_ANGLES_DEG: tuple[float, ...] = tuple(float(a) for a in range(-70, 71, 5))
+DEFAULT_ANGLES_DEG: tuple[float, ...] = angle_range(-70.0, 70.0, 5.0, field="angles_deg")
+#: the sample's turntable angles [deg]: beyond, the plate is seen edge-on
+SAMPLE_ANGLE_RANGE_DEG: tuple[float, float] = (-85.0, 85.0)
 
 
 @dataclass(frozen=True)
@@ -35,7 +39,8 @@ class MaterialSweepPlan:
     Attributes
     ----------
     angles_deg : tuple of float
-        Reported turntable angles [deg], each in [-85, 85]: beyond, the plate is seen edge-on.
+        Reported turntable angles [deg], 1 to 721, each in [-85, 85]: beyond, the plate is seen
+        edge-on (:func:`sample_angles`).
     size_m : float
         Side of the square sample [m], in [0.02, 0.5].
     frames_per_state : int
@@ -68,14 +73,7 @@ class MaterialSweepPlan:
     reference_albedo: float = 0.5
 
     def __post_init__(self) -> None:
-        angles = tuple(float(a) for a in self.angles_deg)
-        object.__setattr__(self, "angles_deg", angles)
-        if not angles:
-            raise InvalidInputError("angles_deg", "no turntable angles: give at least one")
-        bad = [a for a in angles if not (math.isfinite(a) and -85.0 <= a <= 85.0)]
-        if bad:
-            raise InvalidInputError("angles_deg", f"{bad[0]!r} is outside [-85, 85] deg (beyond, "
-                                    "the plate is seen edge-on)")
+        object.__setattr__(self, "angles_deg", sample_angles(self.angles_deg, "angles_deg"))
         _bounded("size_m", self.size_m, 0.02, 0.5)
         _bounded("frames_per_state", self.frames_per_state, 2, 64)
         if self.solar_suns != 0.0:
@@ -105,30 +103,20 @@ class MaterialSweepPlan:
         return len(self.angles_deg) * (2 if self.with_solar else 1)
 
 
-def parse_angles(text: str) -> tuple[float, ...]:
-    """Turntable angles from ``"FROM:TO:STEP"`` (both ends included) or ``"a,b,c"`` [deg].
+def sample_angles(angles: str | Sequence[float], field: str) -> tuple[float, ...]:
+    """The sweep's angles [deg]: text in the grammar of :func:`calibration.angles.parse_angles`
+    (``"-70:70:5"``, ``"-30, 0, 30"``) or numbers; 1 to 721, each in
+    :data:`SAMPLE_ANGLE_RANGE_DEG`; an input error names ``field``.
 
-    >>> parse_angles("-10:10:5")
+    >>> sample_angles("-10:10:5", "--angles")
     (-10.0, -5.0, 0.0, 5.0, 10.0)
-    >>> parse_angles("0, 12.5")
-    (0.0, 12.5)
     """
-    t = text.strip()
-    try:
-        if ":" in t:
-            parts = [float(p) for p in t.split(":")]
-            if len(parts) != 3:
-                raise ValueError
-            start, stop, step = parts
-            if not (math.isfinite(step) and step > 0.0 and stop >= start):
-                raise InvalidInputError("angles", f"'{text}': FROM:TO:STEP needs TO >= FROM and "
-                                        "a positive STEP")
-            n = math.floor((stop - start) / step + 1e-9) + 1
-            return tuple(float(start + i * step) for i in range(n))
-        return tuple(float(p) for p in t.split(",") if p.strip())
-    except ValueError:
-        raise InvalidInputError("angles", f"'{text}' is not FROM:TO:STEP nor a comma-separated "
-                                "list of angles [deg]") from None
+    limits = {"field": field, "lo_deg": SAMPLE_ANGLE_RANGE_DEG[0],
+              "hi_deg": SAMPLE_ANGLE_RANGE_DEG[1], "min_count": 1, "max_count": MAX_ANGLES,
+              "why_range": "beyond, the plate is seen edge-on"}
+    if isinstance(angles, str):
+        return parse_angles(angles, **limits)
+    return check_angles(angles, **limits)
 
 
 def sample_fixture(spec: SceneSpec) -> BoardFixture:

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from calibration.angles import parse_angles
 from sim_core.metrics import compare_images
 from sim_core.pipeline import expose_light, render_light
 from sim_core.render import RenderSettings
@@ -72,5 +73,5 @@ def main(seed: int, angles: list[float], k_lab: float | None, k_twin: float | No
 
 if __name__ == "__main__":
     a = sys.argv[1:]
-    main(int(a[0]), [float(v) for v in a[1].split(",")], _fraction(a[2]), _fraction(a[3]),
+    main(int(a[0]), list(parse_angles(a[1], field="ANGLES")), _fraction(a[2]), _fraction(a[3]),
          *(int(v) for v in a[4:6]))

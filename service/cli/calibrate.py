@@ -9,6 +9,7 @@ board and the test object when asked) or on the simulated lab (``--simulated``, 
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,6 +18,12 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from calibration.angles import (
+    SWEEP_COUNT_RANGE,
+    SWEEP_FROM_DEG,
+    SWEEP_STEP_DEG,
+    SWEEP_TO_DEG,
+)
 from service.cli import ranges
 from service.cli.command_settings import open_command_rig, rig_settings
 from service.cli.common import (
@@ -30,6 +37,10 @@ from service.cli.common import (
     rig_scene,
 )
 from sim_core.errors import InvalidInputError
+
+#: the board sweep's inputs as the options name them (calibration.angles.sweep_angles)
+SWEEP_OPTIONS = {"sweep": "--sweep-from/--sweep-to/--sweep-step", "from_deg": "--sweep-from",
+                 "to_deg": "--sweep-to", "step_deg": "--sweep-step"}
 
 calibrate_app = command_group("Measure the twin's camera and rig parameters.")
 
@@ -60,11 +71,21 @@ def rig_command(
         int, number_option("--frames-per-view", help="Frames averaged per board view.",
                            allowed=ranges.FRAMES_PER_VIEW)
     ] = 4,
+    sweep_from_deg: Annotated[
+        float, number_option("--sweep-from", help="First angle of the board sweep [deg].",
+                             allowed=ranges.TURNTABLE_DEG)
+    ] = SWEEP_FROM_DEG,
+    sweep_to_deg: Annotated[
+        float, number_option("--sweep-to", help="Last angle of the board sweep (when a step "
+                             "reaches it) [deg]; above --sweep-from.",
+                             allowed=ranges.TURNTABLE_DEG)
+    ] = SWEEP_TO_DEG,
     sweep_step_deg: Annotated[
-        float, number_option("--sweep-step", help="Step of the board sweep over -55..55 deg "
-                             "[deg]; coarser is quicker and measures less well.",
+        float, number_option("--sweep-step", help="Step of the board sweep [deg]; coarser is "
+                             "quicker and measures less well; the sweep has "
+                             f"{SWEEP_COUNT_RANGE[0]}-{SWEEP_COUNT_RANGE[1]} angles.",
                              allowed=ranges.SWEEP_STEP)
-    ] = 5.0,
+    ] = SWEEP_STEP_DEG,
     solar_reference_suns: Annotated[
         float | None,
         number_option("--solar-reference-suns",
@@ -79,19 +100,25 @@ def rig_command(
     seed: Annotated[int, number_option("--seed", help="Noise seed of the simulated camera.",
                                        allowed=ranges.CAMERA_SEED)] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    print_plan: Annotated[
+        bool, typer.Option("--print-plan", help="Print the plan (what the sequence captures) "
+                           "as JSON and stop, the rig untouched.")
+    ] = False,
 ) -> None:
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
     from calibration.report import write_report
-    from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
+    from calibration.rig_sequence import SimulatedOperator, build_rig_plan, calibrate_rig
 
     try:
         check_rig_options(out, reality, simulated)
+        # the service's builder (POST /calibrations): the same plan for the same inputs
+        plan = build_rig_plan(sweep_from_deg=sweep_from_deg, sweep_to_deg=sweep_to_deg,
+                              sweep_step_deg=sweep_step_deg, frames_per_view=frames_per_view,
+                              solar_reference_suns=solar_reference_suns, fields=SWEEP_OPTIONS)
+        if print_plan:
+            typer.echo(json.dumps(plan.summary(), indent=2))
+            return
         source = rig_scene(scene)
-        n_angles = math.floor(110.0 / sweep_step_deg + 1e-9) + 1
-        plan = RigCalibrationPlan(frames_per_view=frames_per_view,
-                                  sweep_deg=tuple(-55.0 + i * sweep_step_deg
-                                                  for i in range(n_angles)),
-                                  solar_reference_suns=solar_reference_suns)
     except InvalidInputError as exc:
         fail_invalid(exc)
     settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
@@ -186,8 +213,8 @@ def material_command(
     from calibration.rig_material import (
         MaterialSweepPlan,
         calibrate_material,
-        parse_angles,
         prior_material,
+        sample_angles,
     )
     from calibration.rig_material.plan import SAMPLE_NAME
     from calibration.rig_sequence import SimulatedOperator
@@ -199,7 +226,7 @@ def material_command(
         if sample_material is not None and not simulated:
             raise InvalidInputError("--sample-material", "is the simulated lab's sample: needs "
                                     "--simulated")
-        plan = MaterialSweepPlan(angles_deg=parse_angles(angles), size_m=size_m,
+        plan = MaterialSweepPlan(angles_deg=sample_angles(angles, "--angles"), size_m=size_m,
                                  frames_per_state=frames_per_state, solar_suns=solar_suns)
         prior_mat = prior_material(model, _material_arg(prior, "--prior"))
         cal = load_calibration(calibration) if calibration is not None else None

@@ -32,31 +32,8 @@ from sim_core.errors import InvalidInputError
 
 #: default turntable angles [deg]: three views, the faces seen from three sides
 DEFAULT_ANGLES = "-60,-30,0,30,60"
-
-
-def parse_angles(text: str) -> list[float]:
-    """``"0,30,60"`` -> [0.0, 30.0, 60.0]; 1-36 distinct finite angles within [-360, 360].
-
-    >>> parse_angles("0, 30,60")
-    [0.0, 30.0, 60.0]
-    >>> parse_angles("0,x")
-    Traceback (most recent call last):
-    ...
-    sim_core.errors.InvalidInputError: --angles: 'x' is not a number; give e.g. 0,30,60
-    """
-    out = []
-    for part in text.split(","):
-        try:
-            a = float(part.strip())
-        except ValueError:
-            raise InvalidInputError("--angles", f"'{part.strip()}' is not a number; give e.g. "
-                                    "0,30,60") from None
-        if not (abs(a) <= 360.0):
-            raise InvalidInputError("--angles", f"{a} is outside [-360, 360] degrees")
-        out.append(a)
-    if not 1 <= len(set(out)) == len(out) <= 36:
-        raise InvalidInputError("--angles", f"{len(out)} angles; give 1-36 distinct angles")
-    return out
+#: how many angles the fit takes (each once)
+MAX_FIT_ANGLES = 36
 
 
 def fit_object_command(
@@ -72,7 +49,8 @@ def fit_object_command(
         str, typer.Option(help="Bundled scene name or scene file: what is on the turntable.")
     ] = "satellite_ground_test",
     angles: Annotated[
-        str, typer.Option("--angles", help="Reported turntable angles to capture [deg].")
+        str, typer.Option("--angles", help="Reported turntable angles to capture [deg]: "
+                          "FROM:TO:STEP or a list, 1-36 distinct angles in [-360, 360].")
     ] = DEFAULT_ANGLES,
     calibration: Annotated[
         Path | None,
@@ -91,6 +69,7 @@ def fit_object_command(
                                        allowed=ranges.CAMERA_SEED)] = 0,
 ) -> None:
     """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
+    from calibration.angles import parse_angles
     from calibration.captures import average_frames
     from calibration.object_twin.fit import fit_object
     from drivers.rig import RigState
@@ -100,7 +79,8 @@ def fit_object_command(
 
     try:
         check_rig_options(out, reality, simulated)
-        angle_list = parse_angles(angles)
+        angle_list = parse_angles(angles, field="--angles", max_count=MAX_FIT_ANGLES,
+                                  distinct=True)
         source = rig_scene(scene)
         cal = (load_calibration(calibration) if calibration is not None
                else scene_twin(source.spec.model_copy(update={"object_twin": None}),

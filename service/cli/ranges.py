@@ -12,6 +12,7 @@ every such copy against its home.
 
 from __future__ import annotations
 
+from calibration.angles import SWEEP_STEP_RANGE_DEG
 from drivers.turntable import ADDRESS_RANGE
 from service.cli.common import Range, field_range
 from sim_core.lights import SUNS_RANGE
@@ -22,6 +23,8 @@ SPP = field_range(RenderSpec, "spp")
 MAX_BOUNCES = field_range(RenderSpec, "max_bounces")
 SEED = field_range(RenderSpec, "seed")
 TURNTABLE_ADDRESS = Range(*ADDRESS_RANGE)
+#: the board sweep's step (calibration.angles: the command line's and the service's rule)
+SWEEP_STEP = Range(*SWEEP_STEP_RANGE_DEG, unit="deg")
 #: a solar simulator level, or 0 for off
 SOLAR_SUNS_OR_OFF = Range(*SUNS_RANGE, unit="sun", also=(0.0,))
 
@@ -36,6 +39,10 @@ TIME_BUDGET = Range(0.0, 86_400.0, lo_open=True, unit="s")
 TURNTABLE_DEG = Range(-360.0, 360.0, unit="deg")
 #: service.lab.requests.MaskSpec.near_m and far_m
 MASK_DISTANCE = Range(0.0, 1000.0, unit="m")
+#: calibration.rig_sequence.FRAMES_PER_VIEW_RANGE (the plan builder's)
+FRAMES_PER_VIEW = Range(1, 64)
+#: calibration.solar.REFERENCE_SUNS_RANGE: a reference cell's reading at a set level of 1 sun
+REFERENCE_SUNS = Range(0.0, 5.0, lo_open=True, unit="sun")
 #: service.lab.requests.ObjectFitIn.frames
 FIT_FRAMES = Range(1, 256)
 #: service.settings.Settings: port, workers, sim_threads, camera_spp, camera_seed
@@ -54,10 +61,6 @@ BENCH_SPP = Range(1, 256)
 #: the effect planner's tolerance (sim_core.plan takes any positive value)
 EFFECT_TOLERANCE = Range(0.0, 1e4, lo_open=True, unit="mm")
 PREVIEW_SCALE = Range(1, 8)
-FRAMES_PER_VIEW = Range(1, 64)
-SWEEP_STEP = Range(1.0, 30.0, unit="deg")
-#: calibration.solar: a reference cell's reading at a set level of 1 sun
-REFERENCE_SUNS = Range(0.0, 5.0, lo_open=True, unit="sun")
 #: calibration.rig_material.MaterialSweepPlan: size_m and frames_per_state
 SAMPLE_SIZE = Range(0.02, 0.5, unit="m")
 FRAMES_PER_STATE = Range(2, 64)

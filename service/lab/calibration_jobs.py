@@ -167,30 +167,10 @@ class CalibrationJobs:
     # -- commands ------------------------------------------------------------------------------
     def create(self, req: CalibrationCreate) -> str:
         """Validate ``req``, claim the rig, store the job and start it; returns its id."""
-        from calibration.fixtures import BoardFixture
-        from calibration.rig_sequence import DEFAULT_FIXTURES, RigCalibrationPlan
-
+        plan = req.plan()  # the command line's builder: the same plan for the same inputs
         rig = self.lease.require()
-        angles = req.sweep.angles()
-        if len(angles) < 3:
-            raise InvalidInputError(
-                "sweep", f"{len(angles)} angle(s) from {req.sweep.from_deg:g} to "
-                f"{req.sweep.to_deg:g} deg every {req.sweep.step_deg:g} deg; at least 3 are "
-                "needed to determine the turntable's axis")
-        if len(angles) > 721:
-            raise InvalidInputError("sweep.step_deg", f"{len(angles)} angles; allowed: at most "
-                                    "721 (a coarser step)")
-        check_angle(rig, angles[0], "sweep.from_deg")
-        check_angle(rig, angles[-1], "sweep.to_deg")
-        by_name: dict[str, BoardFixture] = {f.name: f for f in DEFAULT_FIXTURES}
-        try:
-            plan = RigCalibrationPlan(
-                fixtures=tuple(by_name[n] for n in req.fixtures), sweep_deg=angles,
-                frames_per_view=req.frames_per_view, noise_frames=req.noise_frames,
-                solar_levels_suns=tuple(req.solar_levels_suns), solar_frames=req.solar_frames,
-                solar_reference_suns=req.solar_reference_suns)
-        except InvalidInputError as exc:  # the plan's own checks, named as in the body
-            raise InvalidInputError(exc.field.replace("sweep_deg", "sweep"), exc.message) from None
+        check_angle(rig, plan.sweep_deg[0], "sweep.from_deg")
+        check_angle(rig, plan.sweep_deg[-1], "sweep.to_deg")
         require_free(self.root, self.settings.min_free_bytes)  # 507 before anything moves
         job_id = uuid.uuid4().hex
         with self._lock:
@@ -429,3 +409,4 @@ def _output_file(row: Any, name: str) -> Path:
                             "data directory")
         raise NotFoundError(f"calibration job {row.id} has no file {name}")
     return path
+

@@ -23,8 +23,26 @@ from pydantic import (
     model_validator,
 )
 
-from calibration.rig_sequence import DEFAULT_FIXTURES
+from calibration.angles import (
+    SWEEP_COUNT_RANGE,
+    SWEEP_FROM_DEG,
+    SWEEP_STEP_DEG,
+    SWEEP_STEP_RANGE_DEG,
+    SWEEP_TO_DEG,
+    sweep_angles,
+)
+from calibration.rig_sequence import (
+    DEFAULT_FIXTURES,
+    FRAMES_PER_VIEW_RANGE,
+    NOISE_FRAMES_RANGE,
+    SOLAR_FRAMES_RANGE,
+    SOLAR_LEVELS_COUNT,
+    RigCalibrationPlan,
+    build_rig_plan,
+)
+from calibration.solar import REFERENCE_SUNS_RANGE, check_reference_suns
 from sim_core.adaptive import NOISE_FRACTION_RANGE
+from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 
 SUNS_LOW, SUNS_HIGH = SUNS_RANGE
@@ -50,6 +68,13 @@ def _check_suns(v: float) -> float:
     raise ValueError(
         f"got {v!r} sun; allowed: {SUNS_LOW:g} to {SUNS_HIGH:g} sun, or 0 (lamp off)"
     )
+
+
+def _reference_suns(v: float) -> float:
+    try:
+        return check_reference_suns(v)
+    except InvalidInputError as exc:
+        raise ValueError(exc.message) from None
 
 
 def _check_level(v: float) -> float:
@@ -243,28 +268,25 @@ FixtureName = Literal[FIXTURE_NAMES]  # type: ignore[valid-type]
 
 class SweepIn(RequestBody):
     """The board sweep: reported turntable angles ``from_deg``, ``from_deg + step_deg``, ... up to
-    ``to_deg`` (each fixture); also checked against the stage's software limits."""
+    ``to_deg`` (each fixture): the rule of :func:`calibration.angles.sweep_angles`, the same as
+    ``toftwin calibrate rig``'s; also checked against the stage's software limits."""
 
-    from_deg: Angle = -55.0
-    to_deg: Angle = 55.0
+    from_deg: Angle = SWEEP_FROM_DEG
+    to_deg: Angle = SWEEP_TO_DEG
     step_deg: Annotated[
         float, Strict(),
-        Field(description="Step between views [deg], 0.5 to 90.",
-              json_schema_extra={"minimum": 0.5, "maximum": 90}),
-        AfterValidator(_in_range(0.5, 90.0, "deg")),
-    ] = 5.0
-
-    @model_validator(mode="after")
-    def _ordered(self) -> SweepIn:
-        if not self.to_deg > self.from_deg:
-            raise ValueError(f"to_deg ({self.to_deg:g}) must be greater than from_deg "
-                             f"({self.from_deg:g})")
-        return self
+        Field(description=f"Step between views [deg], {SWEEP_STEP_RANGE_DEG[0]:g} to "
+              f"{SWEEP_STEP_RANGE_DEG[1]:g}; the sweep has {SWEEP_COUNT_RANGE[0]} to "
+              f"{SWEEP_COUNT_RANGE[1]} angles, to_deg above from_deg.",
+              json_schema_extra={"minimum": SWEEP_STEP_RANGE_DEG[0],
+                                 "maximum": SWEEP_STEP_RANGE_DEG[1]}),
+        AfterValidator(_in_range(*SWEEP_STEP_RANGE_DEG, "deg")),
+    ] = SWEEP_STEP_DEG
 
     def angles(self) -> tuple[float, ...]:
-        """The reported angles of the sweep (the end included when the step reaches it)."""
-        n = math.floor((self.to_deg - self.from_deg) / self.step_deg + 1e-9) + 1
-        return tuple(round(self.from_deg + i * self.step_deg, 9) for i in range(n))
+        """The reported angles of the sweep (the end included when the step reaches it); an
+        input error naming ``sweep`` or ``sweep.step_deg`` when they break the rule."""
+        return sweep_angles(self.from_deg, self.to_deg, self.step_deg)
 
 
 class CalibrationCreate(RequestBody):
@@ -281,20 +303,26 @@ class CalibrationCreate(RequestBody):
         "principal point: the upright board alone is a degenerate set and is refused.")
     sweep: SweepIn = SweepIn()
     frames_per_view: Annotated[int, Strict()] = Field(
-        4, ge=1, le=64, description="Frames averaged per board view.")
+        4, ge=FRAMES_PER_VIEW_RANGE[0], le=FRAMES_PER_VIEW_RANGE[1],
+        description="Frames averaged per board view.")
     noise_frames: Annotated[int, Strict()] = Field(
-        24, ge=2, le=256, description="Frames of the noise stack (16 or more for gain within 2 %).")
+        24, ge=NOISE_FRAMES_RANGE[0], le=NOISE_FRAMES_RANGE[1],
+        description="Frames of the noise stack (16 or more for gain within 2 %).")
     solar_levels_suns: list[Level] = Field(
-        default_factory=lambda: [0.8, 1.0, 1.2], min_length=1, max_length=8,
+        default_factory=lambda: [0.8, 1.0, 1.2], min_length=SOLAR_LEVELS_COUNT[0],
+        max_length=SOLAR_LEVELS_COUNT[1],
         description="Set levels of the solar simulator for its scale.")
     solar_frames: Annotated[int, Strict()] = Field(
-        8, ge=1, le=64, description="Frames averaged per solar level.")
+        8, ge=SOLAR_FRAMES_RANGE[0], le=SOLAR_FRAMES_RANGE[1],
+        description="Frames averaged per solar level.")
     solar_reference_suns: Annotated[
         float, Strict(),
         Field(description="A reference cell's reading at a set level of 1 sun [sun], used when "
-              "the frames do not determine the solar simulator's scale; 0.01 to 10.",
-              json_schema_extra={"minimum": 0.01, "maximum": 10}),
-        AfterValidator(_in_range(0.01, 10.0, "sun")),
+              "the frames do not determine the solar simulator's scale; above "
+              f"{REFERENCE_SUNS_RANGE[0]:g}, up to {REFERENCE_SUNS_RANGE[1]:g}.",
+              json_schema_extra={"exclusiveMinimum": REFERENCE_SUNS_RANGE[0],
+                                 "maximum": REFERENCE_SUNS_RANGE[1]}),
+        AfterValidator(_reference_suns),
     ] | None = None
     activate: StrictBool = Field(
         False, description="Make the result the active calibration when the job is done.")
@@ -305,3 +333,14 @@ class CalibrationCreate(RequestBody):
         if len(set(v)) != len(v):
             raise ValueError(f"{v} names a fixture twice; each once")
         return v
+
+    def plan(self) -> RigCalibrationPlan:
+        """The sequence's plan: :func:`calibration.rig_sequence.build_rig_plan`, the builder
+        ``toftwin calibrate rig`` uses too (the same plan for the same inputs); an input error
+        names the request's field (``sweep``, ``sweep.step_deg``, ...)."""
+        return build_rig_plan(
+            fixtures=self.fixtures, sweep_from_deg=self.sweep.from_deg,
+            sweep_to_deg=self.sweep.to_deg, sweep_step_deg=self.sweep.step_deg,
+            frames_per_view=self.frames_per_view, noise_frames=self.noise_frames,
+            solar_levels_suns=self.solar_levels_suns, solar_frames=self.solar_frames,
+            solar_reference_suns=self.solar_reference_suns)

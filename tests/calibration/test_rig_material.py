@@ -24,8 +24,8 @@ from calibration.rig_material import (
     MaterialSweepPlan,
     calibrate_material,
     extract_slices,
-    parse_angles,
     prior_material,
+    sample_angles,
 )
 from calibration.rig_material.reference import PlateGeometry, ReferenceView
 from calibration.rig_material.sweep import SampleCaptures
@@ -102,7 +102,8 @@ def _check_recovery(result, true: dict[str, float]) -> dict[str, float]:
 #: the random samples' sweep: every 5 deg to +-50 deg, 2 frames a state (the default plan,
 #: every 5 deg to +-70 deg with 4 frames, takes ~5 min a sample on two cores and recovers the
 #: same parameters: seed 1 within 0.6 %)
-RANDOM_PLAN = MaterialSweepPlan(angles_deg=parse_angles("-50:50:5"), frames_per_state=2)
+RANDOM_PLAN = MaterialSweepPlan(angles_deg=sample_angles("-50:50:5", "--angles"),
+                                frames_per_state=2)
 
 
 @pytest.mark.slow
@@ -197,10 +198,10 @@ def test_the_plan_refuses_bad_input():
     with pytest.raises(InvalidInputError, match="solar_suns"):
         MaterialSweepPlan(solar_suns=0.3)
     with pytest.raises(InvalidInputError, match="angles"):
-        parse_angles("10:-10:5")
+        sample_angles("10:-10:5", "--angles")
     with pytest.raises(InvalidInputError, match="prior"):
         prior_material("cook-torrance", "thermal-control-film")  # a seed-microfacet preset
-    assert parse_angles("-70:70:5")[::14] == (-70.0, 0.0, 70.0)
+    assert sample_angles("-70:70:5", "--angles")[::14] == (-70.0, 0.0, 70.0)
 
 
 def test_the_cli_refuses_bad_input(tmp_path):

@@ -109,19 +109,30 @@ function list(text) {
   return String(text).split(/[,\s]+/).filter((s) => s !== "");
 }
 
-// "a, b, c" or "from:to:step" (the end included when a step reaches it).
+// Turntable angles in the grammar of calibration/angles.py (parse_angles: the server's, the
+// authority; this copy gives the form its poses at once, and tests/web checks it against the
+// server's): numbers separated by commas and/or spaces, or "from:to:step", the end included when
+// a step reaches it (within 1e-9 of a step), each rounded to 1e-9 deg, at most 721 angles. Text
+// of neither form is sent as typed, and the API's message says what is wrong with it.
+const NUMBER = /^[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$/;
+const MAX_ANGLES = 721;
+
 function angles(text) {
-  const m = String(text).trim().match(/^([^:]+):([^:]+):([^:]+)$/);
-  if (m) {
-    const [from, to, step] = m.slice(1).map(Number);
-    if ([from, to, step].every(Number.isFinite) && step > 0 && (to - from) / step < 1e5) {
-      const out = [];
-      for (let a = from; a <= to + 1e-9; a += step) out.push(Math.round(a * 1e9) / 1e9);
-      return out;
+  const t = String(text).trim();
+  if (t.includes(":")) {
+    const parts = t.split(":").map((s) => s.trim());
+    if (parts.length !== 3 || !parts.every((s) => NUMBER.test(s))) return [t];
+    const [from, to, step] = parts.map(Number);
+    const steps = (to - from) / step + 1e-9;
+    if (![from, to, step].every(Number.isFinite) || !(step > 0) || to < from
+        || !(steps < MAX_ANGLES)) return [t];
+    const out = [];
+    for (let i = 0; i <= Math.floor(steps); i++) {
+      out.push(Math.min(Math.round((from + i * step) * 1e9) / 1e9, to) + 0);
     }
-    return [String(text).trim()];
+    return out;
   }
-  return list(text).map(value);
+  return list(t).map((s) => (NUMBER.test(s) ? Number(s) : s));
 }
 
 function formBody(form, names) {

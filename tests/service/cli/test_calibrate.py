@@ -29,7 +29,7 @@ def test_bad_options_are_exit_2_and_nothing_is_written(tmp_path):
     res = run("calibrate", "rig", "--out", tmp_path / "c", "--simulated",
               "--frames-per-view", 0)
     assert res.exit_code == 2 and "--frames-per-view" in res.output
-    res = run("calibrate", "rig", "--out", tmp_path / "d", "--simulated", "--sweep-step", 45)
+    res = run("calibrate", "rig", "--out", tmp_path / "d", "--simulated", "--sweep-step", 60)
     assert res.exit_code == 2 and "--sweep-step" in res.output
     assert not any((tmp_path / n).exists() for n in ("a", "b", "c", "d"))
 

@@ -126,6 +126,7 @@ def _copies():
     """Each range the command line copies, and how its home is asked about one value."""
     from calibration.brdf.fit import FitSettings
     from calibration.rig_material.plan import MaterialSweepPlan
+    from calibration.rig_sequence import build_rig_plan
     from service.cli import ranges
     from service.lab import requests
     from service.settings import Settings
@@ -164,6 +165,8 @@ def _copies():
         "FRAMES_PER_STATE": (sweep("frames_per_state"), int),
         "SOLAR_SUNS_OR_OFF": (sweep("solar_suns"), float),
         "OUTLIER_THRESHOLD": (lambda v: FitSettings(outlier_relative_error=v), float),
+        "FRAMES_PER_VIEW": (lambda v: build_rig_plan(frames_per_view=v), int),
+        "REFERENCE_SUNS": (lambda v: build_rig_plan(solar_reference_suns=v), float),
     }
 
 
