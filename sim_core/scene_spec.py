@@ -37,7 +37,27 @@ EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
-PositiveLength = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+
+#: how far from the origin a position may lie [m]: the hard cases render scenes 2,000 km away
+#: (float arithmetic still keeps sub-millimetre range there); far beyond, the ray caster's
+#: arithmetic overflows (a box at 1e308 m gave NaN vertices and a failed object fit)
+MAX_COORDINATE_M = 1e7
+#: the sizes of a shape [m]: from a nanometre (smaller, its triangles fall under the ray
+#: caster's degenerate area, 1e-24 m^2) to 10 km (far beyond any lab, far inside float range)
+MIN_SIZE_M, MAX_SIZE_M = 1e-9, 1e4
+#: the largest rotation angle about one axis [deg] (ten turns: any orientation, and no angle so
+#: large that its sine loses every digit)
+MAX_ROTATION_DEG = 3600.0
+#: one coordinate of a position in the scene [m]
+Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M,
+                                    allow_inf_nan=False)]
+#: a point in the scene [m]
+Point3 = tuple[Coordinate, Coordinate, Coordinate]
+#: a rotation angle [deg]
+RotationDeg = Annotated[float, Field(ge=-MAX_ROTATION_DEG, le=MAX_ROTATION_DEG,
+                                     allow_inf_nan=False)]
+#: a size in the scene [m]
+PositiveLength = Annotated[float, Field(ge=MIN_SIZE_M, le=MAX_SIZE_M, allow_inf_nan=False)]
 
 #: allowed length of a direction (normalised when used) [any unit]
 DIRECTION_LENGTH_RANGE = (1e-6, 1e6)
@@ -82,8 +102,8 @@ class _Strict(BaseModel):
 class PoseLookAt(_Strict):
     """Camera pose by position, look-at point and world up vector."""
 
-    position_m: Vec3
-    look_at_m: Vec3
+    position_m: Point3
+    look_at_m: Point3
     up: Direction = (0.0, 0.0, 1.0)
 
 
@@ -205,7 +225,7 @@ class Illumination(_Strict):
     """The camera's own modulated light source."""
 
     power_w: Annotated[float, Field(ge=0.0, le=1000.0, allow_inf_nan=False)] = 1.0
-    offset_m: Vec3 = (0.0, 0.0, 0.0)
+    offset_m: Point3 = (0.0, 0.0, 0.0)
     angular_profile: list[tuple[Finite, Finite]] | None = Field(None, min_length=2)
 
     @field_validator("angular_profile")
@@ -234,7 +254,7 @@ class SolarSimulatorSpec(_Strict):
         float, Field(ge=SUNS_RANGE[0], le=SUNS_RANGE[1], allow_inf_nan=False)
     ] = 1.0
     in_band_fraction: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.04
-    beam_centre_m: Vec3 = (0.0, 0.0, 0.0)
+    beam_centre_m: Point3 = (0.0, 0.0, 0.0)
     footprint_m: tuple[PositiveLength, PositiveLength] = (0.305, 0.305)
 
 
@@ -367,8 +387,8 @@ MeshSpec = Annotated[
 class ObjectPose(_Strict):
     """Object placement: rotation (extrinsic x, y, z, degrees) then translation."""
 
-    position_m: Vec3 = (0.0, 0.0, 0.0)
-    rotation_deg: Vec3 = (0.0, 0.0, 0.0)
+    position_m: Point3 = (0.0, 0.0, 0.0)
+    rotation_deg: tuple[RotationDeg, RotationDeg, RotationDeg] = (0.0, 0.0, 0.0)
 
 
 class ObjectSpec(_Strict):
@@ -395,7 +415,7 @@ class ObjectSpec(_Strict):
 class TurntableSpec(_Strict):
     """Rotation stage; its angle rotates every object marked ``on_turntable``."""
 
-    axis_point_m: Vec3 = (0.0, 0.0, 0.0)
+    axis_point_m: Point3 = (0.0, 0.0, 0.0)
     axis_direction: UnitVector = (0.0, 0.0, 1.0)
     angle_deg: Annotated[float, Field(ge=-360.0, le=360.0, allow_inf_nan=False)] = 0.0
 

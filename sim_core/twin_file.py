@@ -48,9 +48,9 @@ from sim_core.files import StructuredFileError, atomic_write, load_structured
 from sim_core.scene_spec import (
     Distortion,
     ObjectPose,
+    Point3,
     SensorOverrides,
     UnitVector,
-    Vec3,
     check_lens,
     range_error,
     scene_error_from_validation,
@@ -219,7 +219,7 @@ class IlluminationParameters(_Strict):
 class TurntableParameters(_Strict):
     """The turntable's true axis (world frame) and the error of its zero."""
 
-    axis_point_m: Vec3 | None = None
+    axis_point_m: Point3 | None = None
     axis_direction: UnitVector | None = None
     zero_offset_deg: Annotated[float, Field(ge=-180.0, le=180.0, allow_inf_nan=False)] = 0.0
 

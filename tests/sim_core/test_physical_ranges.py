@@ -227,3 +227,35 @@ def test_a_calibration_that_parses_renders_on_the_preset(fx, cx, k, axis):
         _refused(err, "calibration.")
         return
     _renders(parse_scene_spec(_scene({})), twin=cal)
+
+
+@PROPERTY
+@given(position=st.tuples(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(0.5, 3.0)),
+       size=st.tuples(st.floats(0.01, 5.0), st.floats(0.01, 5.0)),
+       rotation=st.tuples(st.floats(-720.0, 720.0), st.floats(-720.0, 720.0),
+                          st.floats(-720.0, 720.0)),
+       wild=st.sampled_from([None, ("position", 0), ("position", 2), ("size", 0), ("size", 1),
+                             ("rotation", 1)]),
+       wild_value=anything)
+def test_positions_sizes_and_rotations_are_refused_by_field_and_range_or_render(
+        position, size, rotation, wild, wild_value):
+    """A plate a lab would use with one value drawn from anything at all: refused naming the
+    field and its range (1e308 m boxes were accepted, gave NaN vertices and failed an object
+    fit), or it renders."""
+    values = {"position": list(position), "size": list(size), "rotation": list(rotation)}
+    if wild is not None:
+        values[wild[0]][wild[1]] = wild_value
+    plate = {**PLATE, "mesh": {"kind": "rectangle", "size_m": values["size"]},
+             "on_turntable": False,
+             "pose": {"position_m": values["position"], "rotation_deg": values["rotation"]}}
+    try:
+        spec = parse_scene_spec({"camera": {"pose": POSE, "width_px": 8, "height_px": 6,
+                                            "fx_px": 8.0, "fy_px": 8.0},
+                                 "objects": [plate]})
+    except SceneError as err:
+        fields = ("objects[0].mesh.size_m", "objects[0].pose.position_m",
+                  "objects[0].pose.rotation_deg")
+        assert any(f in str(err) for f in fields), err
+        assert "than or equal to" in str(err), err
+        return
+    _renders(spec)

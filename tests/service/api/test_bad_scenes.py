@@ -21,6 +21,17 @@ BAD_SCENES = [
     ({"camera": CAMERA, "objects": [{**PLATE, "mesh": {"kind": "box", "size_m": [3, 3, 3]},
                                      "pose": {"position_m": [0, 0, 0]}}]},
      "scene.camera.pose.position_m"),
+    # beyond a lab's extent (1e308 m boxes were accepted, rendered NaN vertices and failed an
+    # object fit; a camera at 1e308 m was refused naming look_at_m)
+    ({"camera": CAMERA, "objects": [{**PLATE, "mesh": {"kind": "box", "size_m": [1e308, 1, 1]}}]},
+     "scene.objects[0].mesh.size_m[0]"),
+    ({"camera": CAMERA, "objects": [{**PLATE, "pose": {"position_m": [0, 0, 1e308]}}]},
+     "scene.objects[0].pose.position_m[2]"),
+    ({"camera": {"pose": {"position_m": [0, 0, -1e308], "look_at_m": [0, 0, 1]}},
+      "objects": [PLATE]}, "scene.camera.pose.position_m[2]"),
+    ({"camera": CAMERA, "objects": [{**PLATE, "pose": {"position_m": [0, 0, 1],
+                                                        "rotation_deg": [1e308, 0, 0]}}]},
+     "scene.objects[0].pose.rotation_deg[0]"),
 ]
 BAD_MASKS = [
     ({"kind": "objects", "names": ["no-such-object"]}, "mask.names[0]"),
