@@ -76,6 +76,7 @@ def serve(
              "reality": reality}
     settings = load_settings(settings_file, OPTION_OF_FIELD, token=token, **given)
     refuse_if_in_use(settings.data_dir)
+    refuse_if_no_room(settings.data_dir)
     if session:
         session_token(settings.data_dir, token)
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(name)s %(message)s")
@@ -105,6 +106,35 @@ def refuse_if_in_use(data_dir: Path) -> None:
     except DataDirInUseError as exc:
         print_error(str(exc))
         raise typer.Exit(code=2) from None
+
+
+#: the room SQLite needs to open the database (its shared-memory index and write-ahead log)
+#: when the data directory holds no reserve to give back for it [bytes]
+OPEN_ROOM_BYTES = 1024 * 1024
+
+
+def refuse_if_no_room(data_dir: Path) -> None:
+    """Exit with code 2 if the data directory's disk has no room to open the database.
+
+    On a full disk the service still starts and serves reads by giving back its reserve
+    (``DATA_DIR/.space-reserve``) while SQLite opens; without one (deleted, or released by a
+    delete on the full disk) SQLite cannot open its log, and the start would end in uvicorn's
+    traceback. This says so in a sentence, with the sizes, before anything is written.
+    """
+    from service.lab.lab import RESERVE_NAME
+    from service.store.disk_space import format_bytes, free_bytes
+
+    existing = Path(data_dir).resolve()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    free = free_bytes(existing)
+    if free >= OPEN_ROOM_BYTES or (Path(data_dir) / RESERVE_NAME).is_file():
+        return
+    print_error(f"the data directory's disk is full: {format_bytes(free)} free, and opening the "
+                f"database needs about {format_bytes(OPEN_ROOM_BYTES)} (the directory holds no "
+                f"{RESERVE_NAME} to give back for it); free some space (old frames or other "
+                "files on that disk) and start again")
+    raise typer.Exit(code=2)
 
 
 #: open flag that refuses a symlink as the last path component (0 where the OS has none)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -125,3 +126,24 @@ def test_the_service_starts_on_a_full_disk_serves_reads_and_refuses_writes(
     assert free_bytes(small_disk) < 16 * 2**20
     assert os.path.getsize(data / ".lock") == 0  # held, its description had no room
     assert client.delete(f"/api/v1/campaigns/{cid}", headers=AUTH).status_code == 204
+
+
+def test_without_its_reserve_the_service_refuses_to_start_on_a_full_disk_in_a_sentence(
+    small_disk, make_client
+):
+    """The reserve gone (a delete on the full disk released it), SQLite has no room to open its
+    log: ``toftwin serve`` says so with the sizes and exits 2, no traceback, nothing written."""
+    data = small_disk / "data"
+    first = make_client(data, min_free_bytes=0)
+    first.__exit__(None, None, None)
+    (data / ".space-reserve").unlink()
+    fill(small_disk)
+    before = sorted(p.name for p in data.iterdir())
+    res = subprocess.run([sys.executable, "-m", "toftwin_cli", "serve", "--simulated",
+                          "--data-dir", str(data), "--port", "9"],
+                         capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "TOFTWIN_TOKEN": "t" * 24})
+    assert res.returncode == 2, res
+    assert "disk is full: 0 B free" in res.stderr and "1.0 MiB" in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr + res.stdout
+    assert sorted(p.name for p in data.iterdir()) == before
