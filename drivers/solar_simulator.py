@@ -600,10 +600,11 @@ class SolarSimulator:
         self.set_power_w(self.power_for_suns(suns))
 
     def read_suns(self) -> float:
-        """Level in suns implied by the power delivered now; 0 with the lamp off."""
+        """Level in suns implied by the power delivered now; 0 with the lamp off (also when it
+        goes out between the two reads: the level is never negative)."""
         if not self.is_lamp_on():
             return 0.0
-        return self.calibration.suns_for(self.read_power_w(), extrapolate=True)
+        return max(0.0, self.calibration.suns_for(self.read_power_w(), extrapolate=True))
 
     # -- shutter ------------------------------------------------------------------------------
     def shutter_is_open(self) -> bool:

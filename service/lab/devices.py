@@ -31,6 +31,28 @@ def _read(name: str, read) -> dict[str, Any]:
         return {"name": name, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
 
 
+def _solar(lease: RigLease) -> dict[str, Any]:
+    """The solar simulator's entry: not ok while its supply reports a fault or its interlock
+    (the lamp is then out, and no pose relights it: the operator does, once the cause is
+    fixed)."""
+    rig = lease.require()
+
+    def read() -> dict[str, Any]:
+        status = rig.solar.status()
+        return {**solar_state(lease), "status": status.describe(),
+                "fault": status.fault, "interlock": status.interlock}
+
+    entry = _read("solar_simulator", read)
+    details = entry.get("details", {})
+    if entry["ok"] and (details["fault"] or details["interlock"]):
+        cause = ("its interlock is open" if details["interlock"]
+                 else "the lamp supply reports a fault")
+        entry.update(ok=False, error=(
+            f"LampFault: {cause} ({details['status']}); fix the cause, then relight the lamp "
+            "(POST /api/v1/devices/solar/lamp)"))
+    return entry
+
+
 def status(lease: RigLease, simulated: bool) -> dict[str, Any]:
     """Every device with what it reports, or its error."""
     rig = lease.rig
@@ -41,8 +63,7 @@ def status(lease: RigLease, simulated: bool) -> dict[str, Any]:
         devices = [
             _read("turntable", lambda: {**turntable_position(lease),
                                         "status": rig.turntable.status().describe()}),
-            _read("solar_simulator", lambda: {**solar_state(lease),
-                                              "status": rig.solar.status().describe()}),
+            _solar(lease),
             _camera(rig),
         ]
     return {"simulated": simulated, "campaign_id": lease.campaign_id,

@@ -166,6 +166,10 @@ def test_the_issue_case_pauses_naming_the_lamp_and_resumes_once_it_is_relit(lab)
     assert "LampFaultError" in status["error"] and "target 1 sun" in status["error"]
     cid = status["id"]
     assert client.get("/api/v1/devices/solar").json()["lamp_on"] is False
+    # the device list says the same: not ok, naming the fault and the remedy
+    solar = next(d for d in client.get("/api/v1/devices").json()["devices"]
+                 if d["name"] == "solar_simulator")
+    assert solar["ok"] is False and "fault" in solar["error"] and "relight" in solar["error"], solar
 
     res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)
     assert res.status_code == 200, res.text
