@@ -6,6 +6,13 @@ import os
 from collections.abc import Callable, Iterator
 
 import pytest
+from hypothesis import settings
+
+#: Hypothesis's per-example deadline is a timing assertion: the first example of a test may
+#: compile a numba kernel (1.6 s seen on a loaded machine against the 200 ms default), so the
+#: suite's outcome would depend on the load. Examples are bounded by their count instead.
+settings.register_profile("toftwin", deadline=None)
+settings.load_profile("toftwin")
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
