@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import os
+import tempfile
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 from hypothesis import settings
@@ -20,7 +24,11 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
     In a fresh clone numba compiles them on first use, tens of seconds that would otherwise land
     on whichever test renders first; here they are a cost of the session, once, and every test's
-    duration is its own. Under pytest-xdist each worker does it (the controller runs no test).
+    duration is its own. Under pytest-xdist each worker does it (the controller runs no test),
+    one at a time: numba writes a cache entry's index before its data, so a worker reading while
+    another writes can load the data of an older source or another numba version (a floors venv
+    on the same clone died on LLVM 22 bitcode read by LLVM 14). The first worker compiles, the
+    next loads what it wrote.
     """
     config = session.config
     if config.option.collectonly:
@@ -29,7 +37,14 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         return
     from service.compute.jobs import warm_up
 
-    warm_up()
+    clone = hashlib.sha256(str(config.rootpath).encode()).hexdigest()[:16]
+    lock_path = Path(tempfile.gettempdir()) / f"toftwin-numba-warm-up-{clone}.lock"
+    with open(lock_path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            warm_up()
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 @pytest.fixture
