@@ -83,22 +83,14 @@ def simulated_rig(
     started: list[Callable[[], None]] = []
     try:
         tt_instant = instant if turntable_instant is None else turntable_instant
-        tt_sim = start_simulator(
-            "turntable",
-            turntable_faults,
-            transport=transport,
-            instant=tt_instant,
-            time_scale=time_scale,
-        )
-        started.append(tt_sim.stop)
-        solar_sim = start_simulator(
-            "solar-simulator",
-            solar_faults,
-            transport=transport,
-            instant=instant,
-            time_scale=time_scale,
-        )
-        started.append(solar_sim.stop)
+        serial_sims = []
+        for device, faults, device_instant in (("turntable", turntable_faults, tt_instant),
+                                               ("solar-simulator", solar_faults, instant)):
+            sim = start_simulator(device, faults, transport=transport, instant=device_instant,
+                                  time_scale=time_scale)
+            started.append(sim.stop)
+            serial_sims.append(sim)
+        tt_sim, solar_sim = serial_sims
         cam_sim = UsbCameraSim(
             frame_source,
             seed=seed,
