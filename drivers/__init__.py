@@ -16,20 +16,8 @@ TCP socket, the camera as a pyusb backend); ``python -m drivers.sim.pty_server K
 serial one on a pseudo-terminal. Protocol details and sources: ``docs/devices.md``.
 """
 
-from drivers.errors import (
-    CalibrationError,
-    DeviceDisconnectedError,
-    DeviceError,
-    DeviceInputError,
-    DeviceTimeoutError,
-    GarbledReplyError,
-    InterlockError,
-    LampFaultError,
-    LimitError,
-    ProtocolError,
-    SolarSimulatorError,
-    TurntableError,
-)
+from drivers import errors
+from drivers.errors import *  # noqa: F403 (the names of errors.__all__)
 from drivers.solar_simulator import (
     SUNS_RANGE,
     SolarSimulator,
@@ -41,26 +29,15 @@ from drivers.transport import SerialSettings, SerialTransport
 from drivers.turntable import ControllerStatus, Turntable, TurntableProtocol
 
 __all__ = [
+    *errors.__all__,
     "SUNS_RANGE",
-    "CalibrationError",
     "ControllerStatus",
-    "DeviceDisconnectedError",
-    "DeviceError",
-    "DeviceInputError",
-    "DeviceTimeoutError",
-    "GarbledReplyError",
-    "InterlockError",
-    "LampFaultError",
-    "LimitError",
-    "ProtocolError",
     "SerialSettings",
     "SerialTransport",
     "SolarSimulator",
-    "SolarSimulatorError",
     "SolarSimulatorProtocol",
     "SolarStatus",
     "SunsCalibration",
     "Turntable",
-    "TurntableError",
     "TurntableProtocol",
 ]

@@ -62,6 +62,15 @@ def _albedo_phase_integral(theta_rad: float) -> float:
     )
 
 
+def _reflected_irradiance(
+    solar_irradiance_w_m2: float, albedo: float, geometry: float, phase_angle_rad: float
+) -> float:
+    """Sunlight reflected by a diffuse sphere of ``albedo`` at the target (eqs. 13 and 14),
+    ``geometry`` its radius squared over pi times the distance squared; never negative."""
+    value = solar_irradiance_w_m2 * albedo * geometry * _albedo_phase_integral(phase_angle_rad)
+    return float(max(value, 0.0))
+
+
 def earth_albedo_irradiance_w_m2(
     solar_irradiance_w_m2: float,
     sun_earth_target_angle_rad: float,
@@ -75,10 +84,8 @@ def earth_albedo_irradiance_w_m2(
     the Earth-target vectors.
     """
     geometry = earth_radius_m**2 / (np.pi * (earth_radius_m + altitude_m) ** 2)
-    value = solar_irradiance_w_m2 * albedo * geometry * _albedo_phase_integral(
-        sun_earth_target_angle_rad
-    )
-    return float(max(value, 0.0))
+    return _reflected_irradiance(solar_irradiance_w_m2, albedo, geometry,
+                                 sun_earth_target_angle_rad)
 
 
 def moon_albedo_irradiance_w_m2(
@@ -90,7 +97,5 @@ def moon_albedo_irradiance_w_m2(
 ) -> float:
     """Irradiance of sunlight reflected by a diffuse Moon at the target (eq. 14)."""
     geometry = moon_radius_m**2 / (np.pi * target_moon_distance_m**2)
-    value = solar_irradiance_w_m2 * albedo * geometry * _albedo_phase_integral(
-        sun_moon_target_angle_rad
-    )
-    return float(max(value, 0.0))
+    return _reflected_irradiance(solar_irradiance_w_m2, albedo, geometry,
+                                 sun_moon_target_angle_rad)

@@ -21,6 +21,7 @@ Everything here is a pure function over bytes and numpy arrays; the errors are
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 import zlib
@@ -615,16 +616,7 @@ def quantize_frame(raw: RawFrame, use_case: str | int | UseCase) -> RawFrame:
         payload_crc32=0,
     )
     out = wire_to_raw_frame(WireFrame(header, grey, phases))
-    return RawFrame(
-        phase_images=out.phase_images,
-        intensity=out.intensity,
-        frequencies_hz=out.frequencies_hz,
-        saturated=out.saturated,
-        sbi_limit=out.sbi_limit,
-        exposure_s=out.exposure_s,
-        timestamp_s=raw.timestamp_s,
-        meta=dict(raw.meta),
-    )
+    return dataclasses.replace(out, timestamp_s=raw.timestamp_s, meta=dict(raw.meta))
 
 
 # -- status --------------------------------------------------------------------------------

@@ -34,7 +34,7 @@ import sys
 import tempfile
 import threading
 import tty
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TextIO
 
@@ -401,6 +401,14 @@ class SimHandle:
         self.stop()
 
 
+#: the model of each kind served on one port (the solar simulator's two share a SolarRigSim)
+_ONE_PORT_MODELS: dict[str, Callable[..., Any]] = {
+    "turntable": Smc100Sim,
+    "lamp": LampSupplySim,
+    "shutter": ShutterControllerSim,
+}
+
+
 def _injector(kind: str, faults: Iterable[str]) -> FaultInjector:
     allowed = KINDS[kind]
     return FaultInjector([parse_fault(text, allowed) for text in faults])
@@ -428,39 +436,23 @@ def start_simulator(
     if transport == "pty" and link_dir is None:
         link_dir = own_dir = tempfile.mkdtemp(prefix="toftwin-sim-")
     clock = SimClock(time_scale=time_scale, instant=instant)
-    servers: dict[str, DeviceServer] = {}
     models: dict[str, Any] = {}
-    if kind == "turntable":
-        injector = _injector(kind, faults)
-        smc = Smc100Sim(clock=clock, faults=injector)
-        models["turntable"] = smc
-        servers["turntable"] = DeviceServer(
-            smc, injector, transport=transport, name="turntable", link_dir=link_dir
-        )
-    elif kind == "solar-simulator":
+    if kind == "solar-simulator":
         lamp_faults, shutter_faults = _injector(kind, faults), _injector(kind, faults)
         rig = SolarRigSim(clock=clock, lamp_faults=lamp_faults, shutter_faults=shutter_faults)
         models.update(rig=rig, lamp=rig.lamp, shutter=rig.shutter)
-        servers["lamp"] = DeviceServer(
-            rig.lamp, lamp_faults, transport=transport, name="lamp", link_dir=link_dir
-        )
-        servers["shutter"] = DeviceServer(
-            rig.shutter, shutter_faults, transport=transport, name="shutter", link_dir=link_dir
-        )
-    elif kind == "lamp":
-        injector = _injector(kind, faults)
-        lamp = LampSupplySim(clock=clock, faults=injector)
-        models["lamp"] = lamp
-        servers["lamp"] = DeviceServer(
-            lamp, injector, transport=transport, name="lamp", link_dir=link_dir
-        )
+        ports: dict[str, tuple[Any, FaultInjector]] = {
+            "lamp": (rig.lamp, lamp_faults), "shutter": (rig.shutter, shutter_faults)
+        }
     else:
         injector = _injector(kind, faults)
-        shutter = ShutterControllerSim(clock=clock, faults=injector)
-        models["shutter"] = shutter
-        servers["shutter"] = DeviceServer(
-            shutter, injector, transport=transport, name="shutter", link_dir=link_dir
-        )
+        model = _ONE_PORT_MODELS[kind](clock=clock, faults=injector)
+        models[kind] = model
+        ports = {kind: (model, injector)}
+    servers = {
+        name: DeviceServer(sim, port_faults, transport=transport, name=name, link_dir=link_dir)
+        for name, (sim, port_faults) in ports.items()
+    }
     handle = SimHandle(kind, servers, models, own_dir)
     try:
         for server in servers.values():

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import secrets
 import threading
-from collections.abc import Iterator
-from typing import Annotated
+from collections.abc import Callable, Iterator
+from typing import Annotated, Any
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
@@ -37,42 +37,20 @@ def get_lab(request: Request) -> Lab:
 LabDep = Annotated[Lab, Depends(get_lab)]
 
 
-def get_settings(lab: LabDep) -> Settings:
-    return lab.settings
+def _of_lab(attribute: str) -> Callable[[Lab], Any]:
+    """The dependency that answers the running lab's ``attribute``."""
+
+    def dependency(lab: LabDep) -> Any:
+        return getattr(lab, attribute)
+
+    dependency.__name__ = f"get_{attribute}"
+    return dependency
 
 
 def get_session(lab: LabDep) -> Iterator[Session]:
     """A database session for one request."""
     with lab.session() as session:
         yield session
-
-
-def get_sessions(lab: LabDep) -> sessionmaker:
-    return lab.sessions
-
-
-def get_store(lab: LabDep) -> FrameStore:
-    return lab.store
-
-
-def get_executor(lab: LabDep) -> Executor:
-    return lab.executor
-
-
-def get_lease(lab: LabDep) -> RigLease:
-    return lab.lease
-
-
-def get_runner(lab: LabDep) -> CampaignRunner:
-    return lab.runner
-
-
-def get_calibrations(lab: LabDep) -> CalibrationJobs:
-    return lab.calibrations
-
-
-def get_default_scene(lab: LabDep) -> SceneSource:
-    return lab.default_scene
 
 
 class StreamSlots:
@@ -101,16 +79,16 @@ def get_stream_slots(request: Request) -> StreamSlots:
     return request.app.state.stream_slots
 
 
-SettingsDep = Annotated[Settings, Depends(get_settings)]
+SettingsDep = Annotated[Settings, Depends(_of_lab("settings"))]
 StreamSlotsDep = Annotated[StreamSlots, Depends(get_stream_slots)]
 SessionDep = Annotated[Session, Depends(get_session)]
-SessionsDep = Annotated[sessionmaker, Depends(get_sessions)]
-StoreDep = Annotated[FrameStore, Depends(get_store)]
-ExecutorDep = Annotated[Executor, Depends(get_executor)]
-LeaseDep = Annotated[RigLease, Depends(get_lease)]
-RunnerDep = Annotated[CampaignRunner, Depends(get_runner)]
-SceneDep = Annotated[SceneSource, Depends(get_default_scene)]
-CalibrationsDep = Annotated[CalibrationJobs, Depends(get_calibrations)]
+SessionsDep = Annotated[sessionmaker, Depends(_of_lab("sessions"))]
+StoreDep = Annotated[FrameStore, Depends(_of_lab("store"))]
+ExecutorDep = Annotated[Executor, Depends(_of_lab("executor"))]
+LeaseDep = Annotated[RigLease, Depends(_of_lab("lease"))]
+RunnerDep = Annotated[CampaignRunner, Depends(_of_lab("runner"))]
+SceneDep = Annotated[SceneSource, Depends(_of_lab("default_scene"))]
+CalibrationsDep = Annotated[CalibrationJobs, Depends(_of_lab("calibrations"))]
 
 
 def require_token(

@@ -15,6 +15,7 @@ import threading
 import time
 import tty
 
+from drivers.camera.wire import USE_CASES
 from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS
 from drivers.transport import SerialSettings
 from drivers.turntable import SMC100_SETTINGS
@@ -27,6 +28,11 @@ FAST_LAMP = dataclasses.replace(LAMP_SETTINGS, timeout_s=0.25, retries=2, reconn
 FAST_SHUTTER = dataclasses.replace(
     SHUTTER_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0
 )
+
+#: The camera tests' usual use cases, and the pico flexx's image size (rows, columns).
+MODE5 = USE_CASES["MODE_5_45FPS_500"]
+MODE9 = USE_CASES["MODE_9_5FPS_2000"]
+H, W = 171, 224
 
 #: The pico flexx line of royale's udev rules file 10-royale-ubuntu.rules.
 ROYALE_RULE = (

@@ -16,7 +16,6 @@ from drivers.camera.wire import (
     REQ_STOP,
     REQUEST_IN,
     REQUEST_OUT,
-    USE_CASES,
     decode_frame,
     decode_status,
 )
@@ -29,10 +28,9 @@ from drivers.sim.usb_camera import (
     parse_camera_fault,
     plane_source,
 )
+from tests.drivers.helpers import MODE5
 
 pytestmark = pytest.mark.timeout(10)
-
-MODE5 = USE_CASES["MODE_5_45FPS_500"]
 
 
 @pytest.fixture

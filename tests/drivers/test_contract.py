@@ -16,6 +16,7 @@ import dataclasses
 import math
 import os
 from collections.abc import Iterator
+from typing import TypeVar
 
 import pytest
 
@@ -38,55 +39,61 @@ SOLAR_BACKENDS = ["sim-pty", "sim-tcp"] + (
 )
 
 
+DeviceT = TypeVar("DeviceT", Turntable, SolarSimulator)
+
+
+def _connected(device: DeviceT) -> Iterator[DeviceT]:
+    """``device`` connected for one test, closed after it."""
+    device.connect()
+    yield device
+    device.close()
+
+
 @pytest.fixture(params=TURNTABLE_BACKENDS)
 def turntable(request: pytest.FixtureRequest) -> Iterator[TurntableProtocol]:
     if request.param == "hardware":
-        device = Turntable(
-            os.environ["TOFTWIN_TURNTABLE_PORT"],
-            address=int(os.environ.get("TOFTWIN_TURNTABLE_ADDRESS", "1")),
+        yield from _connected(
+            Turntable(
+                os.environ["TOFTWIN_TURNTABLE_PORT"],
+                address=int(os.environ.get("TOFTWIN_TURNTABLE_ADDRESS", "1")),
+            )
         )
-        device.connect()
-        yield device
-        device.close()
         return
     transport = "pty" if request.param == "sim-pty" else "tcp"
     with start_simulator("turntable", transport=transport, time_scale=50.0) as handle:
-        device = Turntable(
-            handle.ports[0],
-            settle_s=0.0,
-            poll_interval_s=0.005,
-            stall_timeout_s=0.5,
-            settings=FAST_SMC100,
+        yield from _connected(
+            Turntable(
+                handle.ports[0],
+                settle_s=0.0,
+                poll_interval_s=0.005,
+                stall_timeout_s=0.5,
+                settings=FAST_SMC100,
+            )
         )
-        device.connect()
-        yield device
-        device.close()
 
 
 @pytest.fixture(params=SOLAR_BACKENDS)
 def solar(request: pytest.FixtureRequest) -> Iterator[SolarSimulatorProtocol]:
     if request.param == "hardware":
-        device = SolarSimulator(
-            os.environ["TOFTWIN_LAMP_PORT"],
-            os.environ["TOFTWIN_SHUTTER_PORT"],
-            warmup_s=float(os.environ.get("TOFTWIN_WARMUP_S", "1800")),
+        yield from _connected(
+            SolarSimulator(
+                os.environ["TOFTWIN_LAMP_PORT"],
+                os.environ["TOFTWIN_SHUTTER_PORT"],
+                warmup_s=float(os.environ.get("TOFTWIN_WARMUP_S", "1800")),
+            )
         )
-        device.connect()
-        yield device
-        device.close()
         return
     transport = "pty" if request.param == "sim-pty" else "tcp"
     with start_simulator("solar-simulator", transport=transport, time_scale=5000.0) as handle:
-        device = SolarSimulator(
-            *handle.ports,
-            warmup_s=0.2,
-            poll_interval_s=0.01,
-            lamp_settings=dataclasses.replace(FAST_LAMP),
-            shutter_settings=FAST_SHUTTER,
+        yield from _connected(
+            SolarSimulator(
+                *handle.ports,
+                warmup_s=0.2,
+                poll_interval_s=0.01,
+                lamp_settings=dataclasses.replace(FAST_LAMP),
+                shutter_settings=FAST_SHUTTER,
+            )
         )
-        device.connect()
-        yield device
-        device.close()
 
 
 def _stable_timeout(device: SolarSimulatorProtocol) -> float:

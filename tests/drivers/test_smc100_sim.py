@@ -55,6 +55,13 @@ def home(sim: Smc100Sim, wall: StepClock) -> None:
     assert ask(sim, "1TS") == "1TS000032"
 
 
+def make_homed_sim(**config: object) -> tuple[Smc100Sim, StepClock]:
+    """A simulator homed, READY at 0 deg."""
+    sim, wall = make_sim(**config)
+    home(sim, wall)
+    return sim, wall
+
+
 # -- syntax --------------------------------------------------------------------------------
 def test_power_up_state_and_queries_with_and_without_question_mark():
     sim, _ = make_sim()
@@ -67,8 +74,7 @@ def test_power_up_state_and_queries_with_and_without_question_mark():
 
 
 def test_blanks_inside_a_number_are_ignored():
-    sim, wall = make_sim()
-    home(sim, wall)
+    sim, _ = make_homed_sim()
     ask(sim, "1P A1.43 6")  # the manual's own example of "2P A1.43 6" == "2PA1.436"
     assert te(sim) == "@"
     assert ask(sim, "1PA?") == "1PA1.436"
@@ -132,8 +138,7 @@ def test_homing_goes_through_1e_to_32_at_the_home_velocity():
 
 
 def test_move_goes_through_28_to_33_and_ends_exactly_on_target():
-    sim, wall = make_sim()
-    home(sim, wall)
+    sim, wall = make_homed_sim()
     ask(sim, "1PA45")
     assert ask(sim, "1TS") == "1TS000028"
     assert ask(sim, "1TH") == "1TH45"
@@ -143,8 +148,7 @@ def test_move_goes_through_28_to_33_and_ends_exactly_on_target():
 
 
 def test_target_outside_software_limits_is_refused_with_g():
-    sim, wall = make_sim(limits_deg=(-170.0, 170.0))
-    home(sim, wall)
+    sim, wall = make_homed_sim(limits_deg=(-170.0, 170.0))
     sim.handle_line("1PA170.5")
     assert te(sim) == "G"
     sim.handle_line("1PA170")
@@ -155,8 +159,7 @@ def test_target_outside_software_limits_is_refused_with_g():
 
 
 def test_software_limits_can_be_set_in_ready_but_not_past_the_set_point():
-    sim, wall = make_sim()
-    home(sim, wall)
+    sim, _ = make_homed_sim()
     ask(sim, "1SL-90")
     ask(sim, "1SR90")
     assert (ask(sim, "1SL?"), ask(sim, "1SR?"), te(sim)) == ("1SL-90", "1SR90", "@")
@@ -165,8 +168,7 @@ def test_software_limits_can_be_set_in_ready_but_not_past_the_set_point():
 
 
 def test_disable_and_enable_with_mm():
-    sim, wall = make_sim()
-    home(sim, wall)
+    sim, _ = make_homed_sim()
     ask(sim, "1MM0")
     assert ask(sim, "1TS") == "1TS00003C"
     assert ask(sim, "1MM?") == "1MM3C"
@@ -177,8 +179,7 @@ def test_disable_and_enable_with_mm():
 
 
 def test_stop_decelerates_at_ac_and_ends_ready_from_moving():
-    sim, wall = make_sim(acceleration_deg_s2=80.0, velocity_deg_s=20.0)
-    home(sim, wall)
+    sim, wall = make_homed_sim(acceleration_deg_s2=80.0, velocity_deg_s=20.0)
     ask(sim, "1PA100")
     wall.t += 2.0  # cruising at 20 deg/s
     before = sim.current_position()
@@ -190,8 +191,7 @@ def test_stop_decelerates_at_ac_and_ends_ready_from_moving():
 
 
 def test_pa_while_moving_retargets_the_move():
-    sim, wall = make_sim()
-    home(sim, wall)
+    sim, wall = make_homed_sim()
     ask(sim, "1PA100")
     wall.t += 1.0
     ask(sim, "1PA-20")
@@ -201,8 +201,7 @@ def test_pa_while_moving_retargets_the_move():
 
 
 def test_reset_makes_the_controller_deaf_then_not_referenced():
-    sim, wall = make_sim(reset_time_s=2.0)
-    home(sim, wall)
+    sim, wall = make_homed_sim(reset_time_s=2.0)
     ask(sim, "1RS")
     assert sim.handle_line("1TS") == []  # rebooting
     wall.t += 2.5
@@ -235,8 +234,7 @@ def test_zt_lists_parameters_between_pw1_and_pw0():
 
 
 def test_pt_returns_the_move_time():
-    sim, wall = make_sim(velocity_deg_s=20.0, acceleration_deg_s2=80.0)
-    home(sim, wall)
+    sim, _ = make_homed_sim(velocity_deg_s=20.0, acceleration_deg_s2=80.0)
     # 10 deg: 0.25 s to 20 deg/s (2.5 deg), 5 deg cruise (0.25 s), 0.25 s to stop
     assert ask(sim, "1PT10") == "1PT0.75"
 
@@ -359,8 +357,7 @@ def test_pysmc100_client_transcript():
 
 # -- the drift fault -------------------------------------------------------------------------
 def test_drift_moves_a_stage_at_rest_off_its_position_and_it_stays_ready():
-    sim, wall = make_sim()
-    home(sim, wall)
+    sim, wall = make_homed_sim()
     ask(sim, "1PA20")
     wall.t += 100.0
     assert ask(sim, "1TP") == "1TP20"

@@ -28,12 +28,9 @@ from drivers.camera.royale import (
 from drivers.camera.wire import quantize_frame, raw_to_wire_values
 from drivers.errors import DeviceInputError, DeviceTimeoutError
 from drivers.sim.usb_camera import CameraRequest, plane_source
+from tests.drivers.helpers import MODE5, MODE9, H, W
 
 pytestmark = pytest.mark.timeout(20)
-
-MODE5 = USE_CASES["MODE_5_45FPS_500"]
-MODE9 = USE_CASES["MODE_9_5FPS_2000"]
-H, W = 171, 224
 
 
 def _source(uc, index=0):

@@ -29,12 +29,9 @@ from drivers.camera.wire import (
 )
 from drivers.errors import DeviceInputError, ProtocolError
 from sim_core.raw import RawFrame
+from tests.drivers.helpers import MODE5, MODE9, H, W
 
 pytestmark = pytest.mark.timeout(30)
-
-MODE5 = USE_CASES["MODE_5_45FPS_500"]
-MODE9 = USE_CASES["MODE_9_5FPS_2000"]
-H, W = 171, 224
 
 
 def _images(uc, seed=0):

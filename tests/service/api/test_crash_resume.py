@@ -81,6 +81,17 @@ def wait_for(client: httpx.Client, cid: str, until, timeout_s: float = 90.0) -> 
         time.sleep(0.05)
 
 
+def start_campaign(client: httpx.Client, name: str, poses: list[dict], *, seed: int,
+                   poses_done: int) -> str:
+    """Create and start a campaign; its id once ``poses_done`` of its poses are done."""
+    res = client.post("/api/v1/campaigns", headers=AUTH,
+                      json={"name": name, "poses": poses, "seed": seed})
+    cid = res.json()["id"]
+    assert client.post(f"/api/v1/campaigns/{cid}/start", headers=AUTH).status_code == 200
+    wait_for(client, cid, lambda s: s["poses_done"] >= poses_done)
+    return cid
+
+
 #: one pool worker (one start-up fewer than two) and still two poses in flight at the kill: the
 #: rig stage of the next pose overlaps the simulation of the previous one
 ONE_WORKER_TWO_IN_FLIGHT = {"TOFTWIN_WORKERS": "1", "TOFTWIN_PIPELINE_DEPTH": "2"}
@@ -96,11 +107,7 @@ def test_killed_server_resumes_the_campaign_with_each_pose_exactly_once(tmp_path
     poses, units = POSES, UNITS
 
     with server(data, log, **ONE_WORKER_TWO_IN_FLIGHT) as (client, proc):
-        res = client.post("/api/v1/campaigns", headers=AUTH,
-                          json={"name": "crash", "poses": poses, "seed": 5})
-        cid = res.json()["id"]
-        assert client.post(f"/api/v1/campaigns/{cid}/start", headers=AUTH).status_code == 200
-        wait_for(client, cid, lambda s: s["poses_done"] >= 2)
+        cid = start_campaign(client, "crash", poses, seed=5, poses_done=2)
         os.killpg(proc.pid, signal.SIGKILL)  # no shutdown handler runs
         proc.wait(timeout=10)
 

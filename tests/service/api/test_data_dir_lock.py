@@ -18,11 +18,12 @@ import signal
 import pytest
 
 from service.store.data_lock import DataDirLock, read_holder
-from tests.service.api.conftest import AUTH, TOKEN
+from tests.service.api.conftest import TOKEN
 from tests.service.api.test_crash_resume import (
     ONE_WORKER_TWO_IN_FLIGHT,
     free_port,
     server,
+    start_campaign,
     wait_for,
 )
 
@@ -40,11 +41,7 @@ def test_a_second_server_on_the_same_data_dir_is_refused(tmp_path, monkeypatch):
 
     data, log = tmp_path / "data", tmp_path / "server.log"
     with server(data, log, **ONE_WORKER_TWO_IN_FLIGHT) as (client, proc):
-        res = client.post("/api/v1/campaigns", headers=AUTH,
-                          json={"name": "first", "poses": POSES, "seed": 3})
-        cid = res.json()["id"]
-        assert client.post(f"/api/v1/campaigns/{cid}/start", headers=AUTH).status_code == 200
-        wait_for(client, cid, lambda s: s["poses_done"] >= 1)
+        cid = start_campaign(client, "first", POSES, seed=3, poses_done=1)
 
         # the second one: no TOFTWIN_TOKEN, so it would write DATA_DIR/token if it got that far
         monkeypatch.delenv("TOFTWIN_TOKEN", raising=False)

@@ -102,21 +102,19 @@ def test_bad_scene_exits_2_names_the_field_and_writes_nothing(tmp_path, case):
     assert not out.exists()
 
 
-def test_nan_vertices_in_a_mesh_file_are_rejected(tmp_path):
-    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n")
-    scene = _scene(tmp_path, lambda d: d["objects"].append(_mesh_object("bad.obj")))
+@pytest.mark.parametrize(
+    ("name", "text", "why"),
+    [("bad.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", "NaN"),
+     ("empty.obj", "# nothing here\n", "empty")],
+    ids=["nan_vertices", "empty"],
+)
+def test_a_bad_mesh_file_is_rejected(tmp_path, name, text, why):
+    (tmp_path / name).write_text(text)
+    scene = _scene(tmp_path, lambda d: d["objects"].append(_mesh_object(name)))
     res = run("simulate", scene, "--out", tmp_path / "out", "-q")
     assert res.exit_code == 2, res.output
-    assert "objects[1].mesh" in res.output and "NaN" in res.output
+    assert "objects[1].mesh" in res.output and why in res.output
     assert not (tmp_path / "out").exists()
-
-
-def test_empty_mesh_file_is_rejected(tmp_path):
-    (tmp_path / "empty.obj").write_text("# nothing here\n")
-    scene = _scene(tmp_path, lambda d: d["objects"].append(_mesh_object("empty.obj")))
-    res = run("simulate", scene, "--out", tmp_path / "out", "-q")
-    assert res.exit_code == 2, res.output
-    assert "objects[1].mesh" in res.output and "empty" in res.output
 
 
 def test_camera_inside_a_closed_mesh_is_rejected(tmp_path):

@@ -25,11 +25,15 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import pytest
 from scipy import stats
 
+from sim_core.errors import InvalidInputError
 from sim_core.materials import Material
 
 
@@ -245,3 +249,14 @@ def check_chi2(
     result = chi2_goodness_of_fit(material, wo, **kwargs)
     assert result.passed(significance), f"{material!r} at wo={wo}: {result.message}"
     return result
+
+
+def check_out_of_range_rejected(
+    make: Callable[..., Material], params: dict[str, Any], field: str, value: float, allowed: str
+) -> None:
+    """Assert ``make(**params)`` with ``field = value`` raises an InvalidInputError naming the
+    field, the value and the ``allowed`` range."""
+    with pytest.raises(InvalidInputError) as excinfo:
+        make(**{**params, field: value})
+    assert excinfo.value.field == field
+    assert f"{field} = {value!r} is outside {allowed}" in str(excinfo.value)

@@ -16,6 +16,7 @@ from .harness import (
     check_albedo_at_most_one,
     check_albedo_consistency,
     check_chi2,
+    check_out_of_range_rejected,
     direction_deg,
     spherical,
 )
@@ -209,11 +210,7 @@ def test_albedo_of_the_most_reflective_parameters_stays_below_one(fresnel_angle:
 def test_out_of_range_parameter_is_rejected_with_its_name_value_and_range(
     field: str, value: float, allowed: str
 ) -> None:
-    params = {"kd": 0.0, "ks": 0.0, field: value}
-    with pytest.raises(InvalidInputError) as excinfo:
-        CookTorrance(**params)
-    assert excinfo.value.field == field
-    assert f"{field} = {value!r} is outside {allowed}" in str(excinfo.value)
+    check_out_of_range_rejected(CookTorrance, {"kd": 0.0, "ks": 0.0}, field, value, allowed)
 
 
 def test_kd_plus_ks_above_one_is_rejected() -> None:

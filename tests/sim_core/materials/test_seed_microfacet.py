@@ -14,6 +14,7 @@ from .harness import (
     check_albedo_at_most_one,
     check_albedo_consistency,
     check_chi2,
+    check_out_of_range_rejected,
     direction_deg,
     repeat,
     spherical,
@@ -164,11 +165,7 @@ def test_black_body_reflects_nothing() -> None:
 def test_out_of_range_parameter_is_rejected_with_its_name_value_and_range(
     field: str, value: float, allowed: str
 ) -> None:
-    params = {"ks": 0.0, "kd": 0.0, field: value}
-    with pytest.raises(InvalidInputError) as excinfo:
-        SeedMicrofacet(**params)
-    assert excinfo.value.field == field
-    assert f"{field} = {value!r} is outside {allowed}" in str(excinfo.value)
+    check_out_of_range_rejected(SeedMicrofacet, {"ks": 0.0, "kd": 0.0}, field, value, allowed)
 
 
 def test_ks_plus_kd_above_one_is_rejected() -> None:
