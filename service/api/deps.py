@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from service.api.problems import problem_content
 from service.compute.executors import Executor
 from service.errors import UnavailableError
+from service.lab.background import BackgroundRunner
 from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.lab import Lab
 from service.lab.rig_lease import RigLease
@@ -71,6 +72,10 @@ def get_calibrations(lab: LabDep) -> CalibrationJobs:
     return lab.calibrations
 
 
+def get_background(lab: LabDep) -> BackgroundRunner:
+    return lab.background
+
+
 def get_default_scene(lab: LabDep) -> SceneSource:
     return lab.default_scene
 
@@ -111,6 +116,7 @@ LeaseDep = Annotated[RigLease, Depends(get_lease)]
 RunnerDep = Annotated[CampaignRunner, Depends(get_runner)]
 SceneDep = Annotated[SceneSource, Depends(get_default_scene)]
 CalibrationsDep = Annotated[CalibrationJobs, Depends(get_calibrations)]
+BackgroundDep = Annotated[BackgroundRunner, Depends(get_background)]
 
 
 def require_token(
