@@ -11,7 +11,7 @@ import threading
 from collections.abc import Iterator
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Request, status
+from fastapi import Depends, HTTPException, Query, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -117,6 +117,10 @@ RunnerDep = Annotated[CampaignRunner, Depends(get_runner)]
 SceneDep = Annotated[SceneSource, Depends(get_default_scene)]
 CalibrationsDep = Annotated[CalibrationJobs, Depends(get_calibrations)]
 BackgroundDep = Annotated[BackgroundRunner, Depends(get_background)]
+#: a page of a list: at most ``limit`` rows (100 unless the route says otherwise) ...
+Limit = Annotated[int, Query(ge=1, le=1000)]
+#: ... from row ``offset`` (0: the first)
+Offset = Annotated[int, Query(ge=0, le=2**31)]
 
 
 def require_token(
