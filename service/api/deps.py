@@ -11,13 +11,14 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Annotated, Any
 
-from fastapi import Depends, HTTPException, Request, status
+from fastapi import Depends, HTTPException, Query, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.api.problems import problem_content
 from service.compute.executors import Executor
 from service.errors import UnavailableError
+from service.lab.background import BackgroundRunner
 from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.lab import Lab
 from service.lab.rig_lease import RigLease
@@ -89,6 +90,11 @@ LeaseDep = Annotated[RigLease, Depends(_of_lab("lease"))]
 RunnerDep = Annotated[CampaignRunner, Depends(_of_lab("runner"))]
 SceneDep = Annotated[SceneSource, Depends(_of_lab("default_scene"))]
 CalibrationsDep = Annotated[CalibrationJobs, Depends(_of_lab("calibrations"))]
+BackgroundDep = Annotated[BackgroundRunner, Depends(_of_lab("background"))]
+#: a page of a list: at most ``limit`` rows (100 unless the route says otherwise) ...
+Limit = Annotated[int, Query(ge=1, le=1000)]
+#: ... from row ``offset`` (0: the first)
+Offset = Annotated[int, Query(ge=0, le=2**31)]
 
 
 def require_token(

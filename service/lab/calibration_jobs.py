@@ -24,6 +24,10 @@ Who swaps what is on the turntable: on the simulated lab the lab itself
 (:class:`calibration.rig_sequence.SimulatedOperator`); on the real rig the operator, whom the
 job asks through its status (``operator_instruction``) and who confirms with
 ``POST /calibrations/{id}/continue`` once the board (or the test object) is mounted.
+
+The life cycle (the thread, the rig's claim, cancel, the emergency stop, shutdown) is the one
+background runner's (:class:`~service.lab.background.BackgroundRunner`, shared with the
+campaigns); this module holds the job's work, its row and its output folder.
 """
 
 from __future__ import annotations
@@ -43,10 +47,10 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.errors import DeviceError
 from service.errors import ConflictError, GoneError, NotFoundError
+from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop
 from service.lab.calibration import activate
 from service.lab.poses import check_angle
 from service.lab.requests import CalibrationCreate
-from service.lab.rig_lease import RigLease
 from service.lab.scenes import SceneSource
 from service.settings import Settings
 from service.store import queries
@@ -70,16 +74,19 @@ class _CancelledError(Exception):
 
 
 @dataclass
-class _Run:
-    job_id: str
-    thread: threading.Thread | None = None
-    stop: threading.Event = field(default_factory=threading.Event)
-    stop_to: str = "cancelled"
-    stop_error: str | None = None
+class _Progress:
+    """What the running job's worker knows beside its row."""
+
     #: (instruction, message) while the job waits for the operator (real rig): one value, so
     #: that a reader gets the instruction and the message that goes with it together
     waiting: tuple[str, str] | None = None
     mounted: threading.Event = field(default_factory=threading.Event)
+    #: the result's hash, and whether it was activated (for the final row)
+    calibration_hash: str | None = None
+    activated: bool = False
+
+
+_Run = Run[_Progress]
 
 
 class _WaitingOperator:
@@ -89,20 +96,20 @@ class _WaitingOperator:
         self.jobs, self.run = jobs, run
 
     def mount(self, objects: Sequence | None, instruction: str) -> None:
-        run = self.run
-        run.mounted.clear()
+        run, progress = self.run, self.run.progress
+        progress.mounted.clear()
         message = (f"waiting for the operator: {instruction}; then POST "
-                   f"/api/v1/calibrations/{run.job_id}/continue")
-        self.jobs._note(run.job_id, message)
+                   f"/api/v1/calibrations/{run.id}/continue")
+        self.jobs._note(run.id, message)
         # Set after the row's message, and read with it (:meth:`CalibrationJobs.live`): a
         # status that shows the instruction shows its message too, whenever the row was read.
-        run.waiting = (instruction, message)
+        progress.waiting = (instruction, message)
         try:
-            while not run.mounted.wait(0.2):
+            while not progress.mounted.wait(0.2):
                 if run.stop.is_set():
                     raise _CancelledError()
         finally:
-            run.waiting = None
+            progress.waiting = None
 
 
 class CalibrationJobs:
@@ -111,8 +118,9 @@ class CalibrationJobs:
     Parameters
     ----------
     sessions : sessionmaker
-    lease : RigLease
-        The rig; a job claims it as ``"calibration job"``.
+    background : BackgroundRunner
+        The one runner of the service's background jobs: a job claims the rig (its ``lease``)
+        as ``"calibration job"``, and the runner stops it and records how it ended.
     scene : SceneSource
         The service's scene: camera pose, turntable and solar simulator of the rig.
     settings : Settings
@@ -122,17 +130,21 @@ class CalibrationJobs:
         The simulated lab (mounts the board itself); None on the real rig.
     """
 
-    def __init__(self, sessions: sessionmaker, lease: RigLease, scene: SceneSource,
+    def __init__(self, sessions: sessionmaker, background: BackgroundRunner, scene: SceneSource,
                  settings: Settings, root: str | Path, world: Any = None) -> None:
         self.sessions = sessions
-        self.lease = lease
+        self.background = background
+        self.lease = background.lease
         self.scene = scene
         self.settings = settings
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
         self.world = world
-        self._lock = threading.Lock()
-        self._run: _Run | None = None
+        self.kind: Kind[_Progress] = Kind(
+            name=KIND, busy="calibration job {id} is running; one at a time",
+            emergency=Stop("cancelled", "emergency stop"), shutdown=Stop("failed", INTERRUPTED),
+            shutdown_overrides=True, live=self._live, finish=self._finished,
+            abandoned=self._abandoned, thread="calibration")
 
     # -- start-up ------------------------------------------------------------------------------
     def recover(self) -> list[str]:
@@ -152,17 +164,11 @@ class CalibrationJobs:
     def live(self, job_id: str) -> dict[str, Any] | None:
         """What only the running job knows: the operator's instruction and its message (both
         None unless it waits for the operator)."""
-        run = self._run
-        if run is None or run.job_id != job_id:
-            return None
-        instruction, message = run.waiting or (None, None)
-        return {"operator_instruction": instruction, "message": message}
+        return self.background.live(self.kind, job_id)
 
     def wait(self, timeout_s: float | None = None) -> None:
         """Block until the running job's thread ends (tests)."""
-        run = self._run
-        if run is not None and run.thread is not None:
-            run.thread.join(timeout_s)
+        self.background.wait(timeout_s, self.kind)
 
     # -- commands ------------------------------------------------------------------------------
     def create(self, req: CalibrationCreate) -> str:
@@ -173,40 +179,22 @@ class CalibrationJobs:
         check_angle(rig, plan.sweep_deg[-1], "sweep.to_deg")
         require_free(self.root, self.settings.min_free_bytes)  # 507 before anything moves
         job_id = uuid.uuid4().hex
-        with self._lock:
-            if self._run is not None:
-                raise ConflictError(f"calibration job {self._run.job_id} is running; one at a time")
-            self.lease.claim(job_id, KIND)  # 409 while a campaign holds the rig
-            try:
-                with self.sessions() as s:
-                    queries.create_calibration_job(
-                        s, job_id=job_id, plan=req.model_dump(mode="json"),
-                        activate=req.activate, out_dir=str(self.out_dir(job_id)),
-                        steps_total=plan.n_captures)
-            except BaseException:
-                self.lease.release(job_id)
-                raise
-            run = _Run(job_id)
-            run.thread = threading.Thread(target=self._work, args=(run, plan, req.activate),
-                                          name=f"calibration-{job_id[:8]}", daemon=True)
-            self._run = run
-            run.thread.start()
+
+        def prepare() -> None:  # with the rig claimed: 409 while a campaign holds it
+            with self.sessions() as s:
+                queries.create_calibration_job(
+                    s, job_id=job_id, plan=req.model_dump(mode="json"),
+                    activate=req.activate, out_dir=str(self.out_dir(job_id)),
+                    steps_total=plan.n_captures)
+
+        self.background.start(self.kind, job_id,
+                              lambda run: self._work(run, plan, req.activate), _Progress(),
+                              prepare)
         return job_id
 
     def cancel(self, job_id: str) -> None:
         """Stop a queued or running job before its next capture (409 for a finished one)."""
-        with self._lock:
-            run = self._run
-            if run is not None and run.job_id == job_id:
-                if not run.stop.is_set():
-                    run.stop_to, run.stop_error = "cancelled", None
-                    run.stop.set()
-                thread = run.thread
-            else:
-                thread = None
-        if thread is not None:
-            if thread is not threading.current_thread():
-                thread.join(timeout=self.settings.stop_wait_s)
+        if self.background.stop(self.kind, job_id, Stop("cancelled")):
             return
         with self.sessions() as s:
             row = queries.require_calibration_job(s, job_id)
@@ -215,40 +203,12 @@ class CalibrationJobs:
 
     def confirm_mounted(self, job_id: str) -> None:
         """The operator has mounted what the job asked for (409 if it asks for nothing)."""
-        run = self._run
-        if run is None or run.job_id != job_id or run.waiting is None:
+        run = self.background.find(self.kind, job_id)
+        if run is None or run.progress.waiting is None:
             with self.sessions() as s:
                 queries.require_calibration_job(s, job_id)
             raise ConflictError(f"calibration job {job_id} is not waiting for the operator")
-        run.mounted.set()
-
-    def emergency_stop(self) -> str | None:
-        """Cancel the running job (if any) without waiting; returns its id."""
-        run = self._run
-        if run is None:
-            return None
-        with self._lock:
-            if not run.stop.is_set():
-                run.stop_to, run.stop_error = "cancelled", "emergency stop"
-                run.stop.set()
-        return run.job_id
-
-    def shutdown(self) -> None:
-        """Service shutdown: the running job stops and is ``failed`` (it cannot be resumed)."""
-        run = self._run
-        if run is None:
-            return
-        with self._lock:
-            run.stop_to, run.stop_error = "failed", INTERRUPTED
-            run.stop.set()
-        if run.thread is not None:
-            run.thread.join(timeout=self.settings.stop_wait_s)
-        # still computing (the procedures do not look at the stop): recorded now, the thread
-        # is a daemon and its late writes are refused by the state check
-        with self.sessions() as s:
-            queries.update_calibration_job(s, run.job_id, allowed_from=("queued", "running"),
-                                           state="failed", error=INTERRUPTED,
-                                           finished_at=time.time())
+        run.progress.mounted.set()
 
     def activate(self, job_id: str) -> dict[str, Any]:
         """Make a ``done`` job's result the active calibration; returns its public form."""
@@ -274,11 +234,32 @@ class CalibrationJobs:
         with self.sessions() as s:
             queries.update_calibration_job(s, job_id, allowed_from=("running",), **values)
 
-    def _work(self, run: _Run, plan: Any, activate_result: bool) -> None:
+    def _live(self, run: _Run) -> dict[str, Any]:
+        instruction, message = run.progress.waiting or (None, None)
+        return {"operator_instruction": instruction, "message": message}
+
+    def _finished(self, run: _Run, to: str, error: str | None) -> None:
+        """The final row (in the runner's critical section, the rig already given back)."""
+        with self.sessions() as s:
+            queries.update_calibration_job(
+                s, run.id, allowed_from=("queued", "running"), state=to, error=error,
+                calibration_hash=run.progress.calibration_hash,
+                activated=run.progress.activated, finished_at=time.time(),
+                message="done" if to == "done" else to)
+
+    def _abandoned(self, run: _Run) -> None:
+        """Shutdown, the job still computing (the procedures do not look at the stop): recorded
+        now; the thread is a daemon and its late writes are refused by the state check."""
+        with self.sessions() as s:
+            queries.update_calibration_job(s, run.id, allowed_from=("queued", "running"),
+                                           state="failed", error=INTERRUPTED,
+                                           finished_at=time.time())
+
+    def _work(self, run: _Run, plan: Any, activate_result: bool) -> Ending:
         from calibration.report import write_report
         from calibration.rig_sequence import SimulatedOperator, calibrate_rig
 
-        job_id = run.job_id
+        job_id = run.id
         partial = self.root / f"{_PARTIAL}{job_id}"
         to, error, cal_hash, activated = "done", None, None, False
         operator: Any = None
@@ -310,7 +291,7 @@ class CalibrationJobs:
                 activate(self.sessions, result.calibration, f"calibration job {job_id}")
                 activated = True
         except _CancelledError:
-            to, error = run.stop_to, run.stop_error
+            to, error = run.stopping
         except InvalidInputError as exc:  # the sequence refused what it measured
             to, error = "failed", (f"{exc}. The rig's data could not give a trustworthy "
                                    "calibration: check the board, the fixtures and the plan "
@@ -330,15 +311,8 @@ class CalibrationJobs:
                     self.world.mount(None)
                 except Exception:  # pragma: no cover - never mask the job's own outcome
                     _log.exception("could not mount the test object again")
-            with self._lock:
-                self._run = None
-                self.lease.release(job_id)
-                with self.sessions() as s:
-                    queries.update_calibration_job(
-                        s, job_id, allowed_from=("queued", "running"), state=to, error=error,
-                        calibration_hash=cal_hash, activated=activated,
-                        finished_at=time.time(),
-                        message="done" if to == "done" else to)
+        run.progress.calibration_hash, run.progress.activated = cal_hash, activated
+        return to, error
 
 
 def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:

@@ -14,10 +14,9 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.errors import DeviceError, DeviceTimeoutError
 from drivers.rig import Rig
-from service.lab.calibration_jobs import CalibrationJobs
+from service.lab.background import BackgroundRunner
 from service.lab.poses import check_angle
 from service.lab.rig_lease import RigLease
-from service.lab.runner import CampaignRunner
 from service.lab.scenes import SceneSource, camera_of, for_use_case
 from service.store import queries
 from service.store.disk_space import require_free, writing
@@ -185,11 +184,10 @@ def capture(
             "links": {"self": f"/api/v1/frames/{frame_id}"}}
 
 
-def emergency_stop(
-    lease: RigLease, runner: CampaignRunner, calibrations: CalibrationJobs | None = None
-) -> dict[str, Any]:
-    """Halt the turntable and close the shutter now; pause a running campaign, cancel a running
-    calibration job (before its next capture).
+def emergency_stop(lease: RigLease, background: BackgroundRunner) -> dict[str, Any]:
+    """Halt the turntable and close the shutter now; stop the running job through the one
+    background runner: pause a running campaign, cancel a running calibration job (before its
+    next capture).
 
     The commands go out at once, without the rig lock. A campaign (or a manual call) may be in
     the middle of a rig stage and would open the shutter again, so once that stage has ended -
@@ -197,8 +195,7 @@ def emergency_stop(
     held: when this returns, the stage is halted and the shutter closed.
     """
     rig = lease.require()
-    paused = runner.emergency_stop()
-    cancelled = calibrations.emergency_stop() if calibrations is not None else None
+    kind, job_id = background.emergency_stop() or (None, None)
     errors: dict[str, str] = {}
 
     def halt() -> list[str]:
@@ -219,5 +216,6 @@ def emergency_stop(
             stopped = halt()
     except DeviceTimeoutError as exc:
         errors["rig"] = f"commands sent once; the rig stayed busy: {exc}"
-    return {"stopped": stopped, "errors": errors, "campaign_paused": paused,
-            "calibration_cancelled": cancelled}
+    return {"stopped": stopped, "errors": errors,
+            "campaign_paused": job_id if kind == "campaign" else None,
+            "calibration_cancelled": job_id if kind == "calibration job" else None}

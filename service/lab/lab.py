@@ -10,9 +10,11 @@ and every campaign a crash left ``running`` becomes ``interrupted``), the
 frame store (frames no row names are swept away), the executor, the rig (simulated or real,
 :func:`service.lab.rig_builder.open_rig`; a real rig that cannot be opened leaves the service
 up with the devices reporting 503), the
-campaign runner and the calibration jobs (a job a crash left running becomes ``failed``).
-Each part gets what it uses, not the lab: the runner its sessions, rig lease, store, executor
-and settings; the routes ask for the one part they need.
+background runner (:class:`~service.lab.background.BackgroundRunner`: one job at a time, of
+either kind, holds the rig), and on it the campaign runner and the calibration jobs (a job a
+crash left running becomes ``failed``). Each part gets what it uses, not the lab: the campaign
+runner its sessions, background runner, store, executor and settings; the routes ask for the
+one part they need.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from drivers.errors import DeviceError
 from service.compute.executors import Executor, make_executor
 from service.errors import UnavailableError
+from service.lab.background import BackgroundRunner
 from service.lab.calibration_jobs import CalibrationJobs
 from service.lab.rig_builder import open_rig
 from service.lab.rig_lease import RigLease
@@ -60,6 +63,8 @@ class Lab:
     lease: RigLease
     runner: CampaignRunner
     calibrations: CalibrationJobs
+    #: the one runner of background jobs (campaigns, calibration jobs): e-stop, shutdown
+    background: BackgroundRunner
     #: what startup recovered after a crash: campaigns marked interrupted, frames swept
     recovered: dict[str, list[str]] = field(default_factory=dict)
     lock: DataDirLock | None = None
@@ -71,10 +76,10 @@ class Lab:
             yield s
 
     def close(self) -> None:
-        """Stop the runner, the executor and the rig; dispose of the engine; unlock the data."""
+        """Stop the running job, the executor and the rig; dispose of the engine; unlock the
+        data."""
         try:
-            self.calibrations.shutdown()
-            self.runner.shutdown()
+            self.background.shutdown()
             with contextlib.suppress(Exception):
                 self.executor.close()
             self.lease.close()
@@ -140,12 +145,15 @@ def _open_locked(settings: Settings, lock: DataDirLock) -> Lab:
         rig, rig_error = None, str(exc)
         _log.error("rig not available: %s", exc)
     lease = RigLease(rig, rig_error, settings.rig_wait_s)
-    runner = CampaignRunner(sessions, lease, store, executor, settings, mounted=scene)
-    calibrations = CalibrationJobs(sessions, lease, scene, settings, data / "calibrations", world)
+    background = BackgroundRunner(lease, settings.stop_wait_s)
+    runner = CampaignRunner(sessions, background, store, executor, settings, mounted=scene)
+    calibrations = CalibrationJobs(sessions, background, scene, settings, data / "calibrations",
+                                   world)
     failed_jobs = calibrations.recover()
     if failed_jobs:
         _log.warning("calibration jobs interrupted by the service's end, now failed: %s",
                      failed_jobs)
     return Lab(settings, engine, sessions, store, executor, scene, lease, runner, calibrations,
+               background,
                recovered={"interrupted": interrupted, "swept_frames": swept,
                           "failed_calibrations": failed_jobs}, lock=lock)

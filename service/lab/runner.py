@@ -21,13 +21,16 @@ simply done again on resume; its frame folders are swept at the next start.
 One campaign runs at a time and holds the rig for each unit's rig stage; manual device calls are
 refused with 409 while it runs (:class:`~service.lab.rig_lease.RigLease`). A device fault pauses the
 campaign with the device's message; the operator fixes the rig and resumes.
+
+The life cycle (the thread, the rig's claim, stop, the emergency stop, shutdown) is the one
+background runner's (:class:`~service.lab.background.BackgroundRunner`, shared with the
+calibration jobs); this module holds the campaign's work and rows.
 """
 
 from __future__ import annotations
 
 import collections
 import logging
-import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,11 +40,11 @@ from sqlalchemy.orm import sessionmaker
 from drivers.errors import DeviceError
 from service.compute.executors import Executor
 from service.errors import ConflictError
+from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, failed
 from service.lab.calibration import Twin, calibration_from_json
 from service.lab.object_fit import FitPose, capture_for_fit, fit_poses, fitted_twin, run_fit
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec, ObjectFitIn
-from service.lab.rig_lease import RigLease
 from service.lab.scenes import SceneSource, require_mounted
 from service.settings import Settings
 from service.store import queries
@@ -54,18 +57,15 @@ _log = logging.getLogger(__name__)
 
 
 @dataclass
-class _Run:
-    """In-memory state of the campaign being run."""
+class _Progress:
+    """What the running campaign's worker knows: the pose worked on, the units done."""
 
-    campaign_id: str
-    thread: threading.Thread | None = None
-    stop: threading.Event = field(default_factory=threading.Event)
-    stop_to: str = "paused"
-    stop_error: str | None = None
     current: dict[str, Any] | None = None
-    started: float = field(default_factory=time.monotonic)
     done: int = 0
     outcomes: list[Outcome] = field(default_factory=list)
+
+
+_Run = Run[_Progress]
 
 
 class CampaignRunner:
@@ -75,101 +75,77 @@ class CampaignRunner:
     ----------
     sessions : sessionmaker
         Database sessions (campaign rows, results).
-    lease : RigLease
-        The rig; the runner claims it for the campaign it runs.
+    background : BackgroundRunner
+        The one runner of the service's background jobs: it claims the rig (its ``lease``) for
+        the campaign it runs, stops it, and records how it ended.
     store : FrameStore
     executor : Executor
         Where the simulations run.
     settings : Settings
-        ``depth``, ``threads_per_job``, ``job_timeout_s``, ``solar_stable_timeout_s``,
-        ``stop_wait_s``.
+        ``depth``, ``threads_per_job``, ``job_timeout_s``, ``solar_stable_timeout_s``.
     mounted : SceneSource, optional
         The scene on the rig's turntable; a campaign of another scene (stored before the
         service was restarted with another one) does not start (409).
     """
 
-    def __init__(self, sessions: sessionmaker, lease: RigLease, store: FrameStore,
+    def __init__(self, sessions: sessionmaker, background: BackgroundRunner, store: FrameStore,
                  executor: Executor, settings: Settings,
                  mounted: SceneSource | None = None) -> None:
         self.sessions = sessions
         #: the scene on the rig's turntable: a campaign of another one does not start
         self.mounted = mounted
-        self.lease = lease
+        self.lease = background.lease
         self.store = store
         self.executor = executor
         self.settings = settings
-        self._lock = threading.Lock()
-        self._run: _Run | None = None
+        self.background = background
+        self.kind: Kind[_Progress] = Kind(
+            name="campaign", busy="campaign {id} is running; one campaign at a time",
+            emergency=Stop("paused", "emergency stop"),
+            shutdown=Stop("interrupted", "the service was shut down"),
+            live=self._live, finish=self._finished, failed=self._failed, thread="campaign")
         #: per-unit outcomes of the last run (benchmarks read them)
         self.last_outcomes: list[Outcome] = []
 
     # -- queries --------------------------------------------------------------------------------
     def live(self, campaign_id: str) -> dict[str, Any] | None:
         """Current pose and throughput of ``campaign_id`` if it is the one running."""
-        run = self._run
-        if run is None or run.campaign_id != campaign_id:
-            return None
-        elapsed = time.monotonic() - run.started
-        return {"current": run.current, "done_in_run": run.done, "elapsed_s": elapsed}
+        return self.background.live(self.kind, campaign_id)
 
     def wait(self, timeout_s: float | None = None) -> None:
         """Block until the running campaign's thread ends (benchmarks, tests)."""
-        run = self._run
-        if run is not None and run.thread is not None:
-            run.thread.join(timeout_s)
+        self.background.wait(timeout_s, self.kind)
 
     # -- commands -------------------------------------------------------------------------------
     def start(self, campaign_id: str, resume: bool = False) -> None:
         """Start (``created``) or resume (``paused``, ``interrupted``, ``failed``) a campaign."""
         allowed = queries.RESUMABLE if resume else ("created",)
-        with self._lock:
-            if self._run is not None:
-                raise ConflictError(
-                    f"campaign {self._run.campaign_id} is running; one campaign at a time"
-                )
-            self.lease.require()
-            self.lease.claim(campaign_id)  # 409 while a calibration job holds the rig
-            try:
-                with self.sessions() as s:
-                    row = queries.require_campaign(s, campaign_id)
-                    if self.mounted is not None:
-                        stored = SceneSource.from_json(row.scene_json, row.scene_base_dir,
-                                                       row.scene_name)
-                        require_mounted(stored, self.mounted,
-                                        inline=stored.name != self.mounted.name)
-                    if not queries.transition(s, campaign_id, allowed, "running", started=True,
-                                              count_run=True):
-                        verb = "resume" if resume else "start"
-                        raise ConflictError(
-                            f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
-                            f"allowed from: {', '.join(allowed)}"
-                        )
-            except BaseException:
-                self.lease.release(campaign_id)
-                raise
-            run = _Run(campaign_id)
-            run.thread = threading.Thread(
-                target=self._work, args=(run,), name=f"campaign-{campaign_id[:8]}", daemon=True
-            )
-            self._run = run
-            run.thread.start()
+        self.lease.require()
+
+        def prepare() -> None:  # with the rig claimed: 409 while a calibration job holds it
+            with self.sessions() as s:
+                row = queries.require_campaign(s, campaign_id)
+                if self.mounted is not None:
+                    stored = SceneSource.from_json(row.scene_json, row.scene_base_dir,
+                                                   row.scene_name)
+                    require_mounted(stored, self.mounted,
+                                    inline=stored.name != self.mounted.name)
+                if not queries.transition(s, campaign_id, allowed, "running", started=True,
+                                          count_run=True):
+                    verb = "resume" if resume else "start"
+                    raise ConflictError(
+                        f"cannot {verb} campaign {campaign_id} in state '{row.state}'; "
+                        f"allowed from: {', '.join(allowed)}"
+                    )
+
+        self.background.start(self.kind, campaign_id, self._units, _Progress(), prepare)
 
     def stop(self, campaign_id: str, to: str, error: str | None = None) -> bool:
         """Ask the running campaign to stop after the units in flight (``paused``/``cancelled``).
 
         Returns False if ``campaign_id`` is not running. Waits up to ``settings.stop_wait_s``.
         """
-        with self._lock:
-            run = self._run
-            if run is None or run.campaign_id != campaign_id:
-                return False
-            if not run.stop.is_set():
-                run.stop_to, run.stop_error = to, error
-                run.stop.set()
-            thread = run.thread
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(timeout=self.settings.stop_wait_s)
-        return True
+        return self.background.stop(self.kind, campaign_id, Stop(to, error))
 
     def pause(self, campaign_id: str) -> None:
         if not self.stop(campaign_id, "paused"):
@@ -184,23 +160,6 @@ class CampaignRunner:
                                    "cancelled", finished=True):
                 self._require_state(campaign_id, ("created", "paused", "interrupted"), "cancel")
 
-    def emergency_stop(self) -> str | None:
-        """Pause the running campaign (if any) without waiting; returns its id."""
-        run = self._run
-        if run is None:
-            return None
-        with self._lock:
-            if not run.stop.is_set():
-                run.stop_to, run.stop_error = "paused", "emergency stop"
-                run.stop.set()
-        return run.campaign_id
-
-    def shutdown(self) -> None:
-        """Service shutdown: the running campaign stops and becomes ``interrupted``."""
-        run = self._run
-        if run is not None:
-            self.stop(run.campaign_id, "interrupted", "the service was shut down")
-
     def _require_state(self, campaign_id: str, allowed: tuple[str, ...], verb: str) -> None:
         with self.sessions() as s:
             row = queries.require_campaign(s, campaign_id)
@@ -210,35 +169,33 @@ class CampaignRunner:
         )
 
     # -- the worker thread ---------------------------------------------------------------------
-    def _work(self, run: _Run) -> None:
-        to, error = "completed", None
-        try:
-            to, error = self._units(run)
-        except Exception as exc:  # a bug or a broken executor: record it, never lose the thread
-            if is_disk_full(exc):  # the operator frees space and resumes: not a failure
-                _log.warning("campaign %s paused: disk full: %s", run.campaign_id, exc)
-                to, error = "paused", low_space_message(
-                    free_bytes(self.store.root), self.settings.min_free_bytes)
-            else:
-                _log.exception("campaign %s failed", run.campaign_id)
-                to, error = "failed", f"{type(exc).__name__}: {exc}"
-        finally:
-            # One critical section with start(): whoever sees the final state in the database
-            # also sees the rig free, and the next campaign cannot start before it is written.
-            with self._lock:
-                self.last_outcomes = run.outcomes
-                self._run = None
-                self.lease.release(run.campaign_id)
-                with self.sessions() as s:
-                    queries.transition(s, run.campaign_id, ("running",), to, error=error,
-                                    finished=to in queries.TERMINAL)
+    def _live(self, run: _Run) -> dict[str, Any]:
+        elapsed = time.monotonic() - run.started
+        return {"current": run.progress.current, "done_in_run": run.progress.done,
+                "elapsed_s": elapsed}
 
-    def _units(self, run: _Run) -> tuple[str, str | None]:
+    def _failed(self, run: _Run, exc: Exception) -> Ending:
+        """A bug or a broken executor is ``failed``; a full disk ``paused`` (the operator frees
+        space and resumes)."""
+        if not is_disk_full(exc):
+            return failed(run, exc)
+        _log.warning("campaign %s paused: disk full: %s", run.id, exc)
+        return "paused", low_space_message(free_bytes(self.store.root),
+                                           self.settings.min_free_bytes)
+
+    def _finished(self, run: _Run, to: str, error: str | None) -> None:
+        """The final state (in the runner's critical section, the rig already given back)."""
+        self.last_outcomes = run.progress.outcomes
+        with self.sessions() as s:
+            queries.transition(s, run.id, ("running",), to, error=error,
+                               finished=to in queries.TERMINAL)
+
+    def _units(self, run: _Run) -> Ending:
         settings = self.settings
         with self.sessions() as s:
-            camp = queries.get_campaign(s, run.campaign_id)
-            poses = queries.planned_poses(s, run.campaign_id)
-            done = queries.done_units(s, run.campaign_id)
+            camp = queries.get_campaign(s, run.id)
+            poses = queries.planned_poses(s, run.id)
+            done = queries.done_units(s, run.id)
         scene = SceneSource.from_json(camp.scene_json, camp.scene_base_dir, camp.scene_name)
         mask = MaskSpec.model_validate_json(camp.mask_json)
         twin = Twin.of(calibration_from_json(camp.calibration_json))  # pinned at creation
@@ -258,26 +215,26 @@ class CampaignRunner:
         try:
             for pose, repeat in todo:
                 if run.stop.is_set():
-                    to, error = run.stop_to, run.stop_error
+                    to, error = run.stopping
                     break
                 free = free_bytes(self.store.root)
                 if free < settings.min_free_bytes:
                     to, error = "paused", low_space_message(free, settings.min_free_bytes)
-                    _log.warning("campaign %s paused: %s", run.campaign_id, error)
+                    _log.warning("campaign %s paused: %s", run.id, error)
                     break
                 plan = PosePlan(scene, pose.turntable_deg, pose.solar_suns, mask, camp.seed,
-                                camp.spp, run.campaign_id, pose.pose_index, repeat, twin,
+                                camp.spp, run.id, pose.pose_index, repeat, twin,
                                 fitted, effects, noise_fraction)
-                run.current = {"pose_index": pose.pose_index, "repeat": repeat,
+                run.progress.current = {"pose_index": pose.pose_index, "repeat": repeat,
                                "turntable_deg": pose.turntable_deg,
                                "solar_suns": pose.solar_suns}
                 try:
                     m = measure(self.lease.require(), self.store, plan,
                                 settings.solar_stable_timeout_s)
                 except DeviceError as exc:
-                    _log.warning("campaign %s paused: device fault: %s", run.campaign_id, exc)
+                    _log.warning("campaign %s paused: device fault: %s", run.id, exc)
                     if run.stop.is_set():  # an emergency stop made the move fail
-                        to, error = run.stop_to, run.stop_error
+                        to, error = run.stopping
                     else:
                         to, error = "paused", f"device fault ({type(exc).__name__}): {exc}"
                     break
@@ -305,31 +262,31 @@ class CampaignRunner:
         targets = fit_poses(poses, fit.poses)
 
         def current(pose: FitPose, i: int) -> None:
-            run.current = {"stage": "object_fit", "pose_index": i, "repeat": 0,
+            run.progress.current = {"stage": "object_fit", "pose_index": i, "repeat": 0,
                            "turntable_deg": pose.turntable_deg, "solar_suns": pose.solar_suns}
 
         rig = self.lease.require()
         try:
             captures = capture_for_fit(rig, targets, fit.frames, run.stop, current)
         except DeviceError as exc:
-            _log.warning("campaign %s paused: device fault: %s", run.campaign_id, exc)
+            _log.warning("campaign %s paused: device fault: %s", run.id, exc)
             if run.stop.is_set():
-                return None, (run.stop_to, run.stop_error)
+                return None, run.stopping
             return None, ("paused", f"device fault ({type(exc).__name__}): {exc}")
         if captures is None:
-            return None, (run.stop_to, run.stop_error)
+            return None, run.stopping
         try:
             object_twin, report = run_fit(scene, twin, captures, rig.camera.use_case)
         except InvalidInputError as exc:
-            _log.warning("campaign %s: object fit failed: %s", run.campaign_id, exc)
+            _log.warning("campaign %s: object fit failed: %s", run.id, exc)
             return None, ("failed", f"object fit: {exc}")
         data = object_twin.model_dump(mode="json")
         with self.sessions() as s:
-            queries.set_object_twin(s, run.campaign_id, data, twin_hash(object_twin), report)
+            queries.set_object_twin(s, run.id, data, twin_hash(object_twin), report)
         return queries.dumps(data), ("completed", None)
 
     def _finish(self, run: _Run, plan: PosePlan, m: Measurement, job: Any) -> None:
         outcome = finish(self.sessions, self.store, plan, m, job, self.settings.job_timeout_s)
-        run.done += 1
-        run.outcomes.append(outcome)
+        run.progress.done += 1
+        run.progress.outcomes.append(outcome)
 

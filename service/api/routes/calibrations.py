@@ -7,12 +7,14 @@ from contextlib import aclosing
 from functools import partial
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Path, Query
+from fastapi import APIRouter, Depends, Path
 from fastapi.responses import FileResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from service.api.deps import (
     CalibrationsDep,
+    Limit,
+    Offset,
     SessionDep,
     SessionsDep,
     SettingsDep,
@@ -53,8 +55,8 @@ def create_calibration_job(
 def list_calibration_jobs(
     session: SessionDep,
     calibrations: CalibrationsDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+    limit: Limit = 100,
+    offset: Offset = 0,
 ) -> list[dict]:
     """Calibration jobs, newest first."""
     return [job_public(row, calibrations.live(row.id))

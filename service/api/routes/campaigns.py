@@ -14,6 +14,8 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from service.api.deps import (
     LeaseDep,
+    Limit,
+    Offset,
     RunnerDep,
     SceneDep,
     SessionDep,
@@ -58,8 +60,8 @@ def list_campaigns(
     sessions: SessionsDep,
     runner: RunnerDep,
     session: SessionDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+    limit: Limit = 100,
+    offset: Offset = 0,
 ) -> list[dict]:
     """Campaigns, newest first."""
     rows = queries.list_campaigns(session, limit, offset)
@@ -170,7 +172,7 @@ def list_campaign_results(
     response: Response,
     format: Annotated[Literal["json", "csv"], Query()] = "json",
     limit: Annotated[int, Query(ge=1, le=10000)] = RESULTS_PAGE,
-    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+    offset: Offset = 0,
 ):
     """One row per pose and repeat: metrics and both frame ids, a page at a time (``limit``
     rows from ``offset``, 1000 by default). ``?format=csv``: every row as CSV, streamed."""

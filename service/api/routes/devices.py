@@ -5,9 +5,8 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from service.api.deps import (
-    CalibrationsDep,
+    BackgroundDep,
     LeaseDep,
-    RunnerDep,
     SceneDep,
     SessionsDep,
     SettingsDep,
@@ -106,8 +105,8 @@ def capture_frame(
 
 @router.post("/stop", response_model=StopOut, responses=errors(401, 503))
 def emergency_stop(
-    lease: LeaseDep, runner: RunnerDep, calibrations: CalibrationsDep, _: TokenDep
+    lease: LeaseDep, background: BackgroundDep, _: TokenDep
 ) -> dict:
     """Emergency stop: halt the turntable, close the shutter, pause a running campaign, cancel
     a running calibration job."""
-    return devices.emergency_stop(lease, runner, calibrations)
+    return devices.emergency_stop(lease, background)

@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Path, Query
+from fastapi import APIRouter, Path
 from fastapi.responses import FileResponse, Response
 
-from service.api.deps import SessionDep, SessionsDep, StoreDep, TokenDep, errors
+from service.api.deps import Limit, Offset, SessionDep, SessionsDep, StoreDep, TokenDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
 from service.lab import campaigns as lab_campaigns
@@ -24,8 +24,8 @@ FrameIdPath = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A fram
 def list_frames(
     store: StoreDep,
     session: SessionDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+    limit: Limit = 100,
+    offset: Offset = 0,
 ) -> list[dict]:
     """Stored frames, newest first."""
     return [frame_public(store, row, with_metadata=False)
