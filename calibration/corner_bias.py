@@ -22,6 +22,7 @@ from calibration.board_views import BoardView
 from sim_core.boards import object_from_board
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import Distortion, ObjectSpec, SceneSpec
 
@@ -66,8 +67,8 @@ def debias_views(views: list[BoardView], intr_result, spec: SceneSpec, base_dir:
         synth_spec = spec.model_copy(update={"objects": [*fixed, obj], "camera": camera,
                                              "turntable": None})
         scene = build_scene(synth_spec, base_dir, solar_suns=0.0)
-        frame = simulate(scene, RenderSettings(integrator="direct", spp=SYNTHESIS_SPP, seed=7),
-                         ideal=True)
+        settings = RenderSettings(integrator="direct", spp=SYNTHESIS_SPP, seed=7)
+        frame = simulate(scene, RenderRequest(settings, ideal=True))
         det = detect_board(frame.image.amplitude, obj.mesh)
         if det is None:
             out.append(v)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from sim_core.pipeline import RenderedLight, SimulatedFrame, expose_light, render_light
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene, build_scene
 from sim_core.scene_spec import ObjectSpec, SceneSpec
 from sim_core.twin_file import TwinParameters
@@ -63,4 +64,4 @@ def predict_view(
     scene = build_scene(spec, base_dir, turntable_deg=turntable_deg, solar_suns=solar_suns,
                         twin=twin)
     settings = RenderSettings(integrator="direct", spp=spp, seed=seed)
-    return Prediction(scene, render_light(scene, settings, effects="auto"))
+    return Prediction(scene, render_light(scene, RenderRequest(settings, effects="auto")))

@@ -24,6 +24,7 @@ from sim_core.metrics import ComparisonReport, compare_images, mask_from_objects
 from sim_core.pipeline import simulate
 from sim_core.raw import reconstruct_raw
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import SceneSpec
 from sim_core.twin_file import TwinParameters
@@ -96,7 +97,7 @@ def compare_twins(
             scene = build_scene(spec, base_dir, turntable_deg=state.turntable_angle_deg,
                                 solar_suns=state.solar_suns if state.shutter_open else 0.0,
                                 twin=twin)
-            frame = simulate(scene, dataclasses.replace(settings, seed=1000 + k))
+            frame = simulate(scene, RenderRequest(dataclasses.replace(settings, seed=1000 + k)))
             twins[name] = (scene, frame)
         scene, frame = twins["calibrated"]
         zr = z_over_range(scene.camera.intrinsics)

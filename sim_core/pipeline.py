@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 
 from sim_core import frame_io
-from sim_core.adaptive import INITIAL_SPP, MAX_SPP, AdaptiveReport, render_adaptive
+from sim_core.adaptive import MAX_SPP, AdaptiveReport, render_adaptive
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.optics import apply_mtf
 from sim_core.plan import EffectPlan, plan_effects
 from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.render import LightField, RenderSettings, render
+from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene
 from sim_core.scene_checks import assert_camera_outside_closed_meshes
 from sim_core.sensor import expose, mean_electrons
@@ -87,23 +88,16 @@ class RenderedLight:
 
 def render_light(
     scene: Scene,
-    settings: RenderSettings,
-    effects: str = "auto",
-    ideal: bool = False,
-    tolerance_mm: float | None = None,
+    request: RenderRequest,
     tracer: RayTracer | None = None,
     progress=None,
-    target_range_error_mm: float | None = None,
-    time_budget_s: float | None = None,
-    target_noise_fraction: float | None = None,
 ) -> RenderedLight:
     """Plan the effects and render the light field (the first stages of :func:`simulate`).
 
-    With ``target_noise_fraction`` every pixel gets ``settings.spp`` samples and those whose
-    Monte Carlo error is still above that fraction of the sensor's noise get more
-    (:func:`sim_core.adaptive.noise_fraction`); with ``target_range_error_mm`` or
-    ``time_budget_s`` the render starts from :data:`sim_core.adaptive.INITIAL_SPP`.
+    ``request.accuracy`` decides the samples: ``settings.spp`` everywhere, or adaptively
+    (:class:`sim_core.render_request.AccuracyTarget`, :func:`sim_core.adaptive.render_adaptive`).
     """
+    settings, accuracy = request.settings, request.accuracy
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     own_tracer = tracer is None
@@ -112,7 +106,8 @@ def render_light(
     try:
         assert_camera_outside_closed_meshes(scene, tracer)
         t = time.perf_counter()
-        plan = plan_effects(scene, settings, effects, ideal, tolerance_mm, tracer)
+        plan = plan_effects(scene, settings, request.effects, request.ideal,
+                            request.tolerance_mm, tracer)
         timings["plan"] = time.perf_counter() - t
         multipath = plan.enabled("multipath")
         run = dataclasses.replace(
@@ -122,15 +117,15 @@ def render_light(
             footprint_px=plan.pixel_footprint_px(scene),
         )
         adaptive = None
-        if target_range_error_mm is None and time_budget_s is None and (
-                target_noise_fraction is None):
+        if not accuracy.adaptive:
             result = render(scene, run, tracer=tracer, progress=progress)
         else:
-            target_m = None if target_range_error_mm is None else target_range_error_mm * 1e-3
-            initial = INITIAL_SPP if target_noise_fraction is None else settings.spp
+            target_m = (None if accuracy.range_error_mm is None
+                        else accuracy.range_error_mm * 1e-3)
+            initial = accuracy.initial_spp(settings)
             result, adaptive = render_adaptive(
-                scene, run, target_m, time_budget_s, tracer, initial_spp=initial,
-                max_spp=max(MAX_SPP, initial), target_noise_fraction=target_noise_fraction)
+                scene, run, target_m, accuracy.time_budget_s, tracer, initial_spp=initial,
+                max_spp=max(MAX_SPP, initial), target_noise_fraction=accuracy.noise_fraction)
     finally:
         if own_tracer:
             tracer.close()
@@ -212,29 +207,19 @@ def expose_light(
 
 def simulate(
     scene: Scene,
-    settings: RenderSettings,
-    effects: str = "auto",
-    ideal: bool = False,
-    tolerance_mm: float | None = None,
+    request: RenderRequest,
     tracer: RayTracer | None = None,
     progress=None,
-    target_range_error_mm: float | None = None,
-    time_budget_s: float | None = None,
     noise_rng: np.random.Generator | None = None,
-    target_noise_fraction: float | None = None,
 ) -> SimulatedFrame:
-    """Simulate one frame of ``scene``; see the module docstring for the stages.
+    """Simulate one frame of ``scene`` as ``request`` asks; see the module docstring for the
+    stages: :func:`render_light` then :func:`expose_light`.
 
-    :func:`render_light` then :func:`expose_light`. With ``target_range_error_mm`` and/or
-    ``time_budget_s`` the render samples adaptively (:mod:`sim_core.adaptive`) instead of taking
-    ``settings.spp`` samples everywhere (``target_noise_fraction``: at least ``settings.spp``,
-    more where the Monte Carlo error is above that fraction of the sensor's noise).
-    ``noise_rng`` replaces the sensor-noise generator derived from ``settings.seed`` (the camera
-    simulator draws each frame's noise from its own seed and frame number).
+    ``noise_rng`` replaces the sensor-noise generator derived from the request's seed (the
+    camera simulator draws each frame's noise from its own seed and frame number).
     """
-    rendered = render_light(scene, settings, effects, ideal, tolerance_mm, tracer, progress,
-                            target_range_error_mm, time_budget_s, target_noise_fraction)
-    return expose_light(scene, rendered, ideal, noise_rng)
+    rendered = render_light(scene, request, tracer, progress)
+    return expose_light(scene, rendered, request.ideal, noise_rng)
 
 
 def save_frame(out_dir: str | Path, frame: SimulatedFrame, scene_name: str = "") -> Path:

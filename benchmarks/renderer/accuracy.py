@@ -31,6 +31,7 @@ from sim_core.errors import InvalidInputError
 from sim_core.files import atomic_write
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import EXAMPLES_DIR, load_scene_spec
 from sim_core.tof import ambiguity_range_m
@@ -105,9 +106,9 @@ def run_accuracy_benchmark(
         f0 = scene.camera.modulation_frequencies_hz[0]
         with RayTracer(scene.triangles_m, scene.camera.position_m) as tracer:
             t0 = time.perf_counter()
-            ref = simulate(scene, RenderSettings(
+            ref = simulate(scene, RenderRequest(RenderSettings(
                 integrator="path", spp=cfg["reference_spp"], max_bounces=REFERENCE_BOUNCES,
-                seed=987_654), effects="all", ideal=True, tracer=tracer)
+                seed=987_654), effects="all", ideal=True), tracer=tracer)
             console.print(f"{name}: reference ({cfg['reference_spp']} spp, "
                           f"{REFERENCE_BOUNCES} bounces) in {time.perf_counter() - t0:.1f} s")
             scene_rows = []
@@ -117,7 +118,8 @@ def run_accuracy_benchmark(
                     for spp in cfg["spp"]:
                         st = RenderSettings(integrator=integrator, spp=spp, max_bounces=b,
                                             seed=spp * 31 + b)
-                        frame = simulate(scene, st, effects=effects, ideal=True, tracer=tracer)
+                        frame = simulate(scene, RenderRequest(st, effects=effects, ideal=True),
+                                         tracer=tracer)
                         rmse, bias, grey = errors(frame.image, ref.image, f0)
                         scene_rows.append(Row(
                             name, integrator, spp, b, effects, frame.timings_s["total"],

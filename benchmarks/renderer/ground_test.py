@@ -19,6 +19,7 @@ from rich.table import Table
 from sim_core.metrics import depth_mm_16bit, grey_8bit, mask_from_objects
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import EXAMPLES_DIR, load_scene_spec
 
@@ -36,7 +37,7 @@ def run_ground_test(spp: int, seed: int, console: Console, path: Path = EXAMPLE)
         scene = build_scene(spec, base_dir=path.parent, solar_suns=suns)
         scene = dataclasses.replace(scene, sensor=dataclasses.replace(scene.sensor,
                                                                       sbi_enabled=sbi))
-        frame = simulate(scene, settings)
+        frame = simulate(scene, RenderRequest(settings))
         ids = [scene.object_names.index(n) for n in SATELLITE_PARTS]
         mask = mask_from_objects(frame.light_field.object_id, ids)
         grey = grey_8bit(frame.image.amplitude, frame.grey_full_scale).astype(np.float64)

@@ -29,6 +29,7 @@ from calibration.angles import parse_angles
 from sim_core.metrics import compare_images
 from sim_core.pipeline import expose_light, render_light
 from sim_core.render import RenderSettings
+from sim_core.render_request import AccuracyTarget, RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import random_reality
@@ -56,9 +57,10 @@ def main(seed: int, angles: list[float], k_lab: float | None, k_twin: float | No
         renders = []
         for render_seed, k in ((lab_seed, k_lab), (lab_seed + 11, k_twin)):
             t0 = time.perf_counter()
-            light = render_light(scene, RenderSettings(integrator="path", spp=spp,
-                                                       max_bounces=2, seed=render_seed),
-                                 effects="all", target_noise_fraction=k)
+            settings = RenderSettings(integrator="path", spp=spp, max_bounces=2,
+                                      seed=render_seed)
+            request = RenderRequest(settings, AccuracyTarget(noise_fraction=k), effects="all")
+            light = render_light(scene, request)
             renders.append((light, time.perf_counter() - t0))
         (lab, lab_s), (twin, twin_s) = renders
         first = expose_light(scene, lab, noise_rng=np.random.default_rng(1))

@@ -48,6 +48,7 @@ from drivers.rig import RigState
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import perfect_calibration, pose_errors, random_reality
 from tests.sim_core.scenes import EXAMPLES
@@ -65,8 +66,8 @@ def cloud(seed: int, frames: int, spp: int, cache: Path) -> tuple[np.ndarray, np
         return data["points"], data["cameras"]
     reality = random_reality(seed, nominal_power_w=SPEC.illumination.power_w,
                              object_twin_names=MOUNTED)
-    world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="path", spp=spp,
-                                                          max_bounces=2), reality=reality)
+    world = SimulatedWorld(SPEC, EXAMPLES, RenderRequest(
+        RenderSettings(integrator="path", spp=spp, max_bounces=2), effects="all"), reality=reality)
     captures = []
     with simulated_rig(frame_source=world, seed=seed) as rig, rig.hold():
         for a in ANGLES_DEG:

@@ -29,12 +29,16 @@ from drivers.sim.usb_camera import CameraRequest
 from sim_core.pipeline import RenderedLight, expose_light, render_light
 from sim_core.raw import RawFrame
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene, build_scene
 from sim_core.scene_spec import ObjectPose, ObjectSpec, SceneSpec
 from sim_core.twin_file import MountParameters, ObjectParameters, RealityFile, TurntableParameters
 
 #: rendered light fields kept per world (one per rig state and use case, most recent first)
 CACHE_STATES = 4
+#: how a world renders unless told otherwise: few samples, two bounces, every effect
+DEFAULT_RENDER = RenderRequest(RenderSettings(integrator="path", spp=8, max_bounces=2),
+                               effects="all")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,40 +73,35 @@ class SimulatedWorld:
         The nominal scene.
     base_dir : path
         Folder relative mesh paths resolve against.
-    settings : RenderSettings
-        Render settings of the simulated camera (few spp keep it fast).
+    render : RenderRequest, optional
+        How the simulated camera renders the world (few spp keep it fast; default
+        :data:`DEFAULT_RENDER`). Its seed is replaced per frame request. Its ``effects``: a world
+        has every effect (``"all"``, the default): the effect planner's ``"auto"`` leaves out
+        what it judges below a frame's noise, and its judgement on a marginal effect (the
+        satellite's interreflections, a few per cent of a panel's light) flips with the
+        reality's reflectances, so a twin fitted to averaged frames would see a world that lacks
+        light any real one has. ``"auto"`` is for speed where that cannot matter. Its accuracy
+        target's ``noise_fraction``: render at least ``spp`` samples and more where the Monte
+        Carlo error is above this fraction of the sensor's noise
+        (:func:`sim_core.adaptive.noise_fraction`): a real scene has no render noise, and what a
+        render leaves in the world's light is frozen into every capture of it (a twin can never
+        match it).
     reality : RealityFile, optional
         How the world differs from ``spec``; :func:`default_reality` if not given.
-    effects : {"all", "auto"}
-        Which physical effects the frames have. A world has every effect (``"all"``, the
-        default): the effect planner's ``"auto"`` leaves out what it judges below a frame's noise,
-        and its judgement on a marginal effect (the satellite's interreflections, a few per cent
-        of a panel's light) flips with the reality's reflectances, so a twin fitted to averaged
-        frames would see a world that lacks light any real one has. ``"auto"`` is for speed
-        where that cannot matter.
-    noise_fraction : float, optional
-        Render at least ``settings.spp`` samples and more where the Monte Carlo error is above
-        this fraction of the sensor's noise (:func:`sim_core.adaptive.noise_fraction`): a real
-        scene has no render noise, and what a render leaves in the world's light is frozen
-        into every capture of it (a twin can never match it). None: ``spp`` everywhere.
     """
 
     def __init__(
         self,
         spec: SceneSpec,
         base_dir: str | Path,
-        settings: RenderSettings | None = None,
+        render: RenderRequest = DEFAULT_RENDER,
         reality: RealityFile | None = None,
-        effects: str = "all",
-        noise_fraction: float | None = None,
     ) -> None:
-        if effects not in ("all", "auto"):
-            raise ValueError(f"effects must be 'all' or 'auto', got {effects!r}")
-        self.effects = effects
-        self.noise_fraction = noise_fraction
+        if render.effects not in ("all", "auto"):
+            raise ValueError(f"effects must be 'all' or 'auto', got {render.effects!r}")
+        self.render = render
         self.spec = spec
         self.base_dir = Path(base_dir)
-        self.settings = settings or RenderSettings(integrator="path", spp=8, max_bounces=2)
         self.reality = reality if reality is not None else default_reality(spec)
         self._mounted: tuple[ObjectSpec, ...] | None = None
         self._generation = 0
@@ -172,10 +171,8 @@ class SimulatedWorld:
         })})
         scene = build_scene(spec, self.base_dir, turntable_deg=state.turntable_angle_deg,
                             solar_suns=suns, twin=reality)
-        settings = dataclasses.replace(self.settings, seed=request.seed * 1_000_003
-                                       + self._generation)
-        entry = (scene, render_light(scene, settings, effects=self.effects,
-                                     target_noise_fraction=self.noise_fraction))
+        render = self.render.with_seed(request.seed * 1_000_003 + self._generation)
+        entry = (scene, render_light(scene, render))
         self._cache[key] = entry
         while len(self._cache) > CACHE_STATES:
             self._cache.popitem(last=False)

@@ -84,23 +84,23 @@ def simulate(
     """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
     from sim_core.pipeline import save_frame
     from sim_core.pipeline import simulate as run_simulation
-    from sim_core.render import RenderSettings
+    from sim_core.render_request import AccuracyTarget, request_from_spec
     from sim_core.scene import build_scene
     from sim_core.scene_spec import load_scene_spec
     from sim_core.twin_file import load_calibration
 
     try:
         spec = load_scene_spec(scene)
-        r = spec.render
-        settings = RenderSettings(
-            integrator=choice("--integrator", integrator or r.integrator, ("direct", "path")),
-            spp=spp if spp is not None else r.spp,
-            max_bounces=max_bounces if max_bounces is not None else r.max_bounces,
-            seed=seed if seed is not None else r.seed,
-            russian_roulette_from_bounce=r.russian_roulette_from_bounce,
-            threads=threads,
+        request = request_from_spec(
+            spec.render,
+            integrator=None if integrator is None else choice(
+                "--integrator", integrator, ("direct", "path")),
+            spp=spp, max_bounces=max_bounces, seed=seed, threads=threads,
+            accuracy=AccuracyTarget(range_error_mm=target_range_error_mm,
+                                    noise_fraction=noise_fraction, time_budget_s=time_budget_s),
+            effects=choice("--effects", effects, ("auto", "all")), ideal=ideal,
+            tolerance_mm=effect_tolerance_mm,
         )
-        choice("--effects", effects, ("auto", "all"))
         twin = None if calibration is None else load_calibration(calibration)
         built = build_scene(spec, base_dir=scene.parent, turntable_deg=turntable_deg, twin=twin)
     except InvalidInputError as exc:
@@ -109,15 +109,9 @@ def simulate(
     # Nothing is written to --out before the scene and settings are known to be valid.
     try:
         with progress_bar(quiet) as progress:
-            task = progress.add_task("rendering", total=settings.spp)
+            task = progress.add_task("rendering", total=request.settings.spp)
             frame = run_simulation(
-                built, settings, effects=effects, ideal=ideal,
-                tolerance_mm=effect_tolerance_mm,
-                progress=lambda done, total: progress.update(task, completed=done),
-                target_range_error_mm=target_range_error_mm,
-                time_budget_s=time_budget_s,
-                target_noise_fraction=noise_fraction,
-            )
+                built, request, progress=lambda done, total: progress.update(task, completed=done))
     except InvalidInputError as exc:
         fail_invalid(exc)
         return

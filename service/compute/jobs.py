@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sim_core.scene_spec import RUSSIAN_ROULETTE_FROM_BOUNCE, SceneSpec
+from sim_core.render_request import RenderRequest
+from sim_core.scene_spec import SceneSpec
 
 #: One render at a time per process: every render in this process - jobs on a threaded executor
 #: or a multi-threaded Dask worker, and the simulated camera's frames
@@ -47,16 +48,9 @@ class SimulationJob:
         Turntable angle to pose the scene for [deg] (None: the spec's).
     solar_suns : float or None
         Solar simulator level reaching the scene [sun]; 0 with the shutter closed.
-    integrator, spp, max_bounces, seed, russian_roulette_from_bounce : render settings
-    threads : int or None
-        Render threads on the worker (None: all its cores).
-    effects : "auto" or "all"
-    noise_fraction : float or None
-        Render at least ``spp`` samples and more where the Monte Carlo error is above this
-        fraction of the sensor's noise (:func:`sim_core.adaptive.noise_fraction`); None: ``spp``
-        everywhere.
-    ideal : bool
-        Ideal sensor (no noise, SBI, ADC).
+    request : RenderRequest
+        The render, whole (:class:`sim_core.render_request.RenderRequest`: settings with the
+        worker's threads, accuracy target, effects, ideal sensor).
     scene_name : str
     extra : dict
         Written into the frame's ``frame.json`` (rig state, object names, ...).
@@ -72,20 +66,12 @@ class SimulationJob:
     meshes: dict[str, bytes]
     turntable_deg: float | None
     solar_suns: float | None
-    integrator: str
-    spp: int
-    max_bounces: int
-    seed: int
-    russian_roulette_from_bounce: int = RUSSIAN_ROULETTE_FROM_BOUNCE
-    threads: int | None = None
-    effects: str = "auto"
-    ideal: bool = False
+    request: RenderRequest
     scene_name: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
     twin: dict[str, Any] | None = None
     #: contents of the goniometer tables of tabulated materials, keyed by ``params.table``
     tables: dict[str, bytes] = field(default_factory=dict)
-    noise_fraction: float | None = None
 
 
 def _material_specs(spec: SceneSpec):
@@ -105,17 +91,13 @@ def make_job(
     *,
     turntable_deg: float | None,
     solar_suns: float | None,
-    spp: int,
-    seed: int,
-    threads: int | None = None,
-    effects: str = "auto",
-    ideal: bool = False,
+    request: RenderRequest,
     scene_name: str = "",
     extra: dict[str, Any] | None = None,
     twin: dict[str, Any] | None = None,
-    noise_fraction: float | None = None,
 ) -> SimulationJob:
-    """A job for ``spec`` posed at the given rig state, with its mesh files packed in."""
+    """A job for ``spec`` posed at the given rig state, rendered as ``request`` asks, with its
+    mesh and table files packed in."""
     from sim_core.scene import inline_material_files
 
     spec = inline_material_files(spec, base_dir)  # the worker has not the scene's folder
@@ -130,25 +112,16 @@ def make_job(
         if isinstance(table, str) and table not in tables:
             p = Path(table)
             tables[table] = (p if p.is_absolute() else Path(base_dir) / p).read_bytes()
-    r = spec.render
     return SimulationJob(
         scene=spec.model_dump(mode="json"),
         meshes=meshes,
         tables=tables,
         turntable_deg=turntable_deg,
         solar_suns=solar_suns,
-        integrator=r.integrator,
-        spp=spp,
-        max_bounces=r.max_bounces,
-        seed=seed,
-        russian_roulette_from_bounce=r.russian_roulette_from_bounce,
-        threads=threads,
-        effects=effects,
-        ideal=ideal,
+        request=request,
         scene_name=scene_name,
         extra=dict(extra or {}),
         twin=twin,
-        noise_fraction=noise_fraction,
     )
 
 
@@ -211,7 +184,6 @@ def run_job(job: SimulationJob) -> SimulationResult:
     import time
 
     from sim_core.pipeline import save_frame, simulate
-    from sim_core.render import RenderSettings
     from sim_core.scene import build_scene
     from sim_core.scene_spec import parse_scene_spec
     from sim_core.twin_file import parse_twin
@@ -238,17 +210,8 @@ def run_job(job: SimulationJob) -> SimulationResult:
         built = build_scene(
             spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin
         )
-    settings = RenderSettings(
-        integrator=job.integrator,
-        spp=job.spp,
-        max_bounces=job.max_bounces,
-        seed=job.seed,
-        russian_roulette_from_bounce=job.russian_roulette_from_bounce,
-        threads=job.threads,
-    )
     with RENDER_LOCK:
-        frame = simulate(built, settings, effects=job.effects, ideal=job.ideal,
-                         target_noise_fraction=job.noise_fraction)
+        frame = simulate(built, job.request)
     worker = f"{socket.gethostname()}:{os.getpid()}"
     frame.extra.update({"kind": "simulated", **job.extra, "worker": worker})
     t0 = time.perf_counter()
@@ -268,6 +231,7 @@ def warm_up() -> int:
     """Import the renderer and load its compiled kernels (the first frame would otherwise pay)."""
     from sim_core.pipeline import simulate
     from sim_core.render import RenderSettings
+    from sim_core.render_request import RenderRequest
     from sim_core.scene import build_scene
     from sim_core.scene_spec import parse_scene_spec
 
@@ -289,6 +253,6 @@ def warm_up() -> int:
         }
     )
     with RENDER_LOCK:
-        simulate(build_scene(spec),
-                 RenderSettings(integrator="path", spp=1, max_bounces=2, threads=1))
+        simulate(build_scene(spec), RenderRequest(
+            RenderSettings(integrator="path", spp=1, max_bounces=2, threads=1)))
     return os.getpid()

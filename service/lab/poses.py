@@ -48,6 +48,8 @@ from service.store.tables import FrameRow, PoseResultRow
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.errors import InvalidInputError
 from sim_core.raw import reconstruct_raw
+from sim_core.render_request import AccuracyTarget, RenderRequest, request_from_spec
+from sim_core.scene_spec import SceneSpec
 from sim_core.tof import ToFImage
 from sim_core.twin_apply import apply_to_spec
 
@@ -82,6 +84,15 @@ class PosePlan:
     #: (:func:`sim_core.adaptive.noise_fraction`); None: ``spp`` everywhere
     noise_fraction: float | None = None
 
+    def render_request(self, spec: SceneSpec, threads: int | None) -> RenderRequest:
+        """How this unit's simulations render: the scene's ``render:`` section with the plan's
+        samples per pixel, effects and noise-fraction target, the unit's own seed
+        (:func:`unit_seed`) and the worker's threads."""
+        return request_from_spec(
+            spec.render, spp=self.spp, seed=unit_seed(self.seed, self.pose_index, self.repeat),
+            threads=threads, effects=self.effects,
+            accuracy=AccuracyTarget(noise_fraction=self.noise_fraction))
+
     @property
     def target(self) -> RigState:
         """The rig state to drive to (shutter open whenever the lamp is lit)."""
@@ -95,7 +106,9 @@ class Measurement:
     row: FrameRow
     image: ToFImage
     rig: RigState
-    use_case: Any
+    #: the plan's scene with the camera as the rig's is set up (:func:`for_use_case`), nominal
+    #: intrinsics: what the simulations render
+    spec: SceneSpec
     timings_s: dict[str, float] = field(default_factory=dict)
     started: float = 0.0
     grey_full_scale: float = 0.0
@@ -161,7 +174,8 @@ def measure(
         use_case = rig.camera.use_case
     raw = raws[0]
     t2 = time.perf_counter()
-    spec = for_use_case(plan.scene.spec, use_case)
+    sim_spec = for_use_case(plan.scene.spec, use_case)
+    spec = sim_spec
     if plan.twin.calibration is not None:  # the calibrated intrinsics turn range into depth
         spec = apply_to_spec(spec, plan.twin.calibration)
     camera = camera_of(spec)
@@ -178,7 +192,7 @@ def measure(
         frame_id, "measured", campaign_id=plan.campaign_id, scene_name=plan.scene.name,
         rig=state.to_dict(), summary=_summary(image), calibration_hash=plan.twin.hash,
     )
-    return Measurement(row, image, state, use_case,
+    return Measurement(row, image, state, sim_spec,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
                        grey_full_scale, second)
 
@@ -198,17 +212,13 @@ def _submit_one(
     executor: Executor, plan: PosePlan, m: Measurement, threads: int | None, twin: Twin,
     label: str,
 ) -> tuple[str, JobFuture]:
-    spec = for_use_case(plan.scene.spec, m.use_case)
+    spec = m.spec
     frame_id = new_frame_id()
     job = make_job(
         spec, plan.scene.base_dir,
         turntable_deg=m.rig.turntable_angle_deg,
         solar_suns=m.rig.irradiance_suns,
-        spp=plan.spp,
-        seed=unit_seed(plan.seed, plan.pose_index, plan.repeat),
-        effects=plan.effects,
-        noise_fraction=plan.noise_fraction,
-        threads=threads,
+        request=plan.render_request(spec, threads),
         scene_name=plan.scene.name,
         extra={
             "frame_id": frame_id, "rig": m.rig.to_dict(), "campaign_id": plan.campaign_id,

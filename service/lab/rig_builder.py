@@ -70,14 +70,16 @@ def simulated_world(settings: Settings, scene: SceneSource) -> SimulatedWorld:
     the settings' integrator, samples per pixel and noise fraction."""
     from drivers.sim.world import SimulatedWorld
     from sim_core.render import RenderSettings
+    from sim_core.render_request import AccuracyTarget, RenderRequest
     from sim_core.twin_file import load_reality
 
     return SimulatedWorld(
         scene.spec, scene.base_dir,
-        RenderSettings(integrator=settings.camera_integrator, spp=settings.camera_spp,
-                       max_bounces=CAMERA_MAX_BOUNCES),
+        RenderRequest(
+            RenderSettings(integrator=settings.camera_integrator, spp=settings.camera_spp,
+                           max_bounces=CAMERA_MAX_BOUNCES),
+            AccuracyTarget(noise_fraction=settings.camera_noise_fraction), effects="all"),
         reality=None if settings.reality is None else load_reality(settings.reality),
-        noise_fraction=settings.camera_noise_fraction,
     )
 
 

@@ -17,6 +17,7 @@ from service.store import queries
 from service.store.disk_space import require_free, writing
 from service.store.frame_files import FrameStore, new_frame_id
 from sim_core.json_safe import json_safe
+from sim_core.render_request import request_from_spec
 
 
 def simulate_frame(
@@ -32,10 +33,12 @@ def simulate_frame(
     spp = check_spp(req.spp, settings)
     twin = effective_twin(active_twin(sessions), scene)
     frame_id = new_frame_id()
+    request = request_from_spec(scene.spec.render, spp=spp, seed=req.seed,
+                                threads=settings.threads_per_job, effects=req.effects,
+                                ideal=req.ideal)
     job = make_job(
         scene.spec, scene.base_dir, turntable_deg=req.turntable_deg, solar_suns=req.solar_suns,
-        spp=spp, seed=req.seed, threads=settings.threads_per_job, effects=req.effects,
-        ideal=req.ideal, scene_name=scene.name,
+        request=request, scene_name=scene.name,
         extra={"frame_id": frame_id, "object_names": [o.name for o in scene.spec.objects],
                "turntable_object_ids": scene.turntable_object_ids},
         twin=twin.to_json(),

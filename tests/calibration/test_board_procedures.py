@@ -17,6 +17,7 @@ from sim_core.errors import InvalidInputError
 from sim_core.geometry import axis_angle_matrix
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_camera, build_scene
 from sim_core.scene_spec import load_scene_spec
 from tests.sim_core.scenes import EXAMPLES
@@ -41,7 +42,8 @@ def test_a_rendered_board_is_found_where_it_projects(tilt, off_m, angle):
     spec = SPEC.model_copy(update={"objects": [o for o in SPEC.objects if not o.on_turntable]
                                    + [obj]})
     scene = build_scene(spec, EXAMPLES, turntable_deg=angle, solar_suns=0.0)
-    frame = simulate(scene, RenderSettings(integrator="direct", spp=64, seed=1), ideal=True)
+    frame = simulate(scene,
+                     RenderRequest(RenderSettings(integrator="direct", spp=64, seed=1), ideal=True))
     det = detect_board(frame.image.amplitude, obj.mesh)
     assert det is not None and len(det.corner_ids) >= 10
     cam_from_board = (np.linalg.inv(scene.camera.world_from_camera)

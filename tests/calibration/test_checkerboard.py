@@ -17,6 +17,7 @@ from calibration.fixtures import BoardFixture, board_object, world_from_board
 from sim_core.geometry import axis_angle_matrix
 from sim_core.pipeline import expose_light, render_light
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from tests.sim_core.scenes import EXAMPLES
@@ -35,7 +36,8 @@ def _views(board, tilt, angle, centre_height_m=CENTRE_HEIGHT_M):
     spec = SPEC.model_copy(update={"objects": [o for o in SPEC.objects if not o.on_turntable]
                                    + [obj]})
     scene = build_scene(spec, EXAMPLES, turntable_deg=angle, solar_suns=0.0)
-    rendered = render_light(scene, RenderSettings(integrator="direct", spp=16, seed=1))
+    rendered = render_light(scene,
+                            RenderRequest(RenderSettings(integrator="direct", spp=16, seed=1)))
     clean = expose_light(scene, rendered, noise=False).image.amplitude
     noisy = expose_light(scene, rendered, noise_rng=np.random.default_rng(5)).image.amplitude
     turn = np.eye(4)

@@ -24,6 +24,7 @@ from drivers.camera.wire import quantize_frame
 from sim_core.errors import InvalidInputError
 from sim_core.pipeline import expose_light, render_light
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from sim_core.twin_file import parse_reality
@@ -106,7 +107,8 @@ def lab_scene():
 def _lab_frames(scene, render_seed):
     """24 frames of one render (the render's seed moves the pixels' jitter, so which pixels
     are bright, dark or mixed; the sensor noise's seeds stay the same)."""
-    rendered = render_light(scene, RenderSettings(integrator="direct", spp=4, seed=render_seed))
+    settings = RenderSettings(integrator="direct", spp=4, seed=render_seed)
+    rendered = render_light(scene, RenderRequest(settings))
     return [expose_light(scene, rendered, noise_rng=np.random.default_rng([7, i])).raw
             for i in range(24)]
 

@@ -36,6 +36,7 @@ from service.cli import app
 from sim_core.errors import InvalidInputError
 from sim_core.materials import CookTorrance
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
 from sim_core.twin_file import dump_yaml, write_calibration
 from tests.calibration.realities import perfect_calibration, random_reality, reality_seeds
@@ -65,8 +66,8 @@ def _random_sample(seed: int) -> dict[str, float]:
 
 def _measure(true: dict[str, float], reality_seed: int, plan: MaterialSweepPlan):
     reality = random_reality(reality_seed)
-    world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="direct", spp=32),
-                           reality=reality)
+    world = SimulatedWorld(SPEC, EXAMPLES, RenderRequest(
+        RenderSettings(integrator="direct", spp=32), effects="all"), reality=reality)
     operator = SimulatedOperator(world, {SAMPLE_NAME: {"kind": "cook-torrance",
                                                        "params": true}})
     with simulated_rig(frame_source=world, seed=reality_seed) as rig:

@@ -17,6 +17,7 @@ from drivers.sim.world import SimulatedWorld
 from sim_core.camera import F_60_24_MHZ
 from sim_core.depth_errors import DepthErrorModel, range_to_phase_rad
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import random_reality, reality_seeds
 from tests.sim_core.scenes import EXAMPLES
@@ -32,8 +33,8 @@ SPEC = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
 
 
 def _calibrate(reality, seed, frames_per_view=4):
-    world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="direct", spp=32),
-                           reality=reality)
+    world = SimulatedWorld(SPEC, EXAMPLES, RenderRequest(
+        RenderSettings(integrator="direct", spp=32), effects="all"), reality=reality)
     with simulated_rig(frame_source=world, seed=seed) as rig:
         return calibrate_rig(rig, SimulatedOperator(world), SPEC, EXAMPLES,
                              RigCalibrationPlan(frames_per_view=frames_per_view))
@@ -135,8 +136,8 @@ def test_the_calibrated_twin_lands_near_the_ceiling_on_a_satellite_campaign():
     """Issue 13's end to end: nominal twin, calibrated twin, ceiling on 8 satellite poses all
     round (every 45 deg)."""
     reality, result = _calibrated_reality(CAMPAIGN_SEED)  # a drawn reality has no object diffs
-    world = SimulatedWorld(SPEC, EXAMPLES, RenderSettings(integrator="path", spp=32,
-                                                          max_bounces=2), reality=reality)
+    world = SimulatedWorld(SPEC, EXAMPLES, RenderRequest(
+        RenderSettings(integrator="path", spp=32, max_bounces=2), effects="all"), reality=reality)
     with simulated_rig(frame_source=world, seed=7) as rig:
         res = compare_twins(rig, SPEC, EXAMPLES, result.calibration,
                             [-165.0 + 45.0 * i for i in range(8)],

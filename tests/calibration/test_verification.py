@@ -8,6 +8,7 @@ from calibration.verification import compare_twins
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
 from sim_core.twin_file import CalibrationFile
 from tests.calibration.realities import random_reality
@@ -22,7 +23,7 @@ def test_a_perfect_calibration_reaches_the_ceiling_and_the_nominal_twin_does_not
     # The reality's own keys, as a calibration would ideally find them.
     perfect = CalibrationFile.model_validate(reality.model_dump(exclude={"mount", "objects"}))
     settings = RenderSettings(integrator="direct", spp=16)
-    world = SimulatedWorld(spec, EXAMPLES, settings, reality=reality)
+    world = SimulatedWorld(spec, EXAMPLES, RenderRequest(settings, effects="all"), reality=reality)
     with simulated_rig(frame_source=world, seed=2) as rig:
         res = compare_twins(rig, spec, EXAMPLES, perfect, [-30.0, 30.0, 90.0], settings=settings)
     assert res.poses == 3

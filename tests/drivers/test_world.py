@@ -11,6 +11,7 @@ from drivers.sim.world import SimulatedWorld, default_reality
 from sim_core.camera import Intrinsics, z_over_range
 from sim_core.raw import reconstruct_raw
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import ObjectSpec, load_scene_spec
 from sim_core.sensor import SensorParams
 from sim_core.twin_file import parse_reality
@@ -23,7 +24,8 @@ UC = get_use_case("MODE_5_45FPS_500")
 
 def _world(reality=None, spp=2):
     return SimulatedWorld(load_scene_spec(SATELLITE), EXAMPLES,
-                          RenderSettings(integrator="direct", spp=spp), reality=reality)
+                          RenderRequest(RenderSettings(integrator="direct", spp=spp),
+                                        effects="all"), reality=reality)
 
 
 def _request(index=0, angle=30.0, seed=3):

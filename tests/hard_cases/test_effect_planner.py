@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from sim_core.pipeline import simulate
+from sim_core.render_request import RenderRequest
 from tests.hard_cases.helpers import PATH, build, camera, lambert, rectangle
 
 
@@ -31,7 +32,7 @@ def multipath_of(frame):
 
 
 def test_corner_multipath_is_simulated_before_a_perfectly_black_backdrop():
-    frame = simulate(corner_before_backdrop(0.0), PATH)
+    frame = simulate(corner_before_backdrop(0.0), RenderRequest(PATH))
     mp = multipath_of(frame)
     assert mp.enabled, mp.reason
     assert mp.numbers["range_bias_p95_mm"] > 10.0 * frame.plan.tolerance_mm
@@ -39,8 +40,8 @@ def test_corner_multipath_is_simulated_before_a_perfectly_black_backdrop():
 
 @pytest.mark.parametrize("backdrop_albedo", [1e-9, 0.02], ids=["1e-9", "black-flannel"])
 def test_a_dark_backdrop_does_not_switch_the_corner_multipath_off(backdrop_albedo):
-    black = simulate(corner_before_backdrop(0.0), PATH)
-    frame = simulate(corner_before_backdrop(backdrop_albedo), PATH)
+    black = simulate(corner_before_backdrop(0.0), RenderRequest(PATH))
+    frame = simulate(corner_before_backdrop(backdrop_albedo), RenderRequest(PATH))
     # The backdrop is too dark to measure: its pixels are invalid in the frame ...
     backdrop = frame.light_field.object_id == 0
     assert frame.image.valid[backdrop].mean() < 0.05
@@ -57,7 +58,8 @@ def test_plan_of_a_bright_scene_is_stable_under_a_1e_9_albedo_change():
                       rectangle("right", (2.0, 2.0), lambert(0.9), (0.3, 1.5, 0.0),
                                 (90.0, 0.0, -45.0))], power_w=5.0)
 
-    a, b = simulate(scene(0.5), PATH), simulate(scene(0.5 * (1.0 + 1e-9)), PATH)
+    a, b = simulate(scene(0.5),
+                    RenderRequest(PATH)), simulate(scene(0.5 * (1.0 + 1e-9)), RenderRequest(PATH))
     assert [e.enabled for e in a.plan.effects] == [e.enabled for e in b.plan.effects]
     assert b.plan.tolerance_mm == pytest.approx(a.plan.tolerance_mm, rel=1e-6)
     np.testing.assert_allclose(b.light_field.dc_active, a.light_field.dc_active, rtol=1e-6)

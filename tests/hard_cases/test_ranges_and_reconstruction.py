@@ -23,6 +23,7 @@ from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.pipeline import simulate
 from sim_core.raw import RawFrame, ValidityThresholds, reconstruct_raw
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.tof import (
     ambiguity_range_m,
     common_frequency_hz,
@@ -63,7 +64,7 @@ def test_extended_ambiguity_range_of_the_dual_mode_is_7_46_m():
 @pytest.mark.parametrize("fraction", [-1e-4, 0.0, 1e-4])
 def test_ideal_dual_frequency_frame_at_the_extended_range_wraps_without_nan(fraction):
     frame = simulate(dual_wall(U_EXT * (1.0 + fraction)),
-                     dataclasses.replace(DIRECT, jitter=False), ideal=True)
+                     RenderRequest(dataclasses.replace(DIRECT, jitter=False), ideal=True))
     assert_frame_bounded(frame)
     img, truth = frame.image, frame.light_field.truth_range_m
     assert img.valid.all()
@@ -87,7 +88,7 @@ def test_phases_straddling_the_wrap_unwrap_next_to_zero(phase1, phase2):
 
 
 def test_noisy_dual_frequency_frame_at_the_extended_range_has_no_gross_errors():
-    frame = simulate(dual_wall(U_EXT), DIRECT)
+    frame = simulate(dual_wall(U_EXT), RenderRequest(DIRECT))
     img, truth = frame.image, frame.light_field.truth_range_m
     assert img.valid.mean() > 0.95
     # Shot noise alone: about 1 cm per pixel here (4 cm at most); a wrong wrap is >= 0.6 m.
@@ -97,7 +98,7 @@ def test_noisy_dual_frequency_frame_at_the_extended_range_has_no_gross_errors():
 
 @pytest.mark.parametrize("distance_m", [3.0, 5.0, 7.0])
 def test_noisy_dual_frequency_frame_inside_the_extended_range_has_no_gross_errors(distance_m):
-    frame = simulate(dual_wall(distance_m), DIRECT)
+    frame = simulate(dual_wall(distance_m), RenderRequest(DIRECT))
     assert_frame_bounded(frame)
     img, truth = frame.image, frame.light_field.truth_range_m
     assert img.valid.all()
@@ -105,8 +106,8 @@ def test_noisy_dual_frequency_frame_inside_the_extended_range_has_no_gross_error
 
 
 def test_dual_frequency_frame_is_stable_under_a_nanometre_wall_move():
-    a = simulate(dual_wall(5.0), DIRECT)
-    b = simulate(dual_wall(5.0 + 1e-9), DIRECT)
+    a = simulate(dual_wall(5.0), RenderRequest(DIRECT))
+    b = simulate(dual_wall(5.0 + 1e-9), RenderRequest(DIRECT))
     # Same seed, same noise: the range moves by 1e-9 m plus float32 rounding (F32 * 5 m).
     assert_stable(a, b, range_tol_m=1e-5, radiance_rel=1e-5)
 
@@ -132,8 +133,8 @@ def test_unwrapping_tolerates_phase_noise_inside_the_extended_range(r, n1, n2):
 @pytest.mark.parametrize("mode", ["single", "dual"])
 @pytest.mark.parametrize("ideal", [False, True], ids=["sensor", "ideal"])
 def test_dark_source_gives_a_finite_all_invalid_frame(mode, ideal):
-    frame = simulate(dual_wall(2.0, power_w=0.0) if mode == "dual" else _single_wall(0.0),
-                     DIRECT, ideal=ideal)
+    scene = dual_wall(2.0, power_w=0.0) if mode == "dual" else _single_wall(0.0)
+    frame = simulate(scene, RenderRequest(DIRECT, ideal=ideal))
     assert_frame_bounded(frame)
     assert not frame.image.valid.any()
     assert np.all(frame.light_field.dc_active == 0.0)
@@ -147,7 +148,7 @@ def test_dark_source_gives_a_finite_all_invalid_frame(mode, ideal):
 @pytest.mark.parametrize("ideal", [False, True], ids=["sensor", "ideal"])
 def test_empty_scene_in_dual_frequency_mode_is_all_invalid_and_finite(ideal):
     scene = build(camera((0, 0, 0), (0, 1, 0), mode="dual"), [])
-    frame = simulate(scene, DIRECT, ideal=ideal)
+    frame = simulate(scene, RenderRequest(DIRECT, ideal=ideal))
     assert_frame_bounded(frame)
     assert frame.image.phase_rad.shape[0] == 2
     assert not frame.image.valid.any() and not frame.light_field.hit.any()
@@ -167,7 +168,7 @@ def test_a_source_that_saturates_every_pixel_gives_a_finite_all_invalid_frame(se
             "material": lambert(0.8),
             "pose": {"position_m": [0.0, 0.05, 0.0], "rotation_deg": [90.0, 0.0, 0.0]}}
     scene = build(camera((0, 0, 0), (0, 1, 0), sensor=sensor), [wall], power_w=1000.0)
-    frame = simulate(scene, DIRECT)
+    frame = simulate(scene, RenderRequest(DIRECT))
     assert_frame_bounded(frame)
     assert (frame.raw.saturated | frame.raw.sbi_limit).all()
     assert not frame.image.valid.any()

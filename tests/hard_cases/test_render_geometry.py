@@ -24,6 +24,7 @@ from sim_core.pipeline import simulate
 from sim_core.render import render
 from sim_core.render.integrator import MIN_LIGHT_DISTANCE_M
 from sim_core.render.lightfield import LightField
+from sim_core.render_request import RenderRequest
 from tests.hard_cases.helpers import (
     CENTRE,
     I_1W,
@@ -96,8 +97,8 @@ def test_wall_seen_and_lit_at_89_99_degrees_follows_the_cos_law():
 
 def test_grazing_wall_frame_is_finite_and_bounded_with_every_stage():
     scene = grazing_wall()
-    assert_frame_bounded(simulate(scene, PATH))
-    assert_frame_bounded(simulate(scene, PATH, ideal=True, effects="all"))
+    assert_frame_bounded(simulate(scene, RenderRequest(PATH)))
+    assert_frame_bounded(simulate(scene, RenderRequest(PATH, effects="all", ideal=True)))
 
 
 @pytest.mark.parametrize(
@@ -122,8 +123,8 @@ def test_grazing_wall_is_stable_under_tiny_perturbations(perturbed, range_tol_m,
     # Bounds: the exact change (the Lipschitz constant is 1 / cos(89.99 deg) = 5730 for moves
     # across the wall) plus float32 rounding of the geometry (F32 * 2 m / cos = 1.1e-3 m in the
     # worst case; measured 0). The ideal sensor makes the range a deterministic function.
-    base = simulate(grazing_wall(), CENTRE, ideal=True)
-    moved = simulate(grazing_wall(**perturbed), CENTRE, ideal=True)
+    base = simulate(grazing_wall(), RenderRequest(CENTRE, ideal=True))
+    moved = simulate(grazing_wall(**perturbed), RenderRequest(CENTRE, ideal=True))
     assert_stable(base, moved, range_tol_m=range_tol_m, radiance_rel=radiance_rel)
 
 
@@ -217,8 +218,8 @@ def test_grazing_sunlight_is_stable_under_a_nanoradian_turn_of_the_sun(elevation
     # (5.7e-6 at 0.01 deg); nothing else changes.
     scene, cos_s = sunlit_plane(elevation_deg)
     turned, cos_t = sunlit_plane(elevation_deg + math.degrees(1e-9))
-    a = simulate(scene, CENTRE, ideal=True, effects="all")
-    b = simulate(turned, CENTRE, ideal=True, effects="all")
+    a = simulate(scene, RenderRequest(CENTRE, effects="all", ideal=True))
+    b = simulate(turned, RenderRequest(CENTRE, effects="all", ideal=True))
     rel = 1e-9 / math.tan(math.radians(elevation_deg))
     assert abs(cos_t / cos_s - 1.0) == pytest.approx(rel, rel=1e-3)
     assert_stable(a, b, range_tol_m=1e-12, radiance_rel=2.0 * rel)
@@ -317,7 +318,7 @@ def test_coincident_rectangles_show_one_material_or_the_other_per_pixel(second_r
     np.testing.assert_array_equal(bright, lf.object_id == 1)
     np.testing.assert_array_equal(dark, lf.object_id == 0)
     # Path tracing: finite, and a jittered pixel mixes the two at most.
-    frame = simulate(scene, PATH, effects="all")
+    frame = simulate(scene, RenderRequest(PATH, effects="all"))
     assert_frame_bounded(frame)
     r = frame.light_field.dc_active / (I_1W / np.pi * cos_a**3 / 2.0**2)
     assert np.all((r > 0.2 * 0.95) & (r < 0.8 * 1.05))
@@ -368,10 +369,10 @@ def test_nanometre_triangles_in_front_of_a_wall_render_finite(tmp_path):
     scene = build(camera((0, 0, 0), (0, 1, 0)), [wall, tiny], power_w=5.0)
     assert scene.n_triangles == 202
     np.testing.assert_allclose(np.linalg.norm(scene.normals, axis=1), 1.0)
-    frame = simulate(scene, PATH)
+    frame = simulate(scene, RenderRequest(PATH))
     assert_frame_bounded(frame)
     assert frame.image.valid.all()
-    alone = simulate(build(camera((0, 0, 0), (0, 1, 0)), [tiny]), PATH)
+    alone = simulate(build(camera((0, 0, 0), (0, 1, 0)), [tiny]), RenderRequest(PATH))
     assert_frame_bounded(alone)
     assert not alone.image.valid.any()
 
@@ -400,7 +401,7 @@ def test_nanometre_triangle_next_to_the_camera_is_hit_and_lit_finitely(tmp_path,
     cos_l = pixel_rays(scene)[:, 1].reshape(lf.shape)
     np.testing.assert_allclose(lf.dc_active, 0.9 / np.pi * I_1W * cos_l / distance_m**2,
                                rtol=1e-5)
-    assert_frame_bounded(simulate(scene, PATH))
+    assert_frame_bounded(simulate(scene, RenderRequest(PATH)))
 
 
 # -------------------------------------------------------------------------------------------
@@ -434,7 +435,7 @@ def test_surface_at_the_light_stays_finite_and_lit(material):
         lf = render(wall_at(distance_m, material), CENTRE).light_field
         assert np.all(np.isfinite(lf.dc_active)) and np.all(np.isfinite(lf.phasor))
         assert lf.dc_active[1, 1] > 0.0
-    assert_frame_bounded(simulate(wall_at(1e-5, material), PATH))
+    assert_frame_bounded(simulate(wall_at(1e-5, material), RenderRequest(PATH)))
 
 
 # -------------------------------------------------------------------------------------------
@@ -447,8 +448,8 @@ FAR_OFFSETS = [(1e6, 0.0, 0.0), (1e6, -1e6, 1e6), (-3e6, 2e6, 1e6)]
 @pytest.mark.parametrize("settings", [CENTRE, PATH], ids=["direct", "path"])
 def test_scene_translated_by_a_million_metres_gives_the_same_range_image(settings, offset):
     # Embree is float32 (6 cm resolution at 1e6 m); the tracer renders relative to the camera.
-    near = simulate(cluttered_scene(), settings, ideal=True)
-    far = simulate(cluttered_scene(offset), settings, ideal=True)
+    near = simulate(cluttered_scene(), RenderRequest(settings, ideal=True))
+    far = simulate(cluttered_scene(offset), RenderRequest(settings, ideal=True))
     np.testing.assert_array_equal(near.image.valid, far.image.valid)
     v = near.image.valid
     assert np.max(np.abs(near.image.range_m[v] - far.image.range_m[v])) < 1e-4
@@ -462,12 +463,12 @@ def test_scene_translated_by_a_million_metres_gives_the_same_range_image(setting
 def test_far_scene_is_stable_under_a_nanometre_camera_move():
     o = np.array(FAR_OFFSETS[1])
     base = cluttered_scene(o)
-    frame = simulate(base, PATH)
+    frame = simulate(base, RenderRequest(PATH))
     moved = dataclasses.replace(
         base, camera=dataclasses.replace(base.camera, world_from_camera=_shifted(base, 1e-9)))
     # The same seed draws the same noise; a 1e-9 m move changes hit distances by 1e-9 m plus
     # float32 rounding of the camera-relative geometry (F32 * 3 m = 7e-7 m).
-    assert_stable(frame, simulate(moved, PATH), range_tol_m=1e-4, radiance_rel=1e-5)
+    assert_stable(frame, simulate(moved, RenderRequest(PATH)), range_tol_m=1e-4, radiance_rel=1e-5)
 
 
 def _shifted(scene, metres):

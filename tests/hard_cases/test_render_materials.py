@@ -16,6 +16,7 @@ import pytest
 
 from sim_core.pipeline import simulate
 from sim_core.render import render
+from sim_core.render_request import RenderRequest
 from tests.hard_cases.helpers import (
     CENTRE,
     PATH,
@@ -71,9 +72,9 @@ def corner(kind, params, camera_shift=0.0, power_w=8.0):
 @pytest.mark.parametrize("name", EXTREMES)
 def test_frame_of_an_extreme_material_is_finite_and_bounded(name):
     kind, params = EXTREMES[name]
-    frame = simulate(corner(kind, params), PATH, effects="all")
+    frame = simulate(corner(kind, params), RenderRequest(PATH, effects="all"))
     assert_frame_bounded(frame)
-    ideal = simulate(corner(kind, params), PATH, effects="all", ideal=True)
+    ideal = simulate(corner(kind, params), RenderRequest(PATH, effects="all", ideal=True))
     assert_frame_bounded(ideal)
     side = frame.light_field.object_id == 2
     assert frame.image.valid[side].mean() > 0.9  # the Lambertian side wall is always measured
@@ -123,16 +124,16 @@ def test_a_parameter_moved_by_1e_9_moves_the_frame_by_little(name, field):
     # radiance by < 2e-6 relative; the noise draws of the same seed stay the same. Every
     # effect is on, so that the effect planner's decisions (test_effect_planner) stay out.
     kind, params = EXTREMES[name]
-    a = simulate(corner(kind, params), PATH, effects="all")
-    b = simulate(corner(kind, _perturbed(params, field)), PATH, effects="all")
+    a = simulate(corner(kind, params), RenderRequest(PATH, effects="all"))
+    b = simulate(corner(kind, _perturbed(params, field)), RenderRequest(PATH, effects="all"))
     assert_stable(a, b, range_tol_m=1e-5, radiance_rel=2e-6, mask_changes=1)
 
 
 @pytest.mark.parametrize("name", ["seed-mirror-f0-1", "ct-mirror-n2-3", "hapke-energy-limit"])
 def test_a_nanometre_camera_move_moves_the_frame_by_little(name):
     kind, params = EXTREMES[name]
-    a = simulate(corner(kind, params), PATH, effects="all")
-    b = simulate(corner(kind, params, camera_shift=1e-9), PATH, effects="all")
+    a = simulate(corner(kind, params), RenderRequest(PATH, effects="all"))
+    b = simulate(corner(kind, params, camera_shift=1e-9), RenderRequest(PATH, effects="all"))
     assert_stable(a, b, range_tol_m=1e-5, radiance_rel=1e-5, mask_changes=1)
 
 
@@ -150,5 +151,5 @@ def test_mirror_lobe_seen_head_on_is_finite_and_peaks_at_the_mirror_pixel():
     alpha2 = 2.0 * 1e-6
     expected = 1.0 / (4.0 * np.pi * alpha2) / (4.0 * np.pi) / 2.0**2
     assert lf.dc_active[12, 16] == pytest.approx(expected, rel=1e-5)
-    frame = simulate(scene, dataclasses.replace(PATH, spp=2))
+    frame = simulate(scene, RenderRequest(dataclasses.replace(PATH, spp=2)))
     assert_frame_bounded(frame)

@@ -7,6 +7,7 @@ import pytest
 
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import parse_scene_spec
 from sim_core.tof import ambiguity_range_m
@@ -30,7 +31,7 @@ def wall_scene(distance_m: float, **extra):
 def test_one_hundred_suns_push_every_lit_pixel_into_the_sbi_limit():
     # The Sun at 0.1 AU: 100 x its in-band irradiance at the Earth.
     sun = {"ambient": {"sun": {"direction": [0.0, 1.0, 0.0], "distance_m": 1.495978707e10}}}
-    frame = simulate(wall_scene(2.0, **sun), SETTINGS)
+    frame = simulate(wall_scene(2.0, **sun), RenderRequest(SETTINGS))
     raw = frame.raw
     assert raw.sbi_limit.all()
     assert not frame.image.valid.any()
@@ -45,7 +46,7 @@ def test_target_at_the_ambiguity_range_wraps_without_nan(fraction):
     exact = dataclasses.replace(SETTINGS, jitter=False)
     no_mtf = {"optics": {"diffraction": False, "pixel_aperture": False}}
     scene = wall_scene(u * (1 + fraction) if fraction else u, **no_mtf)
-    frame = simulate(scene, exact, ideal=True)
+    frame = simulate(scene, RenderRequest(exact, ideal=True))
     img, truth = frame.image, frame.light_field.truth_range_m
     assert img.valid.all() and np.isfinite(img.range_m).all()
     assert np.all((img.range_m >= 0.0) & (img.range_m < u))
@@ -56,7 +57,7 @@ def test_target_at_the_ambiguity_range_wraps_without_nan(fraction):
 
 @pytest.mark.parametrize("distance_m", [1e-3, 1e4])
 def test_targets_at_one_millimetre_and_ten_kilometres_stay_finite(distance_m):
-    frame = simulate(wall_scene(distance_m), SETTINGS)
+    frame = simulate(wall_scene(distance_m), RenderRequest(SETTINGS))
     img = frame.image
     assert np.isfinite(img.amplitude).all() and np.isfinite(img.intensity).all()
     assert np.all(np.isnan(img.range_m[~img.valid]))
@@ -69,6 +70,6 @@ def test_targets_at_one_millimetre_and_ten_kilometres_stay_finite(distance_m):
 def test_empty_scene_is_all_invalid():
     spec = {"camera": {"pose": {"position_m": [0, 0, 0], "look_at_m": [0, 1, 0]},
                        "width_px": 16, "height_px": 12, "fx_px": 15.0, "fy_px": 15.0}}
-    frame = simulate(build_scene(parse_scene_spec(spec)), SETTINGS)
+    frame = simulate(build_scene(parse_scene_spec(spec)), RenderRequest(SETTINGS))
     assert not frame.image.valid.any()
     assert frame.rays_traced > 0 and np.isfinite(frame.image.amplitude).all()

@@ -33,6 +33,7 @@ from sim_core.preview import (
     side_by_side,
 )
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from tests.sim_core.scenes import example
 
 
@@ -56,8 +57,8 @@ def stored(tmp_path_factory):
     root = tmp_path_factory.mktemp("frames")
     store = FrameStore(root)
     scene = example("satellite_ground_test")
-    measured = simulate(scene, RenderSettings(integrator="direct", spp=2, seed=1))
-    simulated = simulate(scene, RenderSettings(integrator="direct", spp=2, seed=2))
+    measured = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=2, seed=1)))
+    simulated = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=2, seed=2)))
     mid, m_image, m_fs = store.save_measured(measured.raw, scene.camera, {"rig": {}})
     out = save_frame(root.parent / "sim-out", simulated)
     sid = new_frame_id()

@@ -22,6 +22,7 @@ from calibration.rig_sequence import DEFAULT_BOARD, DEFAULT_FIXTURES
 from sim_core import frame_io
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from tests.sim_core.scenes import EXAMPLES
@@ -37,7 +38,7 @@ def object_grey(angle_deg: float, spp: int = 2, seed: int = 0) -> dict[str, floa
     """Grey statistics of the model's pixels in one ground-test frame at ``angle_deg``."""
     spec = load_scene_spec(GROUND_TEST)
     scene = build_scene(spec, base_dir=GROUND_TEST.parent, turntable_deg=angle_deg)
-    frame = simulate(scene, RenderSettings(integrator="direct", spp=spp, seed=seed))
+    frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=spp, seed=seed)))
     grey, _ = frame_io.grey_preview_8bit(frame.image.amplitude, frame.image.valid,
                                          frame.grey_full_scale)
     names = [o.name for o in spec.objects]
@@ -67,7 +68,7 @@ def board_whites(spp: int = 16) -> list[dict[str, float]]:
         board_spec = spec.model_copy(update={
             "objects": [o for o in spec.objects if not o.on_turntable] + [obj]})
         scene = build_scene(board_spec, GROUND_TEST.parent, turntable_deg=0.0, solar_suns=0.0)
-        frame = simulate(scene, RenderSettings(integrator="direct", spp=spp, seed=1))
+        frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=spp, seed=1)))
         amp = frame.image.amplitude
         white = white_square_mask(amp)
         taps = frame.raw.taps  # (n_f, 4, 2, H, W) DN

@@ -19,6 +19,7 @@ from sim_core.flying_pixels import (
 )
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from tests.sim_core.scenes import lambert, scene_from
 
 H, W = 20, 24
@@ -200,7 +201,7 @@ def _measured(objects: list[dict], tmp_path) -> tuple[np.ndarray, np.ndarray]:
     """Render with the sensor, write the raw frame as a measured frame folder and read it back:
     the reconstruction a measured frame gets."""
     scene = scene_from([0, 0, 0], [0, 1, 0], objects, power_w=8.0, width=64, height=48)
-    frame = simulate(scene, RenderSettings(integrator="direct", spp=4, seed=1))
+    frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=4, seed=1)))
     image, _ = frame_io.write_measured(tmp_path, frame.raw, scene.camera, {})
     return image.range_m, image.valid
 

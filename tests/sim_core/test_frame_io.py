@@ -14,6 +14,7 @@ from sim_core.json_safe import json_safe
 from sim_core.pipeline import save_frame, simulate
 from sim_core.raw import reconstruct_raw
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from tests.sim_core.scenes import small_example
 
 
@@ -27,7 +28,7 @@ def _strict_json(path):
 @pytest.fixture(scope="module")
 def sim_frame():
     scene = small_example("satellite_ground_test", width=24)
-    return scene, simulate(scene, RenderSettings(integrator="direct", spp=2, seed=5))
+    return scene, simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=2, seed=5)))
 
 
 def test_simulated_frame_round_trips(tmp_path, sim_frame):
@@ -84,7 +85,7 @@ def test_grey_full_scale_rule():
 
 def test_ideal_frame_uses_the_percentile(tmp_path):
     scene = small_example("satellite_ground_test", width=16)
-    frame = simulate(scene, RenderSettings(integrator="direct", spp=1), ideal=True)
+    frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=1), ideal=True))
     im = frame.image
     expected = float(np.percentile(im.amplitude[im.valid], 99.5))
     assert frame.grey_full_scale == pytest.approx(expected)

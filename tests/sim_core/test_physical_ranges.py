@@ -24,6 +24,7 @@ from sim_core.errors import InvalidInputError, SceneError
 from sim_core.lens_ranges import focal_length_range_px
 from sim_core.pipeline import simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import parse_scene_spec
 from sim_core.twin_file import parse_calibration
@@ -55,7 +56,7 @@ def _renders(spec, twin=None) -> None:
         warnings.simplefilter("error")
         scene = build_scene(spec, ".", twin=twin)
         assert np.all(np.isfinite(z_over_range(scene.camera.intrinsics)))
-        frame = simulate(scene, TINY)
+        frame = simulate(scene, RenderRequest(TINY))
     valid = frame.image.valid
     assert np.all(np.isfinite(frame.image.range_m[valid]))
 

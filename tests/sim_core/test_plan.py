@@ -6,6 +6,7 @@ import pytest
 from sim_core.pipeline import simulate
 from sim_core.plan import plan_effects
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import parse_scene_spec
 from tests.sim_core.scenes import small_example
@@ -33,8 +34,8 @@ def effect(plan, name):
 
 def test_convex_object_renders_direct_only_with_the_same_depth_and_fewer_rays():
     scene = lone_box()
-    auto = simulate(scene, PATH, effects="auto", ideal=True)
-    full = simulate(scene, PATH, effects="all", ideal=True)
+    auto = simulate(scene, RenderRequest(PATH, effects="auto", ideal=True))
+    full = simulate(scene, RenderRequest(PATH, effects="all", ideal=True))
     mp = effect(auto.plan, "multipath")
     assert not mp.enabled and mp.numbers["range_bias_p95_mm"] == 0.0
     assert effect(full.plan, "multipath").enabled

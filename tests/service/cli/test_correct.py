@@ -9,6 +9,7 @@ from service.cli import app
 from sim_core import frame_io
 from sim_core.pipeline import expose_light, render_light, simulate
 from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from sim_core.twin_file import parse_calibration, write_calibration
@@ -27,8 +28,8 @@ def test_correct_removes_the_depth_errors(tmp_path):
     # The sensor's mean response (no shot or read noise): what is left after the correction
     # is then the correction's own error, not noise of dim pixels that decides an RMS.
     scene = build_scene(spec, EXAMPLES, twin=cal)
-    measured = expose_light(scene, render_light(scene, settings), noise=False)
-    truth = simulate(build_scene(spec, EXAMPLES), settings, ideal=True)
+    measured = expose_light(scene, render_light(scene, RenderRequest(settings)), noise=False)
+    truth = simulate(build_scene(spec, EXAMPLES), RenderRequest(settings, ideal=True))
     frame_io.write_measured(tmp_path / "m", measured.raw, build_scene(spec, EXAMPLES).camera, {})
     write_calibration(tmp_path / "cal.yaml", cal)
     res = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",

@@ -8,6 +8,7 @@ import pytest
 from service.compute.executors import LocalExecutor
 from service.compute.jobs import make_job
 from sim_core.errors import SceneError
+from sim_core.render_request import request_from_spec
 from sim_core.scene_spec import parse_scene_spec
 
 pytestmark = pytest.mark.timeout(300)
@@ -22,8 +23,8 @@ def _job(material: str):
         "objects": [{"name": "plate", "mesh": {"kind": "rectangle", "size_m": [1.0, 1.0]},
                      "material": {"preset": material}, "pose": {"position_m": [0, 0, 1.0]}}],
     })
-    return make_job(spec, ".", turntable_deg=None, solar_suns=None, spp=1, seed=0, threads=1,
-                    ideal=True)
+    return make_job(spec, ".", turntable_deg=None, solar_suns=None,
+                    request=request_from_spec(spec.render, spp=1, seed=0, threads=1, ideal=True))
 
 
 @pytest.mark.slow

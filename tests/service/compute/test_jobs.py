@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 from service.compute.jobs import make_job, run_job
-from sim_core.scene_spec import parse_scene_spec
+from sim_core.render_request import request_from_spec
+from sim_core.scene_spec import RenderSpec, parse_scene_spec
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -24,8 +25,8 @@ def test_a_job_carries_its_mesh_files_to_the_worker(tmp_path):
         "objects": [{"name": "cube", "mesh": {"kind": "file", "path": "cube.stl"},
                      "material": "black-flannel", "pose": {"position_m": [0, 0, 1.2]}}],
     })
-    job = make_job(spec, mesh_dir, turntable_deg=None, solar_suns=None, spp=1, seed=0,
-                   threads=1, ideal=True)
+    job = make_job(spec, mesh_dir, turntable_deg=None, solar_suns=None,
+                   request=request_from_spec(spec.render, spp=1, seed=0, threads=1, ideal=True))
     shutil.rmtree(mesh_dir)  # the worker must not need the service's files
     result = run_job(job)
     assert set(result.files) == {"frame.npz", "frame.json", "grey.png", "depth.png"}
@@ -48,11 +49,12 @@ def test_a_job_carries_its_goniometer_tables_to_the_worker(tmp_path):
                      "material": {"kind": "tabulated", "params": {"table": "gonio.csv"}},
                      "pose": {"position_m": [0, 0, 1.0], "rotation_deg": [180, 0, 0]}}],
     }
+    request = request_from_spec(RenderSpec(), spp=4, seed=0, threads=1, ideal=True)
     job = make_job(parse_scene_spec(data), scene_dir, turntable_deg=None, solar_suns=None,
-                   spp=4, seed=0, threads=1, ideal=True)
+                   request=request)
     analytic = {**data, "objects": [{**data["objects"][0], "material": "white-matte-tile"}]}
     reference = run_job(make_job(parse_scene_spec(analytic), scene_dir, turntable_deg=None,
-                                 solar_suns=None, spp=4, seed=0, threads=1, ideal=True))
+                                 solar_suns=None, request=request))
     shutil.rmtree(scene_dir)  # the worker must not need the service's files
     result = run_job(job)
     ratio = np.nanmedian(result.image.amplitude / reference.image.amplitude)

@@ -8,6 +8,7 @@ from sim_core.geometry import icosphere_max_chord_error_m
 from sim_core.optics import pixel_irradiance_w_m2
 from sim_core.pipeline import simulate, z_over_range
 from sim_core.render import RenderSettings, render
+from sim_core.render_request import RenderRequest
 from sim_core.scene import build_scene
 from sim_core.scene_spec import parse_scene_spec
 from tests.sim_core.scenes import fronto_parallel_wall, lambert, scene_from
@@ -38,7 +39,7 @@ def test_pixel_irradiance_adds_the_cos4_law_of_seed_eq_32():
 
 def test_wall_range_is_exact_to_a_tenth_of_a_millimetre():
     scene = fronto_parallel_wall(distance_m=2.0)
-    frame = simulate(scene, CENTRE, ideal=True)
+    frame = simulate(scene, RenderRequest(CENTRE, ideal=True))
     truth = 2.0 / z_over_range(scene)  # radial distance to the plane y = 2
     err = np.abs(frame.image.range_m - truth)
     assert frame.image.valid.all()
@@ -51,7 +52,7 @@ def test_sphere_range_matches_the_analytic_ray_sphere_distance():
     sphere = {"name": "ball", "mesh": {"kind": "sphere", "radius_m": radius, "subdivisions": 6},
               "material": lambert(0.7), "pose": {"position_m": centre.tolist()}}
     scene = scene_from([0.0, 0.0, 0.0], centre, [sphere])
-    frame = simulate(scene, CENTRE, ideal=True)
+    frame = simulate(scene, RenderRequest(CENTRE, ideal=True))
     d = scene.camera.pixel_directions_world(*_pixel_grid(scene))
     # |t d - c|^2 = r^2 with the camera at the origin: t = d.c - sqrt((d.c)^2 - |c|^2 + r^2)
     dc = d @ centre
