@@ -1,9 +1,14 @@
-"""``toftwin calibrate rig``: the whole calibration sequence on the rig (issue 13, section 4).
+"""``toftwin calibrate rig``: the whole calibration sequence, planned and fitted (issue 13, §4).
 
-1. **Board sweeps.** For each fixture (tilt) the operator mounts the board
-   (:class:`Operator`; the simulated lab mounts it itself); the turntable sweeps the board
-   past the camera with the solar simulator off; each view averages several frames
-   (:mod:`calibration.captures`) and OpenCV finds the board's corners in its amplitude.
+The sequence is a plan and a fit: :func:`rig_capture_plan` says what to capture (none of it
+depends on what the fits find), the service runs it on the rig
+(:func:`service.lab.acquisition.run_rig_calibration`) and :func:`fit_rig_calibration` fits
+steps 1-7 from the averaged captures it is handed (:mod:`calibration.capture_plan`).
+
+1. **Board sweeps.** For each fixture (tilt) the operator mounts the board (the simulated lab
+   mounts it itself); the turntable sweeps the board past the camera with the solar simulator
+   off; each view averages several frames (:mod:`calibration.captures`) and OpenCV finds the
+   board's corners in its amplitude.
 2. **Intrinsics and distortion** from all views (:mod:`calibration.intrinsics`), as the start
    of 3.
 3. **Turntable axis and zero**, and the intrinsics again, by one bundle adjustment of the camera
@@ -30,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -41,12 +46,19 @@ from calibration.angles import (
     SWEEP_TO_DEG,
     sweep_angles,
 )
-from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
+from calibration.capture_plan import (
+    CapturePlan,
+    Captures,
+    CaptureStep,
+    MountStep,
+    Step,
+    mount,
+)
+from calibration.captures import AveragedCapture, Progress, no_progress
 from calibration.fixtures import BoardFixture, board_object, world_from_board
 from calibration.photometry import fit_source_power
 from calibration.solar import check_reference_suns, fit_solar_scale
-from calibration.twin_prediction import mounted_spec, predict_view
-from drivers.rig import Rig, RigState
+from calibration.twin_prediction import CameraUseCase, mounted_spec, predict_view
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 from sim_core.scene import build_camera
@@ -202,33 +214,6 @@ def _count(field_name: str, n: int, lo: int, hi: int, what: str) -> None:
         raise InvalidInputError(field_name, f"got {n}; allowed: {lo} to {hi} {what}")
 
 
-class Operator(Protocol):
-    """Whoever swaps what stands on the turntable: the operator, or the simulated lab."""
-
-    def mount(self, objects: Sequence[ObjectSpec] | None, instruction: str) -> None:
-        """Mount ``objects`` (world frame at the turntable's zero) or, with None, the test
-        object again; ``instruction`` says it in words."""
-
-class SimulatedOperator:
-    """The simulated lab's swap: :meth:`drivers.sim.world.SimulatedWorld.mount`.
-
-    ``materials`` (object name -> material spec or preset name) are the true materials of what
-    this operator has in hand: an object of that name is mounted with it, whatever material the
-    procedure's object names (a material sample's prior). That is how the simulated lab holds a
-    sample of a material the procedure is to measure without ever telling the procedure.
-    """
-
-    def __init__(self, world, materials: Mapping[str, Any] | None = None) -> None:
-        self.world = world
-        self.materials = dict(materials or {})
-
-    def mount(self, objects: Sequence[ObjectSpec] | None, instruction: str) -> None:
-        if objects is not None:
-            objects = [o.model_copy(update={"material": ObjectSpec.model_validate(
-                {**o.model_dump(), "material": self.materials[o.name]}).material})
-                if o.name in self.materials else o for o in objects]
-        self.world.mount(objects)
-
 @dataclass
 class RigCalibration:
     """The sequence's outcome: the calibration file, every procedure's result, the captures."""
@@ -238,48 +223,82 @@ class RigCalibration:
     views: list[Any]
     frames_used: int
 
-def calibrate_rig(
-    rig: Rig,
-    operator: Operator,
+
+def _board_step(fixture: BoardFixture, index: int) -> str:
+    return f"board/{fixture.name}/{index}"
+
+
+#: the noise stacks' steps: the solar simulator off, and on at the plan's highest level
+NOISE_STEPS = ("noise/dark", "noise/solar")
+
+
+def _solar_step(index: int) -> str:
+    return f"solar/{index}"
+
+
+def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
+    """What the sequence captures on ``spec``'s rig, in order (steps 1, 5 and 7 of the module
+    docstring): none of it depends on what the fits find."""
+    steps: list[Step] = []
+    for fixture in plan.fixtures:
+        steps.append(_mount_board(plan, fixture, spec))
+        steps += [CaptureStep(_board_step(fixture, i), angle, 0.0, False, plan.frames_per_view,
+                              message=f"board {fixture.name} at {angle:+.0f} deg")
+                  for i, angle in enumerate(plan.sweep_deg)]
+    steps.append(_mount_board(plan, plan.fixtures[0], spec))
+    steps.append(CaptureStep(NOISE_STEPS[0], 0.0, 0.0, False, plan.noise_frames,
+                             keep_frames=True, message="noise stack"))
+    if spec.ambient.solar_simulator is not None:
+        # The solar simulator lights the whole view: many more bright pixels for the curve.
+        level = max(plan.solar_levels_suns)
+        steps.append(CaptureStep(NOISE_STEPS[1], 0.0, level, True, plan.noise_frames,
+                                 keep_frames=True, message="noise stack, solar simulator on"))
+        steps += [CaptureStep(_solar_step(i), 0.0, s, s > 0.0, plan.solar_frames,
+                              message=f"solar simulator at {s:g} sun")
+                  for i, s in enumerate(_solar_levels(plan))]
+    steps.append(mount(None, "mount the test object again"))
+    return CapturePlan(tuple(steps))
+
+
+def _mount_board(plan: RigCalibrationPlan, fixture: BoardFixture, spec: SceneSpec) -> MountStep:
+    return mount([board_object(plan.board, fixture, spec)],
+                 f"mount the calibration board in {fixture.instruction}")
+
+
+def _solar_levels(plan: RigCalibrationPlan) -> list[float]:
+    """The solar simulator's levels of step 7: the shutter closed, then the plan's levels."""
+    return [0.0, *plan.solar_levels_suns]
+
+
+def fit_rig_calibration(
+    captures: Captures,
     spec: SceneSpec,
     base_dir: str | Path,
-    plan: RigCalibrationPlan | None = None,
+    plan: RigCalibrationPlan,
+    use_case: CameraUseCase,
     progress: Progress = no_progress,
     rig_name: str = "rig",
 ) -> RigCalibration:
-    """Run the sequence (module docstring) and return the calibration.
+    """Steps 1-7 of the module docstring from the captures of :func:`rig_capture_plan`.
 
-    ``spec`` is the nominal scene (camera pose, turntable, solar simulator); its mounted objects
-    are swapped for the board during the sequence and mounted again at the end.
+    ``spec`` is the nominal scene (camera pose, turntable, solar simulator); ``use_case`` the
+    camera's use case the frames were taken in. Progress is reported with every capture done.
     """
     from calibration.board_detection import detect_board
     from calibration.board_views import BoardView
 
-    plan = plan or RigCalibrationPlan()
     base = Path(base_dir)
     camera = build_camera(spec)
-    use_case = rig.camera.use_case
-    total = plan.n_captures
-    done = 0
-    frames_used = 0
+    done = total = len(captures)
+    frames_used = sum(c.n_frames for c in captures.values())
 
-    def capture(state: RigState, n: int, keep: bool = False) -> AveragedCapture:
-        nonlocal done, frames_used
-        rig.apply(state)
-        cap = average_frames(rig.capture(n, target=state), keep_frames=keep)
-        frames_used += n
-        done += 1
-        return cap
-
-    # 1. board sweeps --------------------------------------------------------------------
+    # 1. board views ---------------------------------------------------------------------
     views: list[tuple[BoardView, AveragedCapture, BoardFixture]] = []
     missed: list[dict[str, str]] = []
     for fixture in plan.fixtures:
         board = board_object(plan.board, fixture, spec)
-        operator.mount([board], f"mount the calibration board in {fixture.instruction}")
-        for angle in plan.sweep_deg:
-            progress(done, total, f"board {fixture.name} at {angle:+.0f} deg")
-            cap = capture(RigState(angle, 0.0, False), plan.frames_per_view)
+        for i, angle in enumerate(plan.sweep_deg):
+            cap = captures[_board_step(fixture, i)]
             det = detect_board(cap.amplitude, board.mesh)
             name = f"{fixture.name}@{angle:+.0f}"
             if det is None:
@@ -309,15 +328,8 @@ def calibrate_rig(
     depth = _depth(views, intr, plan, use_case.frequencies_hz)
     results["depth"] = depth
     # 5. noise and gain --------------------------------------------------------------------
-    first = plan.fixtures[0]
-    operator.mount([board_object(plan.board, first, spec)],
-                   f"mount the calibration board in {first.instruction}")
-    progress(done, total, "noise stack")
-    stacks = [capture(RigState(0.0, 0.0, False), plan.noise_frames, keep=True)]
-    if spec.ambient.solar_simulator is not None:
-        # The solar simulator lights the whole view: many more bright pixels for the curve.
-        level = max(plan.solar_levels_suns)
-        stacks.append(capture(RigState(0.0, level, True), plan.noise_frames, keep=True))
+    progress(done, total, "noise and gain")
+    stacks = [captures[n] for n in NOISE_STEPS if n in captures]
     stack = stacks[0]
     noise = _noise(stacks)
     results["noise"] = noise
@@ -328,6 +340,7 @@ def calibrate_rig(
         camera=CameraParameters(**_camera_keys(intr), sensor=noise.to_sensor_overrides()),
         turntable=_turntable_keys(axis),
     )
+    first = plan.fixtures[0]
     board0 = board_object(plan.board, first, spec)
     twin_spec = mounted_spec(spec, [board0], use_case)
     # 6. effective source power ------------------------------------------------------------
@@ -339,11 +352,9 @@ def calibrate_rig(
     # 7. solar simulator -------------------------------------------------------------------
     solar = None
     if spec.ambient.solar_simulator is not None:
-        levels = [0.0, *plan.solar_levels_suns]
-        caps = []
-        for s in levels:
-            progress(done, total, f"solar simulator at {s:g} sun")
-            caps.append(capture(RigState(0.0, s, s > 0.0), plan.solar_frames))
+        progress(done, total, "solar simulator scale")
+        levels = _solar_levels(plan)
+        caps = [captures[_solar_step(i)] for i in range(len(levels))]
         lit = TwinParameters(camera=partial.camera, turntable=partial.turntable,
                              illumination=IlluminationParameters(power_w=power.power_w))
         sun1 = predict_view(twin_spec, base, lit, caps[0].turntable_angle_deg, solar_suns=1.0)
@@ -354,7 +365,6 @@ def calibrate_rig(
             reference_cell_suns=plan.solar_reference_suns,
         )
         results["solar"] = solar
-    operator.mount(None, "mount the test object again")
     progress(total, total, "done")
 
     cal = CalibrationFile(

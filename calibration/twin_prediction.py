@@ -9,7 +9,9 @@ read noise, no quantisation (:func:`sim_core.pipeline.expose_light` with ``noise
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Protocol
 
 from sim_core.pipeline import RenderedLight, SimulatedFrame, expose_light, render_light
 from sim_core.render import RenderSettings
@@ -22,7 +24,19 @@ from sim_core.twin_file import TwinParameters
 PREDICTION_SPP = 64
 
 
-def mounted_spec(spec: SceneSpec, objects: list[ObjectSpec], use_case) -> SceneSpec:
+class CameraUseCase(Protocol):
+    """What a calibration needs of the camera's use case (the frames' modulation and size)."""
+
+    @property
+    def frequencies_hz(self) -> Sequence[float]: ...
+    @property
+    def exposure_s(self) -> float: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+
+
+def mounted_spec(spec: SceneSpec, objects: list[ObjectSpec],
+                 use_case: CameraUseCase) -> SceneSpec:
     """``spec`` with ``objects`` on the turntable instead of its own, for ``use_case``'s frames."""
     fixed = [o for o in spec.objects if not o.on_turntable]
     camera = spec.camera.model_copy(update={

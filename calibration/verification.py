@@ -6,6 +6,10 @@ first capture (seed Table 5 metrics, :func:`sim_core.metrics.compare_images`), a
 captures with each other: the *ceiling*, what no twin can beat because the camera's own noise
 differs between two captures of the same scene. A good calibration brings the calibrated twin's
 depth RMSE close to the ceiling's.
+
+:func:`comparison_capture_plan` plans the captures (two frames per pose, kept), the service runs
+it on the rig (:func:`service.lab.acquisition.run_twin_comparison`) and :func:`compare_twins`
+compares what it is handed.
 """
 
 from __future__ import annotations
@@ -17,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.capture_plan import CapturePlan, Captures, CaptureStep
 from calibration.captures import Progress, no_progress
-from drivers.rig import Rig, RigState
 from sim_core.camera import z_over_range
 from sim_core.metrics import ComparisonReport, compare_images, mask_from_objects
 from sim_core.pipeline import simulate
@@ -68,17 +72,29 @@ def _metrics(report: ComparisonReport) -> dict[str, float]:
             "grey_psnr_db": float(g.psnr_db), "grey_ssim": float(g.ssim)}
 
 
+def _pose_step(index: int) -> str:
+    return f"pose/{index}"
+
+
+def comparison_capture_plan(angles_deg: Sequence[float], solar_suns: float = 1.0) -> CapturePlan:
+    """Each pose captured twice (two frames, kept): the first against the twins, both for the
+    ceiling."""
+    return CapturePlan(tuple(
+        CaptureStep(_pose_step(k), float(angle), solar_suns, solar_suns > 0.0, 2,
+                    keep_frames=True, message=f"pose {k + 1} at {angle:+.0f} deg")
+        for k, angle in enumerate(angles_deg)))
+
+
 def compare_twins(
-    rig: Rig,
+    captures: Captures,
     spec: SceneSpec,
     base_dir: str | Path,
     calibration: TwinParameters,
     angles_deg: Sequence[float],
-    solar_suns: float = 1.0,
     settings: RenderSettings | None = None,
     progress: Progress = no_progress,
 ) -> TwinComparison:
-    """Measure each pose twice and compare (module docstring).
+    """Compare each pose's captures of :func:`comparison_capture_plan` (module docstring).
 
     The comparison mask is the pixels the calibrated twin sees on the turntable's objects,
     inside both frames' valid pixels.
@@ -88,14 +104,13 @@ def compare_twins(
     rows = []
     turntable_ids = [i for i, o in enumerate(spec.objects) if o.on_turntable]
     for k, angle in enumerate(angles_deg):
-        progress(k, len(angles_deg), f"pose {k + 1} at {angle:+.0f} deg")
-        target = RigState(float(angle), solar_suns, solar_suns > 0.0)
-        state = rig.apply(target)
-        first, second = rig.capture(2, target=target)  # checked against it for the exposure
+        progress(k, len(angles_deg), f"twins at pose {k + 1}")
+        cap = captures[_pose_step(k)]  # the state the rig reported for its exposure
+        first, second = cap.frames
         twins = {}
         for name, twin in (("nominal", None), ("calibrated", calibration)):
-            scene = build_scene(spec, base_dir, turntable_deg=state.turntable_angle_deg,
-                                solar_suns=state.solar_suns if state.shutter_open else 0.0,
+            scene = build_scene(spec, base_dir, turntable_deg=cap.turntable_angle_deg,
+                                solar_suns=cap.solar_suns if cap.shutter_open else 0.0,
                                 twin=twin)
             frame = simulate(scene, RenderRequest(dataclasses.replace(settings, seed=1000 + k)))
             twins[name] = (scene, frame)

@@ -19,7 +19,6 @@ import numpy as np
 
 from calibration.angles import MAX_ANGLES, angle_range, check_angles, parse_angles
 from calibration.fixtures import BoardFixture, fixture_object
-from drivers.rig import RigState
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 from sim_core.scene_spec import ObjectSpec, SceneSpec
@@ -90,17 +89,16 @@ class MaterialSweepPlan:
         """Whether the sweep captures the solar slice."""
         return self.solar_suns > 0.0
 
-    def states(self, angle_deg: float) -> list[RigState]:
-        """The rig states captured at one angle: lamp only, then the solar simulator if planned."""
-        out = [RigState(angle_deg, 0.0, False)]
-        if self.with_solar:
-            out.append(RigState(angle_deg, self.solar_suns, True))
-        return out
-
     @property
     def n_captures(self) -> int:
         """Rig states the sweep visits (for progress)."""
         return len(self.angles_deg) * (2 if self.with_solar else 1)
+
+    @property
+    def n_steps(self) -> int:
+        """Steps of the whole procedure (for progress): the captures, the twin's reference of
+        each angle, the slices and fit."""
+        return self.n_captures + len(self.angles_deg) + 1
 
 
 def sample_angles(angles: str | Sequence[float], field: str) -> tuple[float, ...]:

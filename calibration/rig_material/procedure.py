@@ -1,7 +1,10 @@
 """``toftwin calibrate material``: a material's BRDF from a sample plate on the rig (issue 14, §2).
 
 1. The operator mounts the sample plate (:func:`calibration.rig_material.plan.sample_object`);
-   the rig sweeps it (:mod:`calibration.rig_material.sweep`) and the test object goes back.
+   the rig sweeps it and the test object goes back: :func:`material_capture_plan` plans it
+   (:mod:`calibration.rig_material.sweep`), the service runs the plan on the rig
+   (:func:`service.lab.acquisition.run_material_calibration`) and :func:`fit_material_sweep`
+   does 2-4 with the captures it is handed.
 2. The twin, with the calibration applied and the plate nominally mounted, renders the same
    views with a reference Lambertian (:mod:`calibration.rig_material.reference`).
 3. Measured over reference gives the retro-reflection and the solar slice
@@ -21,15 +24,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from calibration.capture_plan import CapturePlan, Captures
 from calibration.captures import Progress, no_progress
 from calibration.rig_material.fit import DEFAULT_MODEL, SliceFit, fit_slices, prior_material
 from calibration.rig_material.plan import MaterialSweepPlan, sample_object
 from calibration.rig_material.reference import reference_view
 from calibration.rig_material.slices import Slices, extract_slices
-from calibration.rig_material.sweep import capture_sweep
-from calibration.rig_sequence import Operator
-from calibration.twin_prediction import mounted_spec
-from drivers.rig import Rig
+from calibration.rig_material.sweep import sample_captures, sweep_capture_plan
+from calibration.twin_prediction import CameraUseCase, mounted_spec
 from sim_core.json_safe import json_safe
 from sim_core.materials import Material
 from sim_core.scene import build_camera
@@ -79,72 +81,84 @@ class MaterialCalibration:
         })
 
 
-def calibrate_material(
-    rig: Rig,
-    operator: Operator,
+def material_capture_plan(
+    spec: SceneSpec,
+    plan: MaterialSweepPlan,
+    model: str = DEFAULT_MODEL,
+    prior: str | Mapping[str, Any] | Material | None = None,
+) -> CapturePlan:
+    """What the procedure captures (step 1 of the module docstring): the sample plate (its
+    prior as its material in the scene) mounted, swept, and the test object mounted again.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad model or prior (before the rig moves).
+    """
+    sample = sample_object(spec, plan.size_m, _spec_of(prior_material(model, prior)))
+    return sweep_capture_plan(plan, sample)
+
+
+def fit_material_sweep(
+    captures: Captures,
     spec: SceneSpec,
     base_dir: str | Path,
     calibration: TwinParameters | None,
-    plan: MaterialSweepPlan | None = None,
+    plan: MaterialSweepPlan,
+    use_case: CameraUseCase,
     model: str = DEFAULT_MODEL,
     prior: str | Mapping[str, Any] | Material | None = None,
     progress: Progress = no_progress,
     seed: int = 0,
 ) -> MaterialCalibration:
-    """Run the procedure (module docstring).
+    """Steps 2-4 of the module docstring from the captures of :func:`material_capture_plan`.
 
     Parameters
     ----------
-    rig : Rig
-    operator : Operator
-        Mounts the sample and, at the end, the test object again.
+    captures : Captures
+        The plan's captures (:func:`service.lab.acquisition.acquire`).
     spec : SceneSpec
         The nominal scene (camera, illumination, turntable, solar simulator).
     base_dir : path
     calibration : TwinParameters or None
         The rig's calibration (``toftwin calibrate rig``); None: the nominal twin.
-    plan : MaterialSweepPlan, optional
+    plan : MaterialSweepPlan
+    use_case : CameraUseCase
+        The camera's use case the frames were taken in.
     model : str
         The material kind fitted.
     prior : preset name, material spec, Material or None
         Values of the parameters the slices do not determine (None: the model's defaults).
     progress : callable
+        Reported as steps :attr:`MaterialSweepPlan.n_captures` on of
+        :attr:`MaterialSweepPlan.n_steps`.
     seed : int
         Seed of the fit.
 
     Raises
     ------
     InvalidInputError
-        A bad plan, model or prior (before the rig moves); no usable plate pixels or retro rows
+        A bad model or prior; no usable plate pixels or retro rows
         (:func:`calibration.rig_material.slices.extract_slices`); slices that determine nothing
         (:func:`calibration.rig_material.fit.fit_slices`).
     """
-    plan = plan or MaterialSweepPlan()
-    prior_mat = prior_material(model, prior)  # fail before the rig moves
+    prior_mat = prior_material(model, prior)
     twin = calibration if calibration is not None else TwinParameters()
-    total = plan.n_captures + len(plan.angles_deg) + 1
-    t0 = time.perf_counter()
-    sample = sample_object(spec, plan.size_m, _spec_of(prior_mat))
-    operator.mount([sample], f"mount the {plan.size_m * 1e3:.0f} mm square sample plate "
-                   "upright, centred on the axis at the camera's height, facing the camera at "
-                   "the turntable's zero")
-    try:
-        captures = capture_sweep(rig, plan, progress, 0, total)
-    finally:
-        operator.mount(None, "mount the test object again")
+    total = plan.n_steps
     t1 = time.perf_counter()
+    sweep = sample_captures(captures, plan)
     reference = sample_object(spec, plan.size_m, {"kind": "lambertian",
                                                   "params": {"albedo": plan.reference_albedo}})
-    ref_spec = mounted_spec(spec, [reference], rig.camera.use_case)
+    ref_spec = mounted_spec(spec, [reference], use_case)
     references = []
-    for i, cap in enumerate(captures):
+    for i, cap in enumerate(sweep):
         progress(plan.n_captures + i, total, f"twin's reference at {cap.turntable_angle_deg:+.0f}"
                  " deg")
         references.append(reference_view(ref_spec, base_dir, twin, cap.turntable_angle_deg,
                                          plan))
     t2 = time.perf_counter()
     progress(total - 1, total, "slices and fit")
-    slices = extract_slices(captures, references, plan.bin_deg, plan.min_pixels_per_bin)
+    slices = extract_slices(sweep, references, plan.bin_deg, plan.min_pixels_per_bin)
     table = slices.table(source="rig slices",
                          wavelength_nm=float(build_camera(spec).wavelength_m * 1e9))
     result = fit_slices(table, model, prior_mat, seed=seed)
@@ -153,7 +167,7 @@ def calibrate_material(
     n_frames = plan.n_captures * plan.frames_per_state
     return MaterialCalibration(slices, result, plan, n_frames,
                                twin_hash(calibration) if calibration is not None else None,
-                               {"sweep": t1 - t0, "references": t2 - t1, "fit": t3 - t2})
+                               {"references": t2 - t1, "fit": t3 - t2})
 
 
 def _spec_of(material: Material) -> dict[str, Any]:

@@ -1,9 +1,10 @@
-"""The material sweep on the rig: averaged captures of the sample at every planned angle.
+"""The material sweep: averaged captures of the sample at every planned angle.
 
-The rig turns the sample to each angle and captures ``frames_per_state`` frames with the solar
-simulator's shutter closed (the camera's light alone: the retro-reflection slice) and, when the
-plan has a solar level, with it open (the solar slice, from the intensity's difference). The
-frames' spread gives each pixel's standard error.
+The sweep's plan (:func:`sweep_capture_plan`, run on the rig by the service) turns the sample to
+each angle and captures ``frames_per_state`` frames with the solar simulator's shutter closed
+(the camera's light alone: the retro-reflection slice) and, when the plan has a solar level,
+with it open (the solar slice, from the intensity's difference). :func:`sample_captures` groups
+the captures by angle; the frames' spread gives each pixel's standard error.
 """
 
 from __future__ import annotations
@@ -12,9 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
+from calibration.capture_plan import CapturePlan, Captures, CaptureStep, Step, mount
+from calibration.captures import AveragedCapture
 from calibration.rig_material.plan import MaterialSweepPlan
-from drivers.rig import Rig, RigState
+from sim_core.scene_spec import ObjectSpec
 
 
 @dataclass(frozen=True)
@@ -58,29 +60,39 @@ def amplitude_sem(capture: AveragedCapture) -> np.ndarray:
     return amps.std(axis=0, ddof=1) / np.sqrt(len(capture.frames))
 
 
-def capture_sweep(rig: Rig, plan: MaterialSweepPlan, progress: Progress = no_progress,
-                  done: int = 0, total: int | None = None) -> list[SampleCaptures]:
-    """Capture the plan's states (the sample must be mounted); one entry per angle."""
-    total = plan.n_captures if total is None else total
+def sweep_capture_plan(plan: MaterialSweepPlan, sample: ObjectSpec) -> CapturePlan:
+    """Mount ``sample``, capture the plan's states at every angle (lamp only, then the solar
+    simulator if planned), and mount the test object again (even when a capture fails)."""
+    steps: list[Step] = [mount([sample], f"mount the {plan.size_m * 1e3:.0f} mm square sample "
+                               "plate upright, centred on the axis at the camera's height, "
+                               "facing the camera at the turntable's zero")]
+    for i, angle in enumerate(plan.angles_deg):
+        steps.append(CaptureStep(_lamp_step(i), angle, 0.0, False, plan.frames_per_state,
+                                 keep_frames=True, message=f"sample at {angle:+.0f} deg"))
+        if plan.with_solar:
+            steps.append(CaptureStep(
+                _solar_step(i), angle, plan.solar_suns, True, plan.frames_per_state,
+                message=f"sample at {angle:+.0f} deg, solar simulator {plan.solar_suns:g} sun"))
+    return CapturePlan(tuple(steps), restore=mount(None, "mount the test object again"))
+
+
+def sample_captures(captures: Captures, plan: MaterialSweepPlan) -> list[SampleCaptures]:
+    """The captures of :func:`sweep_capture_plan`, one entry per angle."""
     out = []
-    for angle in plan.angles_deg:
-        caps: list[AveragedCapture] = []
-        for state in plan.states(angle):
-            progress(done, total, f"sample at {angle:+.0f} deg"
-                     + (f", solar simulator {state.solar_suns:g} sun" if state.shutter_open
-                        else ""))
-            caps.append(_capture(rig, state, plan.frames_per_state))
-            done += 1
-        lamp = caps[0]
+    for i in range(len(plan.angles_deg)):
+        lamp = captures[_lamp_step(i)]
+        solar = captures[_solar_step(i)] if plan.with_solar else None
         out.append(SampleCaptures(lamp.turntable_angle_deg, _drop_frames(lamp),
-                                  amplitude_sem(lamp),
-                                  _drop_frames(caps[1]) if len(caps) > 1 else None))
+                                  amplitude_sem(lamp), solar))
     return out
 
 
-def _capture(rig: Rig, state: RigState, n: int) -> AveragedCapture:
-    rig.apply(state)
-    return average_frames(rig.capture(n, target=state), keep_frames=True)
+def _lamp_step(index: int) -> str:
+    return f"sample/{index}/lamp"
+
+
+def _solar_step(index: int) -> str:
+    return f"sample/{index}/solar"
 
 
 def _drop_frames(capture: AveragedCapture) -> AveragedCapture:

@@ -1,7 +1,8 @@
 """``toftwin calibrate rig``: measure the twin's camera and rig parameters on the rig.
 
-Runs :func:`calibration.rig_sequence.calibrate_rig` on the real rig (the operator swaps the
-board and the test object when asked) or on the simulated lab (``--simulated``, optionally
+Runs the calibration sequence (:func:`service.lab.acquisition.run_rig_calibration`: the plan
+acquired on the rig, then fitted) on the real rig (the operator swaps the board and the test
+object when asked) or on the simulated lab (``--simulated``, optionally
 ``--reality FILE``: the lab's hidden truth), and writes ``DIR/calibration.yaml``,
 ``DIR/report.json`` and ``DIR/report.html`` with the residual plots.
 """
@@ -107,7 +108,9 @@ def rig_command(
 ) -> None:
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
     from calibration.report import write_report
-    from calibration.rig_sequence import SimulatedOperator, build_rig_plan, calibrate_rig
+    from calibration.rig_sequence import build_rig_plan
+    from drivers.sim.operator import SimulatedOperator
+    from service.lab.acquisition import run_rig_calibration
 
     try:
         check_rig_options(out, reality, simulated)
@@ -141,8 +144,8 @@ def rig_command(
             bar.update(task, completed=done, total=total, description=message)
 
         try:
-            result = calibrate_rig(rig, operator, source.spec, source.base_dir, plan, progress,
-                                   rig_name=rig_name)
+            result = run_rig_calibration(rig, operator, source.spec, source.base_dir, plan,
+                                         progress, rig_name=rig_name)
         except InvalidInputError as exc:
             fail_invalid(exc)
     paths = write_report(out, result)
@@ -210,14 +213,10 @@ def material_command(
 ) -> None:
     """Measure a material's BRDF on the rig: a sample plate swept by the turntable (issue 14)."""
     from calibration.brdf.material_file import write_material_file
-    from calibration.rig_material import (
-        MaterialSweepPlan,
-        calibrate_material,
-        prior_material,
-        sample_angles,
-    )
+    from calibration.rig_material import MaterialSweepPlan, prior_material, sample_angles
     from calibration.rig_material.plan import SAMPLE_NAME
-    from calibration.rig_sequence import SimulatedOperator
+    from drivers.sim.operator import SimulatedOperator
+    from service.lab.acquisition import run_material_calibration
     from sim_core.twin_file import load_calibration
 
     try:
@@ -251,14 +250,14 @@ def material_command(
             TextColumn("{task.completed}/{task.total}"),
             TimeElapsedColumn(), console=err_console, transient=True,
             disable=quiet or not err_console.is_terminal))
-        task = bar.add_task("measuring", total=plan.n_captures)
+        task = bar.add_task("measuring", total=plan.n_steps)
 
         def progress(done: int, total: int, message: str) -> None:
             bar.update(task, completed=done, total=total, description=message)
 
         try:
-            result = calibrate_material(rig, operator, source.spec, source.base_dir, cal, plan,
-                                        model, prior_mat, progress, seed=seed)
+            result = run_material_calibration(rig, operator, source.spec, source.base_dir, cal,
+                                              plan, model, prior_mat, progress, seed=seed)
         except InvalidInputError as exc:
             fail_invalid(exc)
     path = write_material_file(out, result.result.fit)

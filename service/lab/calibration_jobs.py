@@ -4,7 +4,7 @@
 CalibrationCreate`: fixtures, sweep, frames; the angles against the stage's limits), claims the
 rig (:class:`~service.lab.rig_lease.RigLease`: 409 while a campaign or another job holds it; a
 campaign, a manual move or ``POST /poses`` is refused with 409 while the job runs), stores the
-job (``queued``) and runs :func:`calibration.rig_sequence.calibrate_rig` in one thread::
+job (``queued``) and runs :func:`service.lab.acquisition.run_rig_calibration` in one thread::
 
     queued --> running --> done | failed | cancelled
 
@@ -21,7 +21,7 @@ shutdown, or at the next start) with what to do, and removes its partial output.
 (``POST /calibrations/{id}/cancel``) and the emergency stop take effect before the next capture.
 
 Who swaps what is on the turntable: on the simulated lab the lab itself
-(:class:`calibration.rig_sequence.SimulatedOperator`); on the real rig the operator, whom the
+(:class:`drivers.sim.operator.SimulatedOperator`); on the real rig the operator, whom the
 job asks through its status (``operator_instruction``) and who confirms with
 ``POST /calibrations/{id}/continue`` once the board (or the test object) is mounted.
 
@@ -257,7 +257,8 @@ class CalibrationJobs:
 
     def _work(self, run: _Run, plan: Any, activate_result: bool) -> Ending:
         from calibration.report import write_report
-        from calibration.rig_sequence import SimulatedOperator, calibrate_rig
+        from drivers.sim.operator import SimulatedOperator
+        from service.lab.acquisition import run_rig_calibration
 
         job_id = run.id
         partial = self.root / f"{_PARTIAL}{job_id}"
@@ -279,8 +280,8 @@ class CalibrationJobs:
                     raise _CancelledError()
                 self._note(job_id, message, done, total)
 
-            result = calibrate_rig(rig, operator, self.scene.spec, self.scene.base_dir, plan,
-                                   progress, rig_name=rig_name)
+            result = run_rig_calibration(rig, operator, self.scene.spec, self.scene.base_dir,
+                                         plan, progress, rig_name=rig_name)
             if run.stop.is_set():
                 raise _CancelledError()
             self._note(job_id, "writing the report")

@@ -22,17 +22,17 @@ from calibration.captures import AveragedCapture
 from calibration.rig_material import (
     SAMPLE_NAME,
     MaterialSweepPlan,
-    calibrate_material,
     extract_slices,
     prior_material,
     sample_angles,
 )
 from calibration.rig_material.reference import PlateGeometry, ReferenceView
 from calibration.rig_material.sweep import SampleCaptures
-from calibration.rig_sequence import SimulatedOperator
+from drivers.sim.operator import SimulatedOperator
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
 from service.cli import app
+from service.lab.acquisition import run_material_calibration
 from sim_core.errors import InvalidInputError
 from sim_core.materials import CookTorrance
 from sim_core.render import RenderSettings
@@ -71,8 +71,9 @@ def _measure(true: dict[str, float], reality_seed: int, plan: MaterialSweepPlan)
     operator = SimulatedOperator(world, {SAMPLE_NAME: {"kind": "cook-torrance",
                                                        "params": true}})
     with simulated_rig(frame_source=world, seed=reality_seed) as rig:
-        return calibrate_material(rig, operator, SPEC, EXAMPLES, perfect_calibration(reality),
-                                  plan, "cook-torrance", PRIOR, seed=reality_seed)
+        return run_material_calibration(rig, operator, SPEC, EXAMPLES,
+                                        perfect_calibration(reality), plan, "cook-torrance",
+                                        PRIOR, seed=reality_seed)
 
 
 def _check_recovery(result, true: dict[str, float]) -> dict[str, float]:

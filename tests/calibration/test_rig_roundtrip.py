@@ -10,10 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.rig_sequence import RigCalibrationPlan, SimulatedOperator, calibrate_rig
-from calibration.verification import compare_twins
+from calibration.rig_sequence import RigCalibrationPlan
+from drivers.sim.operator import SimulatedOperator
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
+from service.lab.acquisition import run_rig_calibration, run_twin_comparison
 from sim_core.camera import F_60_24_MHZ
 from sim_core.depth_errors import DepthErrorModel, range_to_phase_rad
 from sim_core.render import RenderSettings
@@ -36,8 +37,8 @@ def _calibrate(reality, seed, frames_per_view=4):
     world = SimulatedWorld(SPEC, EXAMPLES, RenderRequest(
         RenderSettings(integrator="direct", spp=32), effects="all"), reality=reality)
     with simulated_rig(frame_source=world, seed=seed) as rig:
-        return calibrate_rig(rig, SimulatedOperator(world), SPEC, EXAMPLES,
-                             RigCalibrationPlan(frames_per_view=frames_per_view))
+        return run_rig_calibration(rig, SimulatedOperator(world), SPEC, EXAMPLES,
+                                   RigCalibrationPlan(frames_per_view=frames_per_view))
 
 
 #: the round trip whose calibration the satellite campaign also uses (one sequence, not two)
@@ -139,9 +140,9 @@ def test_the_calibrated_twin_lands_near_the_ceiling_on_a_satellite_campaign():
     world = SimulatedWorld(SPEC, EXAMPLES, RenderRequest(
         RenderSettings(integrator="path", spp=32, max_bounces=2), effects="all"), reality=reality)
     with simulated_rig(frame_source=world, seed=7) as rig:
-        res = compare_twins(rig, SPEC, EXAMPLES, result.calibration,
-                            [-165.0 + 45.0 * i for i in range(8)],
-                            settings=RenderSettings(integrator="path", spp=32, max_bounces=2))
+        res = run_twin_comparison(rig, SPEC, EXAMPLES, result.calibration,
+                                  [-165.0 + 45.0 * i for i in range(8)],
+                                  settings=RenderSettings(integrator="path", spp=32, max_bounces=2))
     print(res.to_dict())
     assert res.poses == 8
     assert res.calibrated_over_ceiling <= 1.25, res.to_dict()

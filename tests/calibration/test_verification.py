@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from calibration.verification import compare_twins
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
+from service.lab.acquisition import run_twin_comparison
 from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
@@ -25,7 +25,8 @@ def test_a_perfect_calibration_reaches_the_ceiling_and_the_nominal_twin_does_not
     settings = RenderSettings(integrator="direct", spp=16)
     world = SimulatedWorld(spec, EXAMPLES, RenderRequest(settings, effects="all"), reality=reality)
     with simulated_rig(frame_source=world, seed=2) as rig:
-        res = compare_twins(rig, spec, EXAMPLES, perfect, [-30.0, 30.0, 90.0], settings=settings)
+        res = run_twin_comparison(rig, spec, EXAMPLES, perfect, [-30.0, 30.0, 90.0],
+                                  settings=settings)
     assert res.poses == 3
     assert res.calibrated_over_ceiling < 1.15, res.to_dict()
     assert res.nominal["depth_rmse_mm"] > 2.0 * res.calibrated["depth_rmse_mm"], res.to_dict()

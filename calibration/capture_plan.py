@@ -1,0 +1,133 @@
+"""What a calibration procedure needs captured, and the captures it is handed back.
+
+Calibration never drives the rig. Each procedure declares a :class:`CapturePlan` (mounts and
+captures, in order); the service runs it on the rig (:func:`service.lab.acquisition.acquire`:
+the operator mounts, the rig moves and captures, the frames are averaged) and hands the
+:class:`~calibration.captures.AveragedCapture` of every :class:`CaptureStep` back, keyed by the
+step's name (:data:`Captures`), to the procedure's fit. The plan names the rig state in its own
+plain values (turntable angle, solar level, shutter), so calibration imports no driver (an
+import-linter contract).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from calibration.captures import AveragedCapture
+from sim_core.errors import InvalidInputError
+from sim_core.scene_spec import ObjectSpec
+
+
+@dataclass(frozen=True)
+class CaptureStep:
+    """One rig state captured: ``frames`` frames, averaged.
+
+    Attributes
+    ----------
+    name : str
+        The key of its capture in :data:`Captures` (unique within a plan).
+    turntable_angle_deg : float
+        Reported turntable angle to move to [deg].
+    solar_suns : float
+        Set level of the solar simulator [sun] (0: lamp out).
+    shutter_open : bool
+        Whether the solar simulator's shutter lets the light through.
+    frames : int
+        Frames averaged (at least 1).
+    keep_frames : bool
+        Keep the individual frames in the capture (noise stacks, standard errors).
+    message : str
+        What the step does, in words (progress).
+    """
+
+    name: str
+    turntable_angle_deg: float
+    solar_suns: float
+    shutter_open: bool
+    frames: int
+    keep_frames: bool = False
+    message: str = ""
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.turntable_angle_deg):
+            raise InvalidInputError(f"{self.name}.turntable_angle_deg",
+                                    f"got {self.turntable_angle_deg!r}; a finite angle")
+        if not (math.isfinite(self.solar_suns) and self.solar_suns >= 0.0):
+            raise InvalidInputError(f"{self.name}.solar_suns",
+                                    f"got {self.solar_suns!r}; 0 (lamp off) or a level in suns")
+        if self.frames < 1:
+            raise InvalidInputError(f"{self.name}.frames", f"got {self.frames}; at least 1")
+
+
+@dataclass(frozen=True)
+class MountStep:
+    """The operator swaps what stands on the turntable.
+
+    Attributes
+    ----------
+    objects : tuple of ObjectSpec or None
+        What to mount (world frame at the turntable's zero); None: the test object again.
+    instruction : str
+        The same in words, for the operator.
+    """
+
+    objects: tuple[ObjectSpec, ...] | None
+    instruction: str
+
+
+#: a plan's step
+Step = CaptureStep | MountStep
+#: what a plan's captures gave: step name -> averaged capture, in the plan's order
+Captures = Mapping[str, AveragedCapture]
+
+
+@dataclass(frozen=True)
+class CapturePlan:
+    """Mounts and captures, in order.
+
+    Attributes
+    ----------
+    steps : tuple of CaptureStep or MountStep
+    restore : MountStep or None
+        A mount done after the steps even when one of them fails (the test object back).
+    """
+
+    steps: tuple[Step, ...]
+    restore: MountStep | None = None
+
+    def __post_init__(self) -> None:
+        names = [s.name for s in self.captures]
+        if len(set(names)) != len(names):
+            twice = next(n for n in names if names.count(n) > 1)
+            raise InvalidInputError("steps", f"capture '{twice}' is planned twice; each once")
+
+    @property
+    def captures(self) -> tuple[CaptureStep, ...]:
+        """The capture steps, in order."""
+        return tuple(s for s in self.steps if isinstance(s, CaptureStep))
+
+    @property
+    def n_captures(self) -> int:
+        """Rig states the plan visits (for progress)."""
+        return len(self.captures)
+
+    @property
+    def n_frames(self) -> int:
+        """Frames the plan captures."""
+        return sum(s.frames for s in self.captures)
+
+
+def mount(objects: Sequence[ObjectSpec] | None, instruction: str) -> MountStep:
+    """A :class:`MountStep` from any sequence of objects (or None)."""
+    return MountStep(None if objects is None else tuple(objects), instruction)
+
+
+class Operator(Protocol):
+    """Whoever swaps what stands on the turntable: the operator, or the simulated lab."""
+
+    def mount(self, objects: Sequence[ObjectSpec] | None, instruction: str) -> None:
+        """Mount ``objects`` (world frame at the turntable's zero) or, with None, the test
+        object again; ``instruction`` says it in words."""

@@ -1,0 +1,185 @@
+"""Acquisition: the one way a calibration's captures are taken on the rig.
+
+Calibration procedures are a plan and a fit (:mod:`calibration.capture_plan`): the plan says
+what to mount and which rig states to capture, the fit takes the averaged captures. This module
+runs any plan on the rig (:func:`acquire`: the operator mounts, the rig moves, checks where it
+is and captures, the frames are averaged by :func:`calibration.captures.average_frames`), with
+progress and the stop check in one place; and, for each procedure, the plan -> acquire -> fit in
+one call, for the command line (``toftwin calibrate ...``) and the service's calibration jobs
+alike.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from calibration.capture_plan import CapturePlan, Captures, CaptureStep, Operator
+from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
+from calibration.rig_material import (
+    DEFAULT_MODEL,
+    MaterialCalibration,
+    MaterialSweepPlan,
+    fit_material_sweep,
+    material_capture_plan,
+)
+from calibration.rig_sequence import (
+    RigCalibration,
+    RigCalibrationPlan,
+    fit_rig_calibration,
+    rig_capture_plan,
+)
+from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
+from drivers.rig import Rig, RigState
+from sim_core.materials import Material
+from sim_core.render import RenderSettings
+from sim_core.scene_spec import SceneSpec
+from sim_core.twin_file import TwinParameters
+
+
+class AcquisitionStopped(Exception):  # noqa: N818 - a stop asked for, not an error
+    """The acquisition was asked to stop; raised before the next capture."""
+
+    def __init__(self, done: int, total: int) -> None:
+        super().__init__(f"acquisition stopped after {done} of {total} captures")
+        self.done, self.total = done, total
+
+
+def never_stop() -> bool:
+    """A stop check that never asks to stop."""
+    return False
+
+
+def acquire(
+    rig: Rig,
+    operator: Operator,
+    plan: CapturePlan,
+    progress: Progress = no_progress,
+    should_stop: Callable[[], bool] = never_stop,
+    *,
+    total: int | None = None,
+) -> dict[str, AveragedCapture]:
+    """Run ``plan`` on ``rig``: its mounts by ``operator``, its captures in order.
+
+    Before each capture ``progress(done, total, step.message)`` is called (``done`` captures
+    so far; ``total`` defaults to the plan's captures: a procedure whose fit reports further
+    steps passes its own), then ``should_stop()``: if it is true, :class:`AcquisitionStopped`
+    is raised and nothing more is captured (a progress callback may raise to stop as well).
+    The plan's ``restore`` mount is done at the end, and also when a step fails or stops.
+
+    Returns
+    -------
+    dict of str to AveragedCapture
+        Each capture step's frames, averaged, keyed by the step's name, in the plan's order.
+
+    Raises
+    ------
+    AcquisitionStopped
+    DeviceError
+        The rig failed or was not in the planned state for an exposure (:meth:`Rig.apply`,
+        :meth:`Rig.capture`).
+    """
+    total = plan.n_captures if total is None else total
+    captures: dict[str, AveragedCapture] = {}
+    try:
+        for step in plan.steps:
+            if isinstance(step, CaptureStep):
+                progress(len(captures), total, step.message)
+                if should_stop():
+                    raise AcquisitionStopped(len(captures), total)
+                captures[step.name] = _capture(rig, step)
+            else:
+                operator.mount(step.objects, step.instruction)
+    finally:
+        if plan.restore is not None:
+            operator.mount(plan.restore.objects, plan.restore.instruction)
+    return captures
+
+
+def _capture(rig: Rig, step: CaptureStep) -> AveragedCapture:
+    target = RigState(step.turntable_angle_deg, step.solar_suns, step.shutter_open)
+    rig.apply(target)
+    # checked against the target for the whole exposure (Rig.capture)
+    return average_frames(rig.capture(step.frames, target=target), keep_frames=step.keep_frames)
+
+
+def run_rig_calibration(
+    rig: Rig,
+    operator: Operator,
+    spec: SceneSpec,
+    base_dir: str | Path,
+    plan: RigCalibrationPlan | None = None,
+    progress: Progress = no_progress,
+    rig_name: str = "rig",
+    should_stop: Callable[[], bool] = never_stop,
+) -> RigCalibration:
+    """``toftwin calibrate rig``: :func:`calibration.rig_sequence.rig_capture_plan`, acquired
+    on ``rig``, fitted by :func:`calibration.rig_sequence.fit_rig_calibration`.
+
+    ``spec`` is the nominal scene (camera pose, turntable, solar simulator); its mounted objects
+    are swapped for the board during the sequence and mounted again at the end.
+    """
+    plan = plan or RigCalibrationPlan()
+    captures = acquire(rig, operator, rig_capture_plan(plan, spec), progress, should_stop)
+    return fit_rig_calibration(captures, spec, base_dir, plan, rig.camera.use_case, progress,
+                               rig_name)
+
+
+def run_material_calibration(
+    rig: Rig,
+    operator: Operator,
+    spec: SceneSpec,
+    base_dir: str | Path,
+    calibration: TwinParameters | None,
+    plan: MaterialSweepPlan | None = None,
+    model: str = DEFAULT_MODEL,
+    prior: str | Mapping[str, Any] | Material | None = None,
+    progress: Progress = no_progress,
+    seed: int = 0,
+    should_stop: Callable[[], bool] = never_stop,
+) -> MaterialCalibration:
+    """``toftwin calibrate material``: :func:`calibration.rig_material.material_capture_plan`
+    (a bad model or prior fails before the rig moves), acquired on ``rig`` (the sample mounted
+    by ``operator``, the test object mounted again even if a capture fails), fitted by
+    :func:`calibration.rig_material.fit_material_sweep`; the parameters are theirs."""
+    plan = plan or MaterialSweepPlan()
+    capture_plan = material_capture_plan(spec, plan, model, prior)
+    t0 = time.perf_counter()
+    captures = acquire(rig, operator, capture_plan, progress, should_stop, total=plan.n_steps)
+    sweep_s = time.perf_counter() - t0
+    result = fit_material_sweep(captures, spec, base_dir, calibration, plan,
+                                rig.camera.use_case, model, prior, progress, seed)
+    result.seconds = {"sweep": sweep_s, **result.seconds}
+    return result
+
+
+def run_twin_comparison(
+    rig: Rig,
+    spec: SceneSpec,
+    base_dir: str | Path,
+    calibration: TwinParameters,
+    angles_deg: Sequence[float],
+    solar_suns: float = 1.0,
+    settings: RenderSettings | None = None,
+    progress: Progress = no_progress,
+    should_stop: Callable[[], bool] = never_stop,
+) -> TwinComparison:
+    """Does a calibration help? :func:`calibration.verification.comparison_capture_plan`
+    acquired on ``rig`` (with what is mounted: no operator needed), compared by
+    :func:`calibration.verification.compare_twins`."""
+    plan = comparison_capture_plan(angles_deg, solar_suns)
+    captures = acquire(rig, _NoOperator(), plan, progress, should_stop)
+    return compare_twins(captures, spec, base_dir, calibration, angles_deg, settings, progress)
+
+
+class _NoOperator:
+    """For plans without mounts."""
+
+    def mount(self, objects: Sequence[Any] | None, instruction: str) -> None:
+        raise AssertionError(f"this plan mounts nothing, yet asked: {instruction}")
+
+
+__all__ = ["AcquisitionStopped", "Captures", "acquire", "never_stop", "run_material_calibration",
+           "run_rig_calibration", "run_twin_comparison"]
