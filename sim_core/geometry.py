@@ -136,8 +136,18 @@ def face_normals(tris: np.ndarray) -> np.ndarray:
     return out
 
 
+# The two rotations a scene is posed with are written out here rather than taken from scipy's
+# ``Rotation`` (which the rest of the project uses for every conversion back, matrix to angles
+# or rotation vector): they are the scene format's definition, and a frame must not change with
+# the scipy release a lab installs. scipy goes through quaternions and lands within a few
+# 1e-16 of these, not on them, so a frame would differ in its last bits between the two.
+# tests/sim_core/test_geometry.py holds them to scipy's ``from_euler("xyz")`` and
+# ``from_rotvec`` on random angles and axes.
+
+
 def rotation_matrix_xyz_deg(angles_deg) -> np.ndarray:
-    """Rotation from extrinsic x, then y, then z rotations [deg] (R = Rz @ Ry @ Rx)."""
+    """Rotation from extrinsic x, then y, then z rotations [deg] (R = Rz @ Ry @ Rx; scipy's
+    ``Rotation.from_euler("xyz", angles_deg, degrees=True)``)."""
     ax, ay, az = np.radians(np.asarray(angles_deg, dtype=np.float64))
     cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
     rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
@@ -147,7 +157,8 @@ def rotation_matrix_xyz_deg(angles_deg) -> np.ndarray:
 
 
 def axis_angle_matrix(axis, angle_rad: float) -> np.ndarray:
-    """Rotation by ``angle_rad`` about unit ``axis`` (Rodrigues), 3x3."""
+    """Rotation by ``angle_rad`` about ``axis`` (Rodrigues), 3x3 (scipy's
+    ``Rotation.from_rotvec(axis / |axis| * angle_rad)``)."""
     k = np.asarray(axis, dtype=np.float64)
     k = k / np.linalg.norm(k)
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])

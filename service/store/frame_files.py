@@ -2,9 +2,10 @@
 
 A frame is written into ``frames/.partial-<id>/`` (each file itself written to a temporary name
 and renamed by :mod:`sim_core.frame_io`), then the folder is renamed to ``frames/<id>/`` and the
-parent directory is fsynced: a reader sees a whole frame or none. The database row naming the
-frame is committed afterwards, with the result that uses it; :meth:`FrameStore.sweep` removes
-what a crash left between the two (partial folders, folders without a row).
+parent directory is fsynced (:func:`sim_core.files.fsync_dir`): a reader sees a whole frame or
+none. The database row naming the frame is committed afterwards, with the result that uses it;
+:meth:`FrameStore.sweep` removes what a crash left between the two (partial folders, folders
+without a row).
 
 The layout of a frame folder (the same as ``toftwin simulate --out``) is the frame format of
 :mod:`sim_core.frame_io` (docs/frame-format.md), which writes and reads every file of it.
@@ -39,6 +40,7 @@ from service.store.disk_space import SpaceReserve
 from sim_core import frame_io
 from sim_core.camera import Camera
 from sim_core.errors import InvalidInputError
+from sim_core.files import fsync_dir
 from sim_core.raw import RawFrame
 from sim_core.tof import ToFImage
 
@@ -170,7 +172,7 @@ class FrameStore:
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
-        _fsync_dir(self.root)
+        fsync_dir(self.root)
         return final
 
     def save_files(self, frame_id: str, files: dict[str, bytes]) -> Path:
@@ -239,15 +241,3 @@ class FrameStore:
                 shutil.rmtree(p, ignore_errors=True)
                 removed.append(p.name)
         return removed
-
-
-def _fsync_dir(path: Path) -> None:
-    """Make a rename in ``path`` durable (POSIX: fsync the directory)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:  # e.g. Windows: directories cannot be opened; rename is durable enough
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
