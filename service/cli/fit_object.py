@@ -68,7 +68,7 @@ def fit_object_command(
     seed: CameraSeedOption = 0,
 ) -> None:
     """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
-    from calibration.angles import parse_angles
+    from calibration.angles import AngleLimits, parse_angles
     from calibration.captures import average_frames
     from calibration.object_twin.fit import fit_object
     from drivers.rig import RigState
@@ -78,8 +78,8 @@ def fit_object_command(
 
     try:
         check_rig_options(out, reality, simulated)
-        angle_list = parse_angles(angles, field="--angles", max_count=MAX_FIT_ANGLES,
-                                  distinct=True)
+        angle_list = parse_angles(angles, field="--angles",
+                                  limits=AngleLimits(max_count=MAX_FIT_ANGLES, distinct=True))
         source = rig_scene(scene)
         cal = (load_calibration(calibration) if calibration is not None
                else scene_twin(source.spec.model_copy(update={"object_twin": None}),
