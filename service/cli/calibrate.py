@@ -54,6 +54,13 @@ SWEEP_OPTIONS = {"sweep": "--sweep-from/--sweep-to/--sweep-step", "from_deg": "-
 
 calibrate_app = command_group("Measure the twin's camera and rig parameters.")
 
+#: ``--scene`` of the rig's calibrations: the scene whose camera, turntable and solar simulator
+#: the rig is
+SceneOption = Annotated[
+    str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
+                      "solar simulator.")
+]
+
 
 class ConsoleOperator:
     """The operator at the real rig: asked on the terminal to swap what is on the turntable."""
@@ -78,10 +85,7 @@ def rig_command(
         bool, typer.Option("--simulated", help="Calibrate the simulated lab's rig.")
     ] = False,
     reality: RealityOption = None,
-    scene: Annotated[
-        str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
-                          "solar simulator.")
-    ] = "satellite_ground_test",
+    scene: SceneOption = "satellite_ground_test",
     frames_per_view: Annotated[
         int, number_option("--frames-per-view", help="Frames averaged per board view.",
                            allowed=ranges.FRAMES_PER_VIEW)
@@ -189,10 +193,7 @@ def material_command(
                              "[sun]; 0 leaves it out.",
                              allowed=ranges.SOLAR_SUNS_OR_OFF)
     ] = 0.8,
-    scene: Annotated[
-        str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
-                          "solar simulator.")
-    ] = "satellite_ground_test",
+    scene: SceneOption = "satellite_ground_test",
     camera_spp: CameraSppOption = 32,
     seed: Annotated[
         int, number_option("--seed", help="Noise seed of the simulated camera and the fit.",
