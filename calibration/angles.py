@@ -12,8 +12,9 @@ either
 
 Numbers are decimals (``12``, ``-12.5``, ``1e1``); every angle is finite. The range's angles are
 rounded to 1e-9 deg, so that ``0:1:0.1`` gives ``0.3`` rather than ``0.30000000000000004``.
-What a caller allows (the angles' span, how many, whether each only once) is given with each
-call, and an error names the option or field the caller gives and the allowed range.
+What a caller allows (the angles' span, how many, whether each only once: an
+:class:`AngleLimits`) is given with each call, and an error names the option or field the
+caller gives and the allowed range.
 
 **The sweep rule** (:func:`sweep_angles`): the board sweep of the rig calibration
 (``toftwin calibrate rig --sweep-from --sweep-to --sweep-step`` and the service's
@@ -28,6 +29,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 from sim_core.errors import InvalidInputError
 
@@ -44,25 +46,13 @@ _SEPARATOR = re.compile(r"[,\s]+")
 _FORMS = "give FROM:TO:STEP (e.g. -30:30:10) or a list (e.g. -30, 0, 30)"
 
 
-def parse_angles(
-    text: str,
-    *,
-    field: str,
-    lo_deg: float = ANGLE_RANGE_DEG[0],
-    hi_deg: float = ANGLE_RANGE_DEG[1],
-    min_count: int = 1,
-    max_count: int = MAX_ANGLES,
-    distinct: bool = False,
-    why_range: str = "",
-) -> tuple[float, ...]:
-    """The turntable angles [deg] of ``text``: ``"FROM:TO:STEP"`` or ``"a, b, c"``.
+@dataclass(frozen=True)
+class AngleLimits:
+    """What a caller allows of a list of turntable angles (:func:`parse_angles`,
+    :func:`check_angles`).
 
-    Parameters
+    Attributes
     ----------
-    text : str
-        The angles as typed.
-    field : str
-        The option or field the errors name (``"--angles"``).
     lo_deg, hi_deg : float
         Each angle is in [lo_deg, hi_deg].
     min_count, max_count : int
@@ -71,6 +61,32 @@ def parse_angles(
         Whether each angle may appear only once.
     why_range : str
         Why the angles keep to [lo_deg, hi_deg], said when one does not.
+    """
+
+    lo_deg: float = ANGLE_RANGE_DEG[0]
+    hi_deg: float = ANGLE_RANGE_DEG[1]
+    min_count: int = 1
+    max_count: int = MAX_ANGLES
+    distinct: bool = False
+    why_range: str = ""
+
+
+#: any turntable angles: 1 to :data:`MAX_ANGLES` in :data:`ANGLE_RANGE_DEG`, repeats allowed
+ANY_ANGLES = AngleLimits()
+
+
+def parse_angles(text: str, *, field: str,
+                 limits: AngleLimits = ANY_ANGLES) -> tuple[float, ...]:
+    """The turntable angles [deg] of ``text``: ``"FROM:TO:STEP"`` or ``"a, b, c"``.
+
+    Parameters
+    ----------
+    text : str
+        The angles as typed.
+    field : str
+        The option or field the errors name (``"--angles"``).
+    limits : AngleLimits
+        Their span, how many, whether each only once.
 
     Raises
     ------
@@ -82,7 +98,7 @@ def parse_angles(
     (-10.0, -5.0, 0.0, 5.0, 10.0)
     >>> parse_angles("0, 12.5 30", field="--angles")
     (0.0, 12.5, 30.0)
-    >>> parse_angles("0, 0", field="--angles", distinct=True)
+    >>> parse_angles("0, 0", field="--angles", limits=AngleLimits(distinct=True))
     Traceback (most recent call last):
     ...
     sim_core.errors.InvalidInputError: --angles: 0 deg is given twice; allowed: each angle once
@@ -93,11 +109,10 @@ def parse_angles(
         if len(parts) != 3:
             raise InvalidInputError(field, f"'{t}' has {len(parts)} parts; {_FORMS}")
         start, stop, step = (_number(p, field) for p in parts)
-        angles = angle_range(start, stop, step, field=field, max_count=max_count)
+        angles = angle_range(start, stop, step, field=field, max_count=limits.max_count)
     else:
         angles = tuple(_number(p, field) for p in _SEPARATOR.split(t) if p)
-    return check_angles(angles, field=field, lo_deg=lo_deg, hi_deg=hi_deg, min_count=min_count,
-                        max_count=max_count, distinct=distinct, why_range=why_range)
+    return check_angles(angles, field=field, limits=limits)
 
 
 def angle_range(
@@ -131,28 +146,20 @@ def angle_range(
     return tuple(min(round(start_deg + i * step_deg, 9), stop_deg) + 0.0 for i in range(n))
 
 
-def check_angles(
-    angles: Sequence[float],
-    *,
-    field: str,
-    lo_deg: float = ANGLE_RANGE_DEG[0],
-    hi_deg: float = ANGLE_RANGE_DEG[1],
-    min_count: int = 1,
-    max_count: int = MAX_ANGLES,
-    distinct: bool = False,
-    why_range: str = "",
-) -> tuple[float, ...]:
-    """``angles`` as floats if they keep the limits (see :func:`parse_angles`), else an input
-    error naming ``field`` and the allowed range."""
+def check_angles(angles: Sequence[float], *, field: str,
+                 limits: AngleLimits = ANY_ANGLES) -> tuple[float, ...]:
+    """``angles`` as floats if they keep the ``limits``, else an input error naming ``field``
+    and the allowed range."""
+    lo, hi, why = limits.lo_deg, limits.hi_deg, limits.why_range
     out = tuple(float(a) for a in angles)
-    if not min_count <= len(out) <= max_count:
-        raise InvalidInputError(field, f"{len(out)} angle(s); allowed: {min_count} to "
-                                f"{max_count}")
-    bad = [a for a in out if not (math.isfinite(a) and lo_deg <= a <= hi_deg)]
+    if not limits.min_count <= len(out) <= limits.max_count:
+        raise InvalidInputError(field, f"{len(out)} angle(s); allowed: {limits.min_count} to "
+                                f"{limits.max_count}")
+    bad = [a for a in out if not (math.isfinite(a) and lo <= a <= hi)]
     if bad:
-        raise InvalidInputError(field, f"{bad[0]!r} deg is outside the allowed [{lo_deg:g}, "
-                                f"{hi_deg:g}] deg" + (f" ({why_range})" if why_range else ""))
-    if distinct and len(set(out)) != len(out):
+        raise InvalidInputError(field, f"{bad[0]!r} deg is outside the allowed [{lo:g}, "
+                                f"{hi:g}] deg" + (f" ({why})" if why else ""))
+    if limits.distinct and len(set(out)) != len(out):
         twice = next(a for i, a in enumerate(out) if a in out[:i])
         raise InvalidInputError(field, f"{twice:g} deg is given twice; allowed: each angle once")
     return out

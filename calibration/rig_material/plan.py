@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.angles import MAX_ANGLES, angle_range, check_angles, parse_angles
+from calibration.angles import AngleLimits, angle_range, check_angles, parse_angles
 from calibration.fixtures import BoardFixture, fixture_object
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
@@ -29,6 +29,9 @@ SAMPLE_NAME = "material_sample"
 DEFAULT_ANGLES_DEG: tuple[float, ...] = angle_range(-70.0, 70.0, 5.0, field="angles_deg")
 #: the sample's turntable angles [deg]: beyond, the plate is seen edge-on
 SAMPLE_ANGLE_RANGE_DEG: tuple[float, float] = (-85.0, 85.0)
+#: the sample's turntable angles as :func:`sample_angles` allows them
+SAMPLE_ANGLE_LIMITS = AngleLimits(*SAMPLE_ANGLE_RANGE_DEG,
+                                  why_range="beyond, the plate is seen edge-on")
 
 
 @dataclass(frozen=True)
@@ -109,12 +112,9 @@ def sample_angles(angles: str | Sequence[float], field: str) -> tuple[float, ...
     >>> sample_angles("-10:10:5", "--angles")
     (-10.0, -5.0, 0.0, 5.0, 10.0)
     """
-    limits = {"field": field, "lo_deg": SAMPLE_ANGLE_RANGE_DEG[0],
-              "hi_deg": SAMPLE_ANGLE_RANGE_DEG[1], "min_count": 1, "max_count": MAX_ANGLES,
-              "why_range": "beyond, the plate is seen edge-on"}
     if isinstance(angles, str):
-        return parse_angles(angles, **limits)
-    return check_angles(angles, **limits)
+        return parse_angles(angles, field=field, limits=SAMPLE_ANGLE_LIMITS)
+    return check_angles(angles, field=field, limits=SAMPLE_ANGLE_LIMITS)
 
 
 def sample_fixture(spec: SceneSpec) -> BoardFixture:

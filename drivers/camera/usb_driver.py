@@ -53,17 +53,13 @@ from drivers.camera.protocol import (
     CameraNotFoundError,
 )
 from drivers.camera.wire import (
-    REQ_GET_STATUS,
-    REQ_SET_USE_CASE,
-    REQ_START,
-    REQ_STOP,
-    REQUEST_IN,
-    REQUEST_OUT,
     STATUS_SIZE,
     WIRE_VERSION,
     CorruptFrameError,
     DeviceStatus,
     FrameError,
+    Request,
+    RequestType,
     TruncatedFrameError,
     UseCase,
     decode_frame,
@@ -274,7 +270,7 @@ class UsbCamera:
             return
         if self._streaming:
             with contextlib.suppress(DeviceError, usb.core.USBError):
-                self._ctrl_out(REQ_STOP, 0, "STOP")
+                self._ctrl_out(Request.STOP, 0, "STOP")
         self._streaming = False
         self._release()
 
@@ -378,9 +374,9 @@ class UsbCamera:
             extra={"wire_version": str(status.wire_version), "usb_version": bcd(dev.bcdUSB)},
         )
         if status.streaming:  # left running by an earlier session
-            self._ctrl_out(REQ_STOP, 0, "STOP")
+            self._ctrl_out(Request.STOP, 0, "STOP")
         uc = self._use_case
-        self._ctrl_out(REQ_SET_USE_CASE, uc.code, f"SET_USE_CASE({uc.name})")
+        self._ctrl_out(Request.SET_USE_CASE, uc.code, f"SET_USE_CASE({uc.name})")
 
     def _release(self) -> None:
         dev, self._dev = self._dev, None
@@ -442,7 +438,7 @@ class UsbCamera:
         dev = self._require()
         try:
             dev.ctrl_transfer(
-                REQUEST_OUT, request, value, 0, None, _ms(self.settings.ctrl_timeout_s)
+                RequestType.OUT, request, value, 0, None, _ms(self.settings.ctrl_timeout_s)
             )
         except usb.core.USBError as exc:
             if is_usb_error(exc, LIBUSB_PIPE, errno.EPIPE):
@@ -456,7 +452,7 @@ class UsbCamera:
         """Read GET_STATUS (wire version, use case, streaming, last error, next sequence)."""
         dev = self._require()
         data = dev.ctrl_transfer(
-            REQUEST_IN, REQ_GET_STATUS, 0, 0, STATUS_SIZE, _ms(self.settings.ctrl_timeout_s)
+            RequestType.IN, Request.GET_STATUS, 0, 0, STATUS_SIZE, _ms(self.settings.ctrl_timeout_s)
         )
         return decode_status(bytes(data))
 
@@ -483,7 +479,7 @@ class UsbCamera:
             self.stop()
 
         def send() -> None:
-            self._ctrl_out(REQ_SET_USE_CASE, uc.code, f"SET_USE_CASE({uc.name})")
+            self._ctrl_out(Request.SET_USE_CASE, uc.code, f"SET_USE_CASE({uc.name})")
 
         self._use_case = uc  # set first, so that a reconnect restores the new one
         self._with_reconnect(send)
@@ -497,7 +493,7 @@ class UsbCamera:
             return
 
         def send() -> None:
-            self._ctrl_out(REQ_START, 0, "START")
+            self._ctrl_out(Request.START, 0, "START")
 
         self._with_reconnect(send)
         self._streaming = True
@@ -510,7 +506,7 @@ class UsbCamera:
             return
         self._streaming = False
         try:
-            self._ctrl_out(REQ_STOP, 0, "STOP")
+            self._ctrl_out(Request.STOP, 0, "STOP")
         except usb.core.USBError as exc:
             if not self._gone(exc):
                 raise CameraError(f"{self.name}: USB error on STOP: {exc}") from exc

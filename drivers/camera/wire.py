@@ -26,6 +26,7 @@ import math
 import struct
 import zlib
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -42,12 +43,6 @@ __all__ = [
     "MAX_RAW",
     "N_PHASES",
     "RAW_OFFSET",
-    "REQUEST_IN",
-    "REQUEST_OUT",
-    "REQ_GET_STATUS",
-    "REQ_SET_USE_CASE",
-    "REQ_START",
-    "REQ_STOP",
     "STATUS",
     "STATUS_ERRORS",
     "STATUS_SIZE",
@@ -57,6 +52,8 @@ __all__ = [
     "DeviceStatus",
     "FrameError",
     "FrameHeader",
+    "Request",
+    "RequestType",
     "TruncatedFrameError",
     "UseCase",
     "WireFrame",
@@ -92,13 +89,21 @@ HEADER = struct.Struct("<4sBBHIBBBBHHIQIIII12xI")
 assert HEADER.size == HEADER_SIZE
 
 # -- control requests ----------------------------------------------------------------------
-#: bmRequestType of our vendor requests: vendor, recipient device, OUT / IN.
-REQUEST_OUT = 0x40
-REQUEST_IN = 0xC0
-REQ_SET_USE_CASE = 0x01  # OUT, wValue = use case code, no data
-REQ_START = 0x02  # OUT, start streaming
-REQ_STOP = 0x03  # OUT, stop streaming, drop any frame in flight
-REQ_GET_STATUS = 0x10  # IN, wLength = 16
+class RequestType(IntEnum):
+    """bmRequestType of our vendor requests: vendor, recipient device, OUT / IN."""
+
+    OUT = 0x40
+    IN = 0xC0
+
+
+class Request(IntEnum):
+    """bRequest of our vendor requests."""
+
+    SET_USE_CASE = 0x01  # OUT, wValue = use case code, no data
+    START = 0x02  # OUT, start streaming
+    STOP = 0x03  # OUT, stop streaming, drop any frame in flight
+    GET_STATUS = 0x10  # IN, wLength = 16
+
 
 #: GET_STATUS reply: wire version, use case code (0 = none), streaming, last error, width,
 #: height, next sequence number, firmware version (BCD), 2 reserved bytes.

@@ -40,14 +40,10 @@ import usb.backend
 import usb.core
 
 from drivers.camera.wire import (
-    REQ_GET_STATUS,
-    REQ_SET_USE_CASE,
-    REQ_START,
-    REQ_STOP,
-    REQUEST_IN,
-    REQUEST_OUT,
     WIRE_VERSION,
     DeviceStatus,
+    Request,
+    RequestType,
     UseCase,
     encode_raw_frame,
     encode_status,
@@ -557,12 +553,13 @@ class SimulatedUsbCamera:
                 if desc is None:
                     raise _usb_error(_PIPE)
                 return _fill(data, desc)
-            if request_type == REQUEST_OUT and self.speaks_wire:
+            if request_type == RequestType.OUT and self.speaks_wire:
                 self._vendor_out(request, value)
                 return 0
-            if request_type == REQUEST_IN and self.speaks_wire and request == REQ_GET_STATUS:
+            if (request_type == RequestType.IN and self.speaks_wire
+                    and request == Request.GET_STATUS):
                 return _fill(data, encode_status(self.status()))
-            if request_type in (REQUEST_IN, REQUEST_OUT) and self.speaks_wire:
+            if request_type in (RequestType.IN, RequestType.OUT) and self.speaks_wire:
                 self.last_error = 1
             raise _usb_error(_PIPE)  # a stall: request not supported
 
@@ -571,14 +568,14 @@ class SimulatedUsbCamera:
             self.last_error = code
             raise _usb_error(_PIPE)
 
-        if request == REQ_SET_USE_CASE:
+        if request == Request.SET_USE_CASE:
             if self.streaming:
                 refuse(3)
             try:
                 self.use_case = get_use_case(value)
             except DeviceInputError:
                 refuse(2)
-        elif request == REQ_START:
+        elif request == Request.START:
             if self.use_case is None:
                 refuse(4)
             if not self.streaming:
@@ -586,7 +583,7 @@ class SimulatedUsbCamera:
                 self._epoch += 1
                 self._stream_t0 = time.monotonic()
                 self._stream_k = 0
-        elif request == REQ_STOP:
+        elif request == Request.STOP:
             self.streaming = False
             self._epoch += 1
             self._transfer = None

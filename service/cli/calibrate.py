@@ -9,15 +9,13 @@ object when asked) or on the simulated lab (``--simulated``, optionally
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from calibration.angles import (
     SWEEP_COUNT_RANGE,
@@ -26,24 +24,42 @@ from calibration.angles import (
     SWEEP_TO_DEG,
 )
 from service.cli import ranges
-from service.cli.command_settings import open_command_rig, rig_settings
+from service.cli.command_settings import (
+    CameraSeedOption,
+    CameraSppOption,
+    OutFolderOption,
+    RealityOption,
+    open_command_rig,
+    rig_settings,
+)
 from service.cli.common import (
+    QuietOption,
     check_rig_options,
     command_group,
     console,
-    err_console,
     fail_invalid,
     number_option,
     print_warning,
     rig_scene,
+    step_progress,
 )
 from sim_core.errors import InvalidInputError
+
+if TYPE_CHECKING:
+    from drivers.sim.world import SimulatedWorld
 
 #: the board sweep's inputs as the options name them (calibration.angles.sweep_angles)
 SWEEP_OPTIONS = {"sweep": "--sweep-from/--sweep-to/--sweep-step", "from_deg": "--sweep-from",
                  "to_deg": "--sweep-to", "step_deg": "--sweep-step"}
 
 calibrate_app = command_group("Measure the twin's camera and rig parameters.")
+
+#: ``--scene`` of the rig's calibrations: the scene whose camera, turntable and solar simulator
+#: the rig is
+SceneOption = Annotated[
+    str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
+                      "solar simulator.")
+]
 
 
 class ConsoleOperator:
@@ -54,20 +70,22 @@ class ConsoleOperator:
                       abort=True, err=True)
 
 
+def _operator(world: SimulatedWorld | None, materials: Mapping[str, Any] | None = None):
+    """Who swaps what is on the turntable: the simulated lab's operator (mounting
+    ``materials`` where a plan asks for them), or the one at the real rig (no world)."""
+    from drivers.sim.operator import SimulatedOperator
+
+    return ConsoleOperator() if world is None else SimulatedOperator(world, materials=materials)
+
+
 @calibrate_app.command("rig")
 def rig_command(
-    out: Annotated[Path, typer.Option("--out", help="Output folder (must not exist).")],
+    out: OutFolderOption,
     simulated: Annotated[
         bool, typer.Option("--simulated", help="Calibrate the simulated lab's rig.")
     ] = False,
-    reality: Annotated[
-        Path | None,
-        typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
-    ] = None,
-    scene: Annotated[
-        str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
-                          "solar simulator.")
-    ] = "satellite_ground_test",
+    reality: RealityOption = None,
+    scene: SceneOption = "satellite_ground_test",
     frames_per_view: Annotated[
         int, number_option("--frames-per-view", help="Frames averaged per board view.",
                            allowed=ranges.FRAMES_PER_VIEW)
@@ -94,13 +112,9 @@ def rig_command(
                            "the frames do not determine the solar simulator's scale.",
                       allowed=ranges.REFERENCE_SUNS),
     ] = None,
-    camera_spp: Annotated[
-        int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
-                           allowed=ranges.CAMERA_SPP)
-    ] = 32,
-    seed: Annotated[int, number_option("--seed", help="Noise seed of the simulated camera.",
-                                       allowed=ranges.CAMERA_SEED)] = 0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    camera_spp: CameraSppOption = 32,
+    seed: CameraSeedOption = 0,
+    quiet: QuietOption = False,
     print_plan: Annotated[
         bool, typer.Option("--print-plan", help="Print the plan (what the sequence captures) "
                            "as JSON and stop, the rig untouched.")
@@ -109,7 +123,6 @@ def rig_command(
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
     from calibration.report import write_report
     from calibration.rig_sequence import build_rig_plan
-    from drivers.sim.operator import SimulatedOperator
     from service.lab.acquisition import run_rig_calibration
 
     try:
@@ -126,25 +139,11 @@ def rig_command(
         fail_invalid(exc)
     settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
                             camera_integrator="direct", camera_seed=seed)
-    with contextlib.ExitStack() as stack:
-        rig, world = open_command_rig(settings, source)
-        stack.enter_context(rig)
-        if world is not None:
-            operator, rig_name = SimulatedOperator(world), "simulated"
-        else:
-            operator, rig_name = ConsoleOperator(), "lab"
-        bar = stack.enter_context(Progress(
-            TextColumn("{task.description}", markup=False), BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
-            TimeElapsedColumn(), console=err_console, transient=True,
-            disable=quiet or not err_console.is_terminal))
-        task = bar.add_task("calibrating", total=plan.n_captures)
-
-        def progress(done: int, total: int, message: str) -> None:
-            bar.update(task, completed=done, total=total, description=message)
-
+    with (open_command_rig(settings, source) as (rig, world),
+          step_progress(quiet, "calibrating", plan.n_captures) as progress):
+        rig_name = "lab" if world is None else "simulated"
         try:
-            result = run_rig_calibration(rig, operator, source.spec, source.base_dir, plan,
+            result = run_rig_calibration(rig, _operator(world), source.spec, source.base_dir, plan,
                                          progress, rig_name=rig_name)
         except InvalidInputError as exc:
             fail_invalid(exc)
@@ -160,10 +159,7 @@ def material_command(
     simulated: Annotated[
         bool, typer.Option("--simulated", help="Measure on the simulated lab's rig.")
     ] = False,
-    reality: Annotated[
-        Path | None,
-        typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
-    ] = None,
+    reality: RealityOption = None,
     sample_material: Annotated[
         str | None,
         typer.Option("--sample-material",
@@ -197,25 +193,18 @@ def material_command(
                              "[sun]; 0 leaves it out.",
                              allowed=ranges.SOLAR_SUNS_OR_OFF)
     ] = 0.8,
-    scene: Annotated[
-        str, typer.Option(help="Bundled scene name or scene file: camera pose, turntable, "
-                          "solar simulator.")
-    ] = "satellite_ground_test",
-    camera_spp: Annotated[
-        int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
-                           allowed=ranges.CAMERA_SPP)
-    ] = 32,
+    scene: SceneOption = "satellite_ground_test",
+    camera_spp: CameraSppOption = 32,
     seed: Annotated[
         int, number_option("--seed", help="Noise seed of the simulated camera and the fit.",
                            allowed=ranges.CAMERA_SEED)
     ] = 0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """Measure a material's BRDF on the rig: a sample plate swept by the turntable (issue 14)."""
     from calibration.brdf.material_file import write_material_file
     from calibration.rig_material import MaterialSweepPlan, prior_material, sample_angles
     from calibration.rig_material.plan import SAMPLE_NAME
-    from drivers.sim.operator import SimulatedOperator
     from service.lab.acquisition import run_material_calibration
     from sim_core.twin_file import load_calibration
 
@@ -238,25 +227,11 @@ def material_command(
         fail_invalid(exc)
     settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
                             camera_integrator="direct", camera_seed=seed)
-    with contextlib.ExitStack() as stack:
-        rig, world = open_command_rig(settings, source)
-        stack.enter_context(rig)
-        if world is not None:
-            operator = SimulatedOperator(world, materials=truth)
-        else:
-            operator = ConsoleOperator()
-        bar = stack.enter_context(Progress(
-            TextColumn("{task.description}", markup=False), BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
-            TimeElapsedColumn(), console=err_console, transient=True,
-            disable=quiet or not err_console.is_terminal))
-        task = bar.add_task("measuring", total=plan.n_steps)
-
-        def progress(done: int, total: int, message: str) -> None:
-            bar.update(task, completed=done, total=total, description=message)
-
+    with (open_command_rig(settings, source) as (rig, world),
+          step_progress(quiet, "measuring", plan.n_steps) as progress):
         try:
-            result = run_material_calibration(rig, operator, source.spec, source.base_dir, cal,
+            result = run_material_calibration(rig, _operator(world, truth), source.spec,
+                                              source.base_dir, cal,
                                               plan, model, prior_mat, progress, seed=seed)
         except InvalidInputError as exc:
             fail_invalid(exc)

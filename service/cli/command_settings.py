@@ -7,19 +7,22 @@ invalid value an exit with code 2 naming the option (or the variable). The rig c
 get their rig from the service's own builder (:func:`open_command_rig`, which calls
 :func:`service.lab.rig_builder.open_rig`), so that the same environment gives the command line
 and the service the same rig: the same ports, turntable address and camera serial for the real
-one; the same faults, motion and reality for the simulated lab.
+one; the same faults, motion and reality for the simulated lab. The options they declare alike
+(``--reality``, ``--camera-spp``, ...) are declared here once.
 """
 
 from __future__ import annotations
 
+import contextlib
 import secrets
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from service.cli.common import print_error
+from service.cli import ranges
+from service.cli.common import number_option, print_error
 
 if TYPE_CHECKING:
     from drivers.rig import Rig
@@ -30,6 +33,25 @@ if TYPE_CHECKING:
 #: the settings the options of a rig command set: field -> option
 RIG_OPTION_OF_FIELD = {"simulated": "--simulated", "reality": "--reality",
                        "camera_spp": "--camera-spp", "camera_seed": "--seed"}
+
+# -- the options of the rig commands (typer copies an option for each command that uses it) ----
+#: ``--out``: the folder a rig command writes (``calibrate rig``, ``fit-object``)
+OutFolderOption = Annotated[Path, typer.Option("--out", help="Output folder (must not exist).")]
+#: ``--reality``: the simulated lab's hidden truth
+RealityOption = Annotated[
+    Path | None,
+    typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
+]
+#: ``--camera-spp``: how finely the simulated camera renders
+CameraSppOption = Annotated[
+    int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
+                       allowed=ranges.CAMERA_SPP)
+]
+#: ``--seed``: the simulated camera's noise (``calibrate material`` says what else it seeds)
+CameraSeedOption = Annotated[
+    int, number_option("--seed", help="Noise seed of the simulated camera.",
+                       allowed=ranges.CAMERA_SEED)
+]
 
 
 def load_settings(settings_file: Path | None, option_of_field: Mapping[str, str],
@@ -70,9 +92,11 @@ def rig_settings(*, simulated: bool, reality: Path | None, camera_spp: int,
                          camera_integrator=camera_integrator, camera_seed=camera_seed)
 
 
-def open_command_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, SimulatedWorld | None]:
+@contextlib.contextmanager
+def open_command_rig(settings: Settings,
+                     scene: SceneSource) -> Iterator[tuple[Rig, SimulatedWorld | None]]:
     """The rig of ``settings`` (:func:`service.lab.rig_builder.open_rig`) and the simulated
-    lab's world (None for the real rig).
+    lab's world (None for the real rig), the rig closed when the block is left.
 
     A real rig without its ports exits with code 2 naming the missing ``TOFTWIN_*`` variables;
     a device that cannot be opened exits with code 1 naming it.
@@ -82,10 +106,12 @@ def open_command_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, Simul
     from service.lab.rig_builder import open_rig
 
     try:
-        return open_rig(settings, scene)
+        rig, world = open_rig(settings, scene)
     except UnavailableError as exc:
         print_error(exc.detail)
         raise typer.Exit(code=2) from None
     except (DeviceError, OSError) as exc:
         print_error(f"the rig cannot be opened: {type(exc).__name__}: {exc}")
         raise typer.Exit(code=1) from None
+    with rig:
+        yield rig, world

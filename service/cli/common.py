@@ -9,12 +9,13 @@ command is plain text (``rich_markup_mode=None``, see :func:`command_group`), an
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
@@ -194,6 +195,28 @@ def progress_bar(quiet: bool) -> Progress:
         disable=quiet or not err_console.is_terminal,
         transient=True,
     )
+
+
+#: ``--quiet``: no progress bar (:func:`progress_bar`, :func:`step_progress`)
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
+
+
+@contextlib.contextmanager
+def step_progress(quiet: bool, description: str,
+                  total: int) -> Iterator[Callable[[int, int, str], None]]:
+    """A progress bar on stderr over the ``total`` steps of a procedure on the rig (off in a
+    pipe or with ``quiet``) while the block runs; yields the ``progress(done, total, message)``
+    callback the procedure reports to."""
+    with Progress(TextColumn("{task.description}", markup=False), BarColumn(),
+                  TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=err_console, transient=True,
+                  disable=quiet or not err_console.is_terminal) as bar:
+        task = bar.add_task(description, total=total)
+
+        def progress(done: int, total: int, message: str) -> None:
+            bar.update(task, completed=done, total=total, description=message)
+
+        yield progress
 
 
 def check_rig_options(out: Path, reality: Path | None, simulated: bool) -> None:

@@ -10,7 +10,6 @@ and writes ``DIR/object.yaml`` (the object file a scene's ``object_twin:`` names
 
 from __future__ import annotations
 
-import contextlib
 import json
 from pathlib import Path
 from typing import Annotated
@@ -18,7 +17,14 @@ from typing import Annotated
 import typer
 
 from service.cli import ranges
-from service.cli.command_settings import open_command_rig, rig_settings
+from service.cli.command_settings import (
+    CameraSeedOption,
+    CameraSppOption,
+    OutFolderOption,
+    RealityOption,
+    open_command_rig,
+    rig_settings,
+)
 from service.cli.common import (
     check_rig_options,
     console,
@@ -37,14 +43,11 @@ MAX_FIT_ANGLES = 36
 
 
 def fit_object_command(
-    out: Annotated[Path, typer.Option("--out", help="Output folder (must not exist).")],
+    out: OutFolderOption,
     simulated: Annotated[
         bool, typer.Option("--simulated", help="Use the simulated lab's rig.")
     ] = False,
-    reality: Annotated[
-        Path | None,
-        typer.Option("--reality", help="The simulated lab's reality file (needs --simulated)."),
-    ] = None,
+    reality: RealityOption = None,
     scene: Annotated[
         str, typer.Option(help="Bundled scene name or scene file: what is on the turntable.")
     ] = "satellite_ground_test",
@@ -61,15 +64,11 @@ def fit_object_command(
         int, number_option("--frames", help="Frames averaged per angle.",
                            allowed=ranges.FIT_FRAMES)
     ] = 32,
-    camera_spp: Annotated[
-        int, number_option("--camera-spp", help="Samples per pixel of the simulated camera.",
-                           allowed=ranges.CAMERA_SPP)
-    ] = 32,
-    seed: Annotated[int, number_option("--seed", help="Noise seed of the simulated camera.",
-                                       allowed=ranges.CAMERA_SEED)] = 0,
+    camera_spp: CameraSppOption = 32,
+    seed: CameraSeedOption = 0,
 ) -> None:
     """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
-    from calibration.angles import parse_angles
+    from calibration.angles import AngleLimits, parse_angles
     from calibration.captures import average_frames
     from calibration.object_twin.fit import fit_object
     from drivers.rig import RigState
@@ -79,8 +78,8 @@ def fit_object_command(
 
     try:
         check_rig_options(out, reality, simulated)
-        angle_list = parse_angles(angles, field="--angles", max_count=MAX_FIT_ANGLES,
-                                  distinct=True)
+        angle_list = parse_angles(angles, field="--angles",
+                                  limits=AngleLimits(max_count=MAX_FIT_ANGLES, distinct=True))
         source = rig_scene(scene)
         cal = (load_calibration(calibration) if calibration is not None
                else scene_twin(source.spec.model_copy(update={"object_twin": None}),
@@ -89,9 +88,7 @@ def fit_object_command(
         fail_invalid(exc)
     settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
                             camera_integrator="path", camera_seed=seed)
-    with contextlib.ExitStack() as stack:
-        rig, world = open_command_rig(settings, source)
-        stack.enter_context(rig)
+    with open_command_rig(settings, source) as (rig, world):
         rig_name = "lab" if world is None else "simulated"
         captures = []
         with rig.hold():

@@ -9,6 +9,7 @@ import typer
 
 from service.cli import ranges
 from service.cli.common import (
+    QuietOption,
     choice,
     console,
     fail_invalid,
@@ -57,7 +58,7 @@ def simulate(
         float | None, number_option("--turntable-deg", help="Override the turntable angle [deg].",
                                     allowed=ranges.TURNTABLE_DEG)
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    quiet: QuietOption = False,
     target_range_error_mm: Annotated[
         float | None,
         number_option("--target-range-error-mm", help="Sample adaptively until the range "

@@ -15,6 +15,7 @@ from calibration.angles import (
     MAX_ANGLES,
     SWEEP_COUNT_RANGE,
     SWEEP_STEP_RANGE_DEG,
+    AngleLimits,
     angle_range,
     parse_angles,
     sweep_angles,
@@ -31,12 +32,12 @@ quarters = st.integers(-1440, 1440).map(lambda k: k / 4)
 def test_the_range_form_is_the_explicit_list(start, step, n, beyond):
     stop = start + (n - 1 + beyond) * step  # the end is included only when a step reaches it
     expected = tuple(start + i * step for i in range(n))
-    got = parse_angles(f"{start!r}:{stop!r}:{step!r}", field="f", lo_deg=-1e6, hi_deg=1e6)
+    wide = AngleLimits(lo_deg=-1e6, hi_deg=1e6)
+    got = parse_angles(f"{start!r}:{stop!r}:{step!r}", field="f", limits=wide)
     assert got == expected
-    assert parse_angles(", ".join(repr(a) for a in expected), field="f", lo_deg=-1e6,
-                        hi_deg=1e6) == expected
-    assert parse_angles(" ".join(repr(a) for a in expected), field="f", lo_deg=-1e6,
-                        hi_deg=1e6) == expected  # spaces separate as commas do (the page's)
+    assert parse_angles(", ".join(repr(a) for a in expected), field="f", limits=wide) == expected
+    assert parse_angles(" ".join(repr(a) for a in expected), field="f",
+                        limits=wide) == expected  # spaces separate as commas do (the page's)
 
 
 @settings(max_examples=200, deadline=None)
@@ -59,8 +60,8 @@ def test_a_range_ends_within_a_step_of_its_end_and_never_beyond(start, span, ste
        | st.text(max_size=30))
 def test_any_text_gives_angles_within_the_limits_or_an_error_naming_the_field(text):
     try:
-        got = parse_angles(text, field="--angles", lo_deg=-90.0, hi_deg=90.0, max_count=12,
-                           distinct=True)
+        got = parse_angles(text, field="--angles", limits=AngleLimits(
+            lo_deg=-90.0, hi_deg=90.0, max_count=12, distinct=True))
     except InvalidInputError as exc:
         assert exc.field == "--angles"
         assert "allowed" in exc.message or "give FROM:TO:STEP" in exc.message, exc.message
@@ -86,7 +87,7 @@ def test_any_text_gives_angles_within_the_limits_or_an_error_naming_the_field(te
 ])
 def test_bad_text_names_the_field_and_what_is_allowed(text, kwargs, words):
     with pytest.raises(InvalidInputError) as exc:
-        parse_angles(text, field="--angles", **kwargs)
+        parse_angles(text, field="--angles", limits=AngleLimits(**kwargs))
     assert exc.value.field == "--angles"
     assert words in exc.value.message, exc.value.message
 

@@ -10,12 +10,8 @@ import usb.core
 import usb.util
 
 from drivers.camera.wire import (
-    REQ_GET_STATUS,
-    REQ_SET_USE_CASE,
-    REQ_START,
-    REQ_STOP,
-    REQUEST_IN,
-    REQUEST_OUT,
+    Request,
+    RequestType,
     decode_frame,
     decode_status,
 )
@@ -47,7 +43,7 @@ def dev(sim):
 
 
 def _status(dev):
-    return decode_status(bytes(dev.ctrl_transfer(REQUEST_IN, REQ_GET_STATUS, 0, 0, 16)))
+    return decode_status(bytes(dev.ctrl_transfer(RequestType.IN, Request.GET_STATUS, 0, 0, 16)))
 
 
 def _stall(call):
@@ -102,8 +98,8 @@ def test_get_status_after_power_on(dev):
 
 
 def test_set_use_case_and_start_are_reflected_in_the_status(dev):
-    dev.ctrl_transfer(REQUEST_OUT, REQ_SET_USE_CASE, 2, 0)
-    dev.ctrl_transfer(REQUEST_OUT, REQ_START, 0, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.SET_USE_CASE, 2, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.START, 0, 0)
     status = _status(dev)
     assert (status.use_case_code, status.streaming, status.width, status.height) == (
         2,
@@ -111,36 +107,37 @@ def test_set_use_case_and_start_are_reflected_in_the_status(dev):
         224,
         171,
     )
-    dev.ctrl_transfer(REQUEST_OUT, REQ_STOP, 0, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.STOP, 0, 0)
     assert not _status(dev).streaming
 
 
 @pytest.mark.parametrize(
     ("setup", "request_", "value", "error"),
     [
-        ([], REQ_SET_USE_CASE, 9, 2),  # unknown use case code
-        ([], REQ_START, 0, 4),  # no use case configured
-        ([(REQ_SET_USE_CASE, 1), (REQ_START, 0)], REQ_SET_USE_CASE, 2, 3),  # busy streaming
+        ([], Request.SET_USE_CASE, 9, 2),  # unknown use case code
+        ([], Request.START, 0, 4),  # no use case configured
+        # busy streaming
+        ([(Request.SET_USE_CASE, 1), (Request.START, 0)], Request.SET_USE_CASE, 2, 3),
         ([], 0x7F, 0, 1),  # unknown request
     ],
 )
 def test_refused_requests_stall_and_say_why_in_the_status(dev, setup, request_, value, error):
     for req, val in setup:
-        dev.ctrl_transfer(REQUEST_OUT, req, val, 0)
-    _stall(lambda: dev.ctrl_transfer(REQUEST_OUT, request_, value, 0))
+        dev.ctrl_transfer(RequestType.OUT, req, val, 0)
+    _stall(lambda: dev.ctrl_transfer(RequestType.OUT, request_, value, 0))
     assert _status(dev).last_error == error
 
 
 def test_a_device_without_our_protocol_stalls_vendor_requests():
     sim = UsbCameraSim(speaks_wire=False)
     dev = usb.core.find(backend=sim)
-    _stall(lambda: dev.ctrl_transfer(REQUEST_IN, REQ_GET_STATUS, 0, 0, 16))
+    _stall(lambda: dev.ctrl_transfer(RequestType.IN, Request.GET_STATUS, 0, 0, 16))
 
 
 # -- the bulk stream -------------------------------------------------------------------------
 def _start(dev, code=1):
-    dev.ctrl_transfer(REQUEST_OUT, REQ_SET_USE_CASE, code, 0)
-    dev.ctrl_transfer(REQUEST_OUT, REQ_START, 0, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.SET_USE_CASE, code, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.START, 0, 0)
 
 
 def test_bulk_in_times_out_while_not_streaming(dev):
@@ -177,8 +174,8 @@ def test_a_read_that_is_not_whole_packets_overflows(dev):
 def test_stop_drops_the_frame_in_flight(sim, dev):
     _start(dev)
     dev.read(0x81, 512, 500)
-    dev.ctrl_transfer(REQUEST_OUT, REQ_STOP, 0, 0)
-    dev.ctrl_transfer(REQUEST_OUT, REQ_START, 0, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.STOP, 0, 0)
+    dev.ctrl_transfer(RequestType.OUT, Request.START, 0, 0)
     first = dev.read(0x81, 512, 500).tobytes()
     assert first[:4] == b"TOFW" and int.from_bytes(first[8:12], "little") == 1
     assert sim.device.frames_sent == 2

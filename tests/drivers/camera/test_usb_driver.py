@@ -17,11 +17,9 @@ from drivers.camera import (
     UsbCameraSettings,
 )
 from drivers.camera.wire import (
-    REQ_SET_USE_CASE,
-    REQ_START,
-    REQ_STOP,
-    REQUEST_OUT,
     USE_CASES,
+    Request,
+    RequestType,
     quantize_frame,
 )
 from drivers.errors import DeviceInputError
@@ -119,8 +117,8 @@ def test_frames_ending_on_a_packet_boundary_end_with_a_zero_length_packet():
 def test_connect_configures_the_use_case_with_a_vendor_request(sim):
     with UsbCamera(backend=sim, use_case="MODE_9_5FPS_2000", settings=FAST) as cam:
         assert cam.use_case.name == "MODE_9_5FPS_2000"
-        vendor = [t for t in sim.device.transcript if t[0] == REQUEST_OUT]
-        assert vendor == [(REQUEST_OUT, REQ_SET_USE_CASE, 2, 0)]
+        vendor = [t for t in sim.device.transcript if t[0] == RequestType.OUT]
+        assert vendor == [(RequestType.OUT, Request.SET_USE_CASE, 2, 0)]
         assert sim.device.use_case.name == "MODE_9_5FPS_2000"
 
 
@@ -128,8 +126,8 @@ def test_configure_while_streaming_stops_reconfigures_and_restarts(sim, camera):
     camera.start()
     sim.device.transcript.clear()
     camera.configure("MODE_9_5FPS_2000")
-    vendor = [t[1:3] for t in sim.device.transcript if t[0] == REQUEST_OUT]
-    assert vendor == [(REQ_STOP, 0), (REQ_SET_USE_CASE, 2), (REQ_START, 0)]
+    vendor = [t[1:3] for t in sim.device.transcript if t[0] == RequestType.OUT]
+    assert vendor == [(Request.STOP, 0), (Request.SET_USE_CASE, 2), (Request.START, 0)]
     assert camera.is_streaming and sim.device.streaming
     assert camera.capture(1)[0].phase_images.shape == (2, 4, 171, 224)
 
