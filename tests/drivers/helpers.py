@@ -16,7 +16,7 @@ import time
 import tty
 
 from drivers.camera.wire import USE_CASES
-from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS
+from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
 from drivers.transport import SerialSettings
 from drivers.turntable import SMC100_SETTINGS
 
@@ -28,6 +28,19 @@ FAST_LAMP = dataclasses.replace(LAMP_SETTINGS, timeout_s=0.25, retries=2, reconn
 FAST_SHUTTER = dataclasses.replace(
     SHUTTER_SETTINGS, timeout_s=0.25, retries=2, reconnect_timeout_s=3.0
 )
+
+
+def fast_solar(lamp_port: str, shutter_port: str, **kwargs: object) -> SolarSimulator:
+    """A solar simulator driver with fast test settings: no warm-up, quick polls, the fast port
+    settings (``kwargs`` override them). It connects on ``with``."""
+    options: dict[str, object] = {
+        "warmup_s": 0.0,
+        "poll_interval_s": 0.01,
+        "lamp_settings": FAST_LAMP,
+        "shutter_settings": FAST_SHUTTER,
+    }
+    return SolarSimulator(lamp_port, shutter_port, **(options | kwargs))  # type: ignore[arg-type]
+
 
 #: The camera tests' usual use cases, and the pico flexx's image size (rows, columns).
 MODE5 = USE_CASES["MODE_5_45FPS_500"]

@@ -21,13 +21,12 @@ from drivers.errors import (
 from drivers.sim import SimClock
 from drivers.sim.oriel import LampSupplySim, ShutterControllerSim
 from drivers.solar_simulator import (
-    SolarSimulator,
     describe_esr,
     describe_stb,
     parse_register,
     parse_value,
 )
-from tests.drivers.helpers import FAST_LAMP, FAST_SHUTTER
+from tests.drivers.helpers import fast_solar
 
 pytestmark = pytest.mark.timeout(10)
 
@@ -130,20 +129,9 @@ LAMP_CONNECT = [
 SHUTTER_CONNECT = [(b"IDN?\r", b"68945\r\n"), (b"ESR?\r", b"ESR80\r\n")]
 
 
-def _solar(lamp_port: str, shutter_port: str) -> SolarSimulator:
-    return SolarSimulator(
-        lamp_port,
-        shutter_port,
-        warmup_s=0.0,
-        poll_interval_s=0.01,
-        lamp_settings=FAST_LAMP,
-        shutter_settings=FAST_SHUTTER,
-    )
-
-
 def test_connect_sends_exactly_these_bytes(scripted_peer):
     lamp, shutter = scripted_peer(LAMP_CONNECT), scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar:
+    with fast_solar(lamp.path, shutter.path) as solar:
         assert (solar.model_id, solar.shutter_model_id, solar.power_limit_w) == (
             "69907",
             "68945",
@@ -164,7 +152,7 @@ def test_supply_in_current_mode_is_switched_to_power_mode(scripted_peer):
         ]
     )
     shutter = scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path):
+    with fast_solar(lamp.path, shutter.path):
         pass
     lamp.check()
 
@@ -180,7 +168,7 @@ def test_set_power_and_suns_exchanges(scripted_peer):
         ]
     )
     shutter = scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar:
+    with fast_solar(lamp.path, shutter.path) as solar:
         solar.set_power_w(400.0)
         solar.set_suns(1.1)
     lamp.check()
@@ -206,7 +194,7 @@ def test_lamp_on_and_shutter_exchanges(scripted_peer):
             (b"RUN?\r", b"0\r\n"),
         ]
     )
-    with _solar(lamp.path, shutter.path) as solar:
+    with fast_solar(lamp.path, shutter.path) as solar:
         solar.lamp_on()
         solar.open_shutter()
         solar.close_shutter()
@@ -218,7 +206,7 @@ def test_esr_error_after_a_command_raises_naming_the_bits(scripted_peer):
     lamp = scripted_peer([*LAMP_CONNECT, (b"P-PRESET=450\r", b"ESR20\r")])
     shutter = scripted_peer(SHUTTER_CONNECT)
     with (
-        _solar(lamp.path, shutter.path) as solar,
+        fast_solar(lamp.path, shutter.path) as solar,
         pytest.raises(
             SolarSimulatorError, match=r"ESR 0x20 \(command error\) after 'P-PRESET=450'"
         ),
@@ -238,7 +226,10 @@ def test_start_refused_with_interlock_open_raises_interlock_error(scripted_peer)
         ]
     )
     shutter = scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar, pytest.raises(InterlockError, match="interlock"):
+    with (
+        fast_solar(lamp.path, shutter.path) as solar,
+        pytest.raises(InterlockError, match="interlock"),
+    ):
         solar.lamp_on()
     lamp.check()
 
@@ -246,7 +237,7 @@ def test_start_refused_with_interlock_open_raises_interlock_error(scripted_peer)
 def test_device_error_in_esr_is_a_lamp_fault(scripted_peer):
     lamp = scripted_peer([*LAMP_CONNECT, (b"P-PRESET=400\r", b"ESR08\r"), (b"STB?\r", b"STB28\r")])
     shutter = scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar, pytest.raises(LampFaultError) as info:
+    with fast_solar(lamp.path, shutter.path) as solar, pytest.raises(LampFaultError) as info:
         solar.set_power_w(400.0)
     assert str(info.value) == (
         "lamp supply: ESR 0x08 (device dependent error) after 'P-PRESET=400'; "
@@ -258,7 +249,7 @@ def test_device_error_in_esr_is_a_lamp_fault(scripted_peer):
 def test_lamp_off_after_a_latched_fault_only_logs_it(scripted_peer, caplog):
     lamp = scripted_peer([*LAMP_CONNECT, (b"STOP\r", b"ESR08\r")])
     shutter = scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar:
+    with fast_solar(lamp.path, shutter.path) as solar:
         solar.lamp_off()
     assert "a lamp fault was latched" in caplog.text
     lamp.check()
@@ -267,7 +258,7 @@ def test_lamp_off_after_a_latched_fault_only_logs_it(scripted_peer, caplog):
 @pytest.mark.parametrize("suns", [0.79, 1.21, 0.0, float("nan")])
 def test_suns_outside_range_names_field_and_range_and_sends_nothing(scripted_peer, suns):
     lamp, shutter = scripted_peer(LAMP_CONNECT), scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar, pytest.raises(LimitError) as info:
+    with fast_solar(lamp.path, shutter.path) as solar, pytest.raises(LimitError) as info:
         solar.set_suns(suns)
     assert str(info.value).startswith("suns: requested")
     assert "[0.8, 1.2] suns" in str(info.value)
@@ -277,7 +268,7 @@ def test_suns_outside_range_names_field_and_range_and_sends_nothing(scripted_pee
 @pytest.mark.parametrize("power", [0.0, -5.0, 501.0])
 def test_power_outside_supply_limit_names_field_and_range(scripted_peer, power):
     lamp, shutter = scripted_peer(LAMP_CONNECT), scripted_peer(SHUTTER_CONNECT)
-    with _solar(lamp.path, shutter.path) as solar, pytest.raises(LimitError) as info:
+    with fast_solar(lamp.path, shutter.path) as solar, pytest.raises(LimitError) as info:
         solar.set_power_w(power)
     assert str(info.value).startswith("power_w: requested")
     assert "[0, 500] W" in str(info.value)

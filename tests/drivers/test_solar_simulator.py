@@ -13,27 +13,15 @@ from drivers.errors import (
     LampFaultError,
     SolarSimulatorError,
 )
-from drivers.sim.pty_server import SimHandle, start_simulator
-from drivers.solar_simulator import SolarSimulator, SolarSimulatorProtocol, SunsCalibration
-from tests.drivers.helpers import FAST_LAMP, FAST_SHUTTER
+from drivers.sim.pty_server import start_simulator
+from drivers.solar_simulator import SolarSimulatorProtocol, SunsCalibration
+from tests.drivers.helpers import fast_solar
 
 pytestmark = pytest.mark.timeout(15)
 
 
-def make_solar(handle: SimHandle, **kwargs: object) -> SolarSimulator:
-    """A driver with fast test settings for ``handle``'s two ports (connects on ``with``)."""
-    options: dict[str, object] = {
-        "warmup_s": 0.0,
-        "poll_interval_s": 0.01,
-        "lamp_settings": FAST_LAMP,
-        "shutter_settings": FAST_SHUTTER,
-    }
-    options.update(kwargs)
-    return SolarSimulator(*handle.ports, **options)  # type: ignore[arg-type]
-
-
 def test_power_set_and_read_back(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         assert isinstance(solar, SolarSimulatorProtocol)
         solar.lamp_on()
         solar.set_power_w(380.0)
@@ -45,7 +33,7 @@ def test_power_set_and_read_back(solar_sim):
 
 @pytest.mark.parametrize("suns", [0.8, 0.95, 1.0, 1.2])
 def test_suns_level_set_and_read_back(solar_sim, suns):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar.lamp_on()
         solar.set_suns(suns)
         solar.wait_until_stable(timeout_s=2.0)
@@ -55,7 +43,7 @@ def test_suns_level_set_and_read_back(solar_sim, suns):
 
 
 def test_read_suns_is_zero_with_the_lamp_off(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         assert not solar.is_lamp_on()
         assert solar.read_suns() == 0.0
         solar.lamp_on()
@@ -65,7 +53,7 @@ def test_read_suns_is_zero_with_the_lamp_off(solar_sim):
 
 def test_shutter_open_close_and_irradiance(solar_sim):
     rig = solar_sim.models["rig"]
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar.lamp_on()
         solar.set_suns(1.0)
         assert rig.irradiance_suns() == 0.0  # shutter closed
@@ -80,7 +68,7 @@ def test_shutter_open_close_and_irradiance(solar_sim):
 def test_lamp_hours_accumulate_in_simulated_time():
     with (
         start_simulator("solar-simulator", time_scale=36000.0) as handle,  # 0.1 s = 1 h
-        make_solar(handle) as solar,
+        fast_solar(*handle.ports) as solar,
     ):
         hours = solar.lamp_hours()
         solar.lamp_on()
@@ -92,7 +80,7 @@ def test_warm_up_is_waited_for_and_reported():
     """tau = 360 s simulated = 0.18 s real at 2000x: power climbs from 85 % to the preset."""
     with (
         start_simulator("solar-simulator", time_scale=2000.0) as handle,
-        make_solar(handle, warmup_s=0.5, power_tolerance_w=1.0) as solar,
+        fast_solar(*handle.ports, warmup_s=0.5, power_tolerance_w=1.0) as solar,
     ):
         solar.set_power_w(400.0)
         solar.lamp_on()
@@ -106,14 +94,17 @@ def test_warm_up_is_waited_for_and_reported():
 
 
 def test_wait_until_stable_with_the_lamp_off_raises(solar_sim):
-    with make_solar(solar_sim) as solar, pytest.raises(SolarSimulatorError, match="lamp is off"):
+    with (
+        fast_solar(*solar_sim.ports) as solar,
+        pytest.raises(SolarSimulatorError, match="lamp is off"),
+    ):
         solar.wait_until_stable(timeout_s=1.0)
 
 
 def test_custom_calibration_table_is_used(solar_sim, tmp_path):
     path = tmp_path / "lab.yaml"
     path.write_text("suns: [0.8, 1.2]\npower_w: [300, 460]\n")
-    with make_solar(solar_sim, calibration=path) as solar:
+    with fast_solar(*solar_sim.ports, calibration=path) as solar:
         solar.set_suns(1.0)
         assert solar.power_preset_w() == 380.0
         assert isinstance(solar.calibration, SunsCalibration)
@@ -123,14 +114,14 @@ def test_calibration_needing_more_than_p_lim_is_refused_at_connect(solar_sim, tm
     path = tmp_path / "hot.yaml"
     path.write_text("suns: [0.8, 1.2]\npower_w: [400, 600]\n")
     with pytest.raises(Exception, match=r"calibration\.power_w: 600 W needed .*P-LIM 500 W"):
-        make_solar(solar_sim, calibration=path).connect()
+        fast_solar(*solar_sim.ports, calibration=path).connect()
 
 
 # -- faults ----------------------------------------------------------------------------------
 def test_interlock_fault_refuses_the_lamp():
     with (
         start_simulator("solar-simulator", instant=True, faults=["interlock"]) as handle,
-        make_solar(handle) as solar,
+        fast_solar(*handle.ports) as solar,
     ):
         with pytest.raises(InterlockError, match=r"interlock open \(STB 0x21"):
             solar.lamp_on()
@@ -138,7 +129,7 @@ def test_interlock_fault_refuses_the_lamp():
 
 
 def test_interlock_opening_while_lit_is_reported(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar.lamp_on()
         solar_sim.servers["lamp"].inject("interlock")
         with pytest.raises(InterlockError, match="interlock open"):
@@ -147,7 +138,7 @@ def test_interlock_opening_while_lit_is_reported(solar_sim):
 
 
 def test_lamp_fault_is_raised_and_a_restart_recovers(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar_sim.servers["lamp"].inject("lamp-fault:1")
         with pytest.raises(LampFaultError, match=r"lamp fault after START: STB 0x28 \(.*fault"):
             solar.lamp_on()
@@ -157,7 +148,7 @@ def test_lamp_fault_is_raised_and_a_restart_recovers(solar_sim):
 
 
 def test_lamp_fault_during_stabilisation_is_raised(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar.lamp_on()
         solar_sim.servers["lamp"].inject("lamp-fault:1@2")
         with pytest.raises(LampFaultError, match="fault"):
@@ -166,7 +157,7 @@ def test_lamp_fault_during_stabilisation_is_raised(solar_sim):
 
 @pytest.mark.parametrize("device", ["lamp", "shutter"])
 def test_no_reply_ends_in_a_timeout_error(solar_sim, device):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar_sim.servers[device].inject("no-reply")
         start = time.monotonic()
         with pytest.raises(DeviceTimeoutError, match="no reply"):
@@ -176,7 +167,7 @@ def test_no_reply_ends_in_a_timeout_error(solar_sim, device):
 
 @pytest.mark.parametrize("fault", ["garbled:1", "truncated:1", "no-reply:1", "garbled:2@1"])
 def test_occasional_bad_reply_is_retried(solar_sim, fault):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar_sim.servers["lamp"].inject(fault)
         solar_sim.servers["shutter"].inject(fault)
         solar.lamp_on()
@@ -187,14 +178,14 @@ def test_occasional_bad_reply_is_retried(solar_sim, fault):
 
 
 def test_persistently_garbled_replies_raise(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar_sim.servers["lamp"].inject("garbled")
         with pytest.raises(GarbledReplyError, match="garbled reply to 'STB\\?'"):
             solar.lamp_on()
 
 
 def test_disconnect_and_reconnect_of_the_lamp_port(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         server = solar_sim.servers["lamp"]
         server.faults.inject("disconnect:1", downtime_s=0.3)
         solar.lamp_on()
@@ -204,7 +195,7 @@ def test_disconnect_and_reconnect_of_the_lamp_port(solar_sim):
 
 
 def test_shutter_close_fault_closes_an_open_shutter_by_itself(solar_sim):
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar.open_shutter()
         solar_sim.servers["shutter"].inject("shutter-close:1")
         assert not solar.shutter_is_open()  # closed before the query was answered
@@ -216,7 +207,7 @@ def test_shutter_close_fault_closes_an_open_shutter_by_itself(solar_sim):
 def test_an_interlock_that_put_the_lamp_out_stays_on_the_status_until_relit(solar_sim):
     """A short interlock opening (one command) latches the STB interlock bit: a lamp found out
     afterwards is reported as put out by the interlock, not as merely off."""
-    with make_solar(solar_sim) as solar:
+    with fast_solar(*solar_sim.ports) as solar:
         solar.lamp_on()
         solar_sim.servers["lamp"].inject("interlock:1")
         with pytest.raises(InterlockError, match=r"interlock open \(or tripped"):
