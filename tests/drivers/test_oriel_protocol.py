@@ -9,6 +9,9 @@ The byte-exact tests run the real driver against scripted peers on real ptys.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import pytest
 
 from drivers.errors import (
@@ -21,12 +24,13 @@ from drivers.errors import (
 from drivers.sim import SimClock
 from drivers.sim.oriel import LampSupplySim, ShutterControllerSim
 from drivers.solar_simulator import (
+    SolarSimulator,
     describe_esr,
     describe_stb,
     parse_register,
     parse_value,
 )
-from tests.drivers.helpers import fast_solar
+from tests.drivers.helpers import ScriptedPeer, fast_solar
 
 pytestmark = pytest.mark.timeout(10)
 
@@ -129,147 +133,128 @@ LAMP_CONNECT = [
 SHUTTER_CONNECT = [(b"IDN?\r", b"68945\r\n"), (b"ESR?\r", b"ESR80\r\n")]
 
 
-def test_connect_sends_exactly_these_bytes(scripted_peer):
-    lamp, shutter = scripted_peer(LAMP_CONNECT), scripted_peer(SHUTTER_CONNECT)
+@contextmanager
+def _solar_on(
+    scripted_peer: type[ScriptedPeer],
+    lamp_script: list[tuple[bytes, bytes | None]],
+    shutter_script: list[tuple[bytes, bytes | None]] = SHUTTER_CONNECT,
+) -> Iterator[SolarSimulator]:
+    """The driver on two scripted peers; after the block, each has seen exactly its script."""
+    lamp, shutter = scripted_peer(lamp_script), scripted_peer(shutter_script)
     with fast_solar(lamp.path, shutter.path) as solar:
+        yield solar
+    lamp.check()
+    shutter.check()
+
+
+def test_connect_sends_exactly_these_bytes(scripted_peer):
+    with _solar_on(scripted_peer, LAMP_CONNECT) as solar:
         assert (solar.model_id, solar.shutter_model_id, solar.power_limit_w) == (
             "69907",
             "68945",
             500.0,
         )
-    lamp.check()
-    shutter.check()
 
 
 def test_supply_in_current_mode_is_switched_to_power_mode(scripted_peer):
-    lamp = scripted_peer(
-        [
-            (b"IDN?\r", b"69907\r"),
-            (b"ESR?\r", b"ESR00\r"),
-            (b"STB?\r", b"STB00\r"),  # current mode
-            (b"MODE=0\r", b"ESR00\r"),
-            (b"P-LIM?\r", b"0500\r"),
-        ]
-    )
-    shutter = scripted_peer(SHUTTER_CONNECT)
-    with fast_solar(lamp.path, shutter.path):
+    lamp_script = [
+        (b"IDN?\r", b"69907\r"),
+        (b"ESR?\r", b"ESR00\r"),
+        (b"STB?\r", b"STB00\r"),  # current mode
+        (b"MODE=0\r", b"ESR00\r"),
+        (b"P-LIM?\r", b"0500\r"),
+    ]
+    with _solar_on(scripted_peer, lamp_script):
         pass
-    lamp.check()
 
 
 def test_set_power_and_suns_exchanges(scripted_peer):
-    lamp = scripted_peer(
-        [
-            *LAMP_CONNECT,
-            (b"P-PRESET=400\r", b"ESR00\r"),
-            (b"P-PRESET?\r", b"0400\r"),
-            (b"P-PRESET=436\r", b"ESR00\r"),  # 1.1 suns in the default table
-            (b"P-PRESET?\r", b"0436\r"),
-        ]
-    )
-    shutter = scripted_peer(SHUTTER_CONNECT)
-    with fast_solar(lamp.path, shutter.path) as solar:
+    lamp_script = [
+        *LAMP_CONNECT,
+        (b"P-PRESET=400\r", b"ESR00\r"),
+        (b"P-PRESET?\r", b"0400\r"),
+        (b"P-PRESET=436\r", b"ESR00\r"),  # 1.1 suns in the default table
+        (b"P-PRESET?\r", b"0436\r"),
+    ]
+    with _solar_on(scripted_peer, lamp_script) as solar:
         solar.set_power_w(400.0)
         solar.set_suns(1.1)
-    lamp.check()
 
 
 def test_lamp_on_and_shutter_exchanges(scripted_peer):
-    lamp = scripted_peer(
-        [
-            *LAMP_CONNECT,
-            (b"STB?\r", b"STB20\r"),
-            (b"ESR?\r", b"ESR00\r"),
-            (b"START\r", b"ESR00\r"),
-            (b"STB?\r", b"STB20\r"),  # not lit yet
-            (b"STB?\r", b"STBA0\r"),
-        ]
-    )
-    shutter = scripted_peer(
-        [
-            *SHUTTER_CONNECT,
-            (b"START\r", b"ESR00\r\n"),
-            (b"RUN?\r", b"1\r\n"),
-            (b"STOP\r", b"ESR00\r\n"),
-            (b"RUN?\r", b"0\r\n"),
-        ]
-    )
-    with fast_solar(lamp.path, shutter.path) as solar:
+    lamp_script = [
+        *LAMP_CONNECT,
+        (b"STB?\r", b"STB20\r"),
+        (b"ESR?\r", b"ESR00\r"),
+        (b"START\r", b"ESR00\r"),
+        (b"STB?\r", b"STB20\r"),  # not lit yet
+        (b"STB?\r", b"STBA0\r"),
+    ]
+    shutter_script = [
+        *SHUTTER_CONNECT,
+        (b"START\r", b"ESR00\r\n"),
+        (b"RUN?\r", b"1\r\n"),
+        (b"STOP\r", b"ESR00\r\n"),
+        (b"RUN?\r", b"0\r\n"),
+    ]
+    with _solar_on(scripted_peer, lamp_script, shutter_script) as solar:
         solar.lamp_on()
         solar.open_shutter()
         solar.close_shutter()
-    lamp.check()
-    shutter.check()
 
 
 def test_esr_error_after_a_command_raises_naming_the_bits(scripted_peer):
-    lamp = scripted_peer([*LAMP_CONNECT, (b"P-PRESET=450\r", b"ESR20\r")])
-    shutter = scripted_peer(SHUTTER_CONNECT)
     with (
-        fast_solar(lamp.path, shutter.path) as solar,
+        _solar_on(scripted_peer, [*LAMP_CONNECT, (b"P-PRESET=450\r", b"ESR20\r")]) as solar,
         pytest.raises(
             SolarSimulatorError, match=r"ESR 0x20 \(command error\) after 'P-PRESET=450'"
         ),
     ):
         solar.set_power_w(450.0)
-    lamp.check()
 
 
 def test_start_refused_with_interlock_open_raises_interlock_error(scripted_peer):
-    lamp = scripted_peer(
-        [
-            *LAMP_CONNECT,
-            (b"STB?\r", b"STB20\r"),
-            (b"ESR?\r", b"ESR00\r"),
-            (b"START\r", b"ESR10\r"),  # execution error
-            (b"STB?\r", b"STB21\r"),  # interlock bit
-        ]
-    )
-    shutter = scripted_peer(SHUTTER_CONNECT)
+    lamp_script = [
+        *LAMP_CONNECT,
+        (b"STB?\r", b"STB20\r"),
+        (b"ESR?\r", b"ESR00\r"),
+        (b"START\r", b"ESR10\r"),  # execution error
+        (b"STB?\r", b"STB21\r"),  # interlock bit
+    ]
     with (
-        fast_solar(lamp.path, shutter.path) as solar,
+        _solar_on(scripted_peer, lamp_script) as solar,
         pytest.raises(InterlockError, match="interlock"),
     ):
         solar.lamp_on()
-    lamp.check()
 
 
 def test_device_error_in_esr_is_a_lamp_fault(scripted_peer):
-    lamp = scripted_peer([*LAMP_CONNECT, (b"P-PRESET=400\r", b"ESR08\r"), (b"STB?\r", b"STB28\r")])
-    shutter = scripted_peer(SHUTTER_CONNECT)
-    with fast_solar(lamp.path, shutter.path) as solar, pytest.raises(LampFaultError) as info:
+    lamp_script = [*LAMP_CONNECT, (b"P-PRESET=400\r", b"ESR08\r"), (b"STB?\r", b"STB28\r")]
+    with _solar_on(scripted_peer, lamp_script) as solar, pytest.raises(LampFaultError) as info:
         solar.set_power_w(400.0)
     assert str(info.value) == (
         "lamp supply: ESR 0x08 (device dependent error) after 'P-PRESET=400'; "
         "STB 0x28 (power mode (else current mode), fault)"
     )
-    lamp.check()
 
 
 def test_lamp_off_after_a_latched_fault_only_logs_it(scripted_peer, caplog):
-    lamp = scripted_peer([*LAMP_CONNECT, (b"STOP\r", b"ESR08\r")])
-    shutter = scripted_peer(SHUTTER_CONNECT)
-    with fast_solar(lamp.path, shutter.path) as solar:
+    with _solar_on(scripted_peer, [*LAMP_CONNECT, (b"STOP\r", b"ESR08\r")]) as solar:
         solar.lamp_off()
     assert "a lamp fault was latched" in caplog.text
-    lamp.check()
 
 
 @pytest.mark.parametrize("suns", [0.79, 1.21, 0.0, float("nan")])
 def test_suns_outside_range_names_field_and_range_and_sends_nothing(scripted_peer, suns):
-    lamp, shutter = scripted_peer(LAMP_CONNECT), scripted_peer(SHUTTER_CONNECT)
-    with fast_solar(lamp.path, shutter.path) as solar, pytest.raises(LimitError) as info:
+    with _solar_on(scripted_peer, LAMP_CONNECT) as solar, pytest.raises(LimitError) as info:
         solar.set_suns(suns)
     assert str(info.value).startswith("suns: requested")
     assert "[0.8, 1.2] suns" in str(info.value)
-    lamp.check()
 
 
 @pytest.mark.parametrize("power", [0.0, -5.0, 501.0])
 def test_power_outside_supply_limit_names_field_and_range(scripted_peer, power):
-    lamp, shutter = scripted_peer(LAMP_CONNECT), scripted_peer(SHUTTER_CONNECT)
-    with fast_solar(lamp.path, shutter.path) as solar, pytest.raises(LimitError) as info:
+    with _solar_on(scripted_peer, LAMP_CONNECT) as solar, pytest.raises(LimitError) as info:
         solar.set_power_w(power)
     assert str(info.value).startswith("power_w: requested")
     assert "[0, 500] W" in str(info.value)
-    lamp.check()
