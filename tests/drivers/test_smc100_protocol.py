@@ -8,6 +8,9 @@ The byte-exact tests run the real driver against a scripted peer on a real pty.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import pytest
 
 from drivers.errors import DeviceInputError, LimitError, ProtocolError, TurntableError
@@ -26,7 +29,7 @@ from drivers.turntable import (
     parse_ts,
     validate_address,
 )
-from tests.drivers.helpers import FAST_SMC100
+from tests.drivers.helpers import FAST_SMC100, ScriptedPeer
 
 pytestmark = pytest.mark.timeout(10)
 
@@ -171,64 +174,59 @@ CONNECT = [
 ]
 
 
-def _turntable(port: str, **kwargs: object) -> Turntable:
-    options: dict[str, object] = {"settle_s": 0.0, "poll_interval_s": 0.01, "settings": FAST_SMC100}
-    options.update(kwargs)
-    return Turntable(port, **options)  # type: ignore[arg-type]
+@contextmanager
+def _turntable_on(
+    scripted_peer: type[ScriptedPeer], script: list[tuple[bytes, bytes | None]]
+) -> Iterator[Turntable]:
+    """The driver on a scripted peer; after the block, the peer has seen exactly the script."""
+    peer = scripted_peer(script)
+    with Turntable(peer.path, settle_s=0.0, poll_interval_s=0.01, settings=FAST_SMC100) as tt:
+        yield tt
+    peer.check()
 
 
 def test_connect_sends_exactly_these_bytes(scripted_peer):
-    peer = scripted_peer(CONNECT)
-    with _turntable(peer.path) as tt:
+    with _turntable_on(scripted_peer, CONNECT) as tt:
         assert tt.stage_name == "URS100CC"
         assert tt.limits_deg == (-170.0, 170.0)
-    peer.check()
 
 
 def test_position_query_and_its_reply(scripted_peer):
-    peer = scripted_peer([*CONNECT, (b"1TP\r\n", b"1TP45.0000\r\n")])
-    with _turntable(peer.path) as tt:
+    with _turntable_on(scripted_peer, [*CONNECT, (b"1TP\r\n", b"1TP45.0000\r\n")]) as tt:
         assert tt.position_deg() == 45.0
-    peer.check()
 
 
 def test_move_exchange_from_ready(scripted_peer):
-    peer = scripted_peer(
-        [
-            *CONNECT,
-            (b"1TS\r\n", b"1TS000033\r\n"),
-            (b"1PA30.0\r\n", None),
-            (b"1TE\r\n", b"1TE@\r\n"),
-            (b"1TS\r\n", b"1TS000028\r\n"),
-            (b"1TP\r\n", b"1TP15.2\r\n"),  # stall watch while MOVING
-            (b"1TS\r\n", b"1TS000033\r\n"),
-            (b"1TP\r\n", b"1TP30\r\n"),  # verification
-            (b"1TP\r\n", b"1TP30\r\n"),  # after the settle time
-        ]
-    )
-    with _turntable(peer.path) as tt:
+    script = [
+        *CONNECT,
+        (b"1TS\r\n", b"1TS000033\r\n"),
+        (b"1PA30.0\r\n", None),
+        (b"1TE\r\n", b"1TE@\r\n"),
+        (b"1TS\r\n", b"1TS000028\r\n"),
+        (b"1TP\r\n", b"1TP15.2\r\n"),  # stall watch while MOVING
+        (b"1TS\r\n", b"1TS000033\r\n"),
+        (b"1TP\r\n", b"1TP30\r\n"),  # verification
+        (b"1TP\r\n", b"1TP30\r\n"),  # after the settle time
+    ]
+    with _turntable_on(scripted_peer, script) as tt:
         assert tt.move_to(30.0) == 30.0
-    peer.check()
 
 
 def test_homing_exchange_when_not_referenced(scripted_peer):
-    peer = scripted_peer(
-        [
-            (b"1TE\r\n", b"1TE@\r\n"),
-            (b"1TS\r\n", b"1TS00000A\r\n"),  # manual: NOT REFERENCED from reset
-            (b"1ID?\r\n", b"1IDURS100CC\r\n"),
-            (b"1SL?\r\n", b"1SL-170\r\n"),
-            (b"1SR?\r\n", b"1SR170\r\n"),
-            (b"1TS\r\n", b"1TS00000A\r\n"),
-            (b"1OR\r\n", None),
-            (b"1TE\r\n", b"1TE@\r\n"),
-            (b"1TS\r\n", b"1TS00001E\r\n"),
-            (b"1TS\r\n", b"1TS000032\r\n"),
-        ]
-    )
-    with _turntable(peer.path) as tt:
+    script = [
+        (b"1TE\r\n", b"1TE@\r\n"),
+        (b"1TS\r\n", b"1TS00000A\r\n"),  # manual: NOT REFERENCED from reset
+        (b"1ID?\r\n", b"1IDURS100CC\r\n"),
+        (b"1SL?\r\n", b"1SL-170\r\n"),
+        (b"1SR?\r\n", b"1SR170\r\n"),
+        (b"1TS\r\n", b"1TS00000A\r\n"),
+        (b"1OR\r\n", None),
+        (b"1TE\r\n", b"1TE@\r\n"),
+        (b"1TS\r\n", b"1TS00001E\r\n"),
+        (b"1TS\r\n", b"1TS000032\r\n"),
+    ]
+    with _turntable_on(scripted_peer, script) as tt:
         tt.home()
-    peer.check()
 
 
 @pytest.mark.parametrize(
@@ -236,48 +234,41 @@ def test_homing_exchange_when_not_referenced(scripted_peer):
     [("C", "parameter missing or out of range"), ("H", "NOT REFERENCED"), ("G", "out of limits")],
 )
 def test_te_error_after_a_command_raises_naming_the_letter(scripted_peer, code, meaning):
-    peer = scripted_peer(
-        [
-            *CONNECT,
-            (b"1VA25.0\r\n", None),
-            (b"1TE\r\n", f"1TE{code}\r\n".encode()),
-            (b"1TS\r\n", b"1TS000033\r\n"),
-        ]
-    )
-    with _turntable(peer.path) as tt, pytest.raises(TurntableError) as info:
+    script = [
+        *CONNECT,
+        (b"1VA25.0\r\n", None),
+        (b"1TE\r\n", f"1TE{code}\r\n".encode()),
+        (b"1TS\r\n", b"1TS000033\r\n"),
+    ]
+    with _turntable_on(scripted_peer, script) as tt, pytest.raises(TurntableError) as info:
         tt.set_velocity(25.0)
     assert f"TE reply {code!r} after '1VA25.0'" in str(info.value)
     assert meaning in str(info.value)
     assert info.value.te_code == code
-    peer.check()
 
 
 def test_positioner_error_during_a_move_raises_naming_the_bits(scripted_peer):
-    peer = scripted_peer(
-        [
-            *CONNECT,
-            (b"1TS\r\n", b"1TS000033\r\n"),
-            (b"1PA90.0\r\n", None),
-            (b"1TE\r\n", b"1TE@\r\n"),
-            (b"1TS\r\n", b"1TS00203D\r\n"),
-            (b"1TP\r\n", b"1TP44.9\r\n"),
-        ]
-    )
-    with _turntable(peer.path) as tt, pytest.raises(TurntableError) as info:
+    script = [
+        *CONNECT,
+        (b"1TS\r\n", b"1TS000033\r\n"),
+        (b"1PA90.0\r\n", None),
+        (b"1TE\r\n", b"1TE@\r\n"),
+        (b"1TS\r\n", b"1TS00203D\r\n"),
+        (b"1TP\r\n", b"1TP44.9\r\n"),
+    ]
+    with _turntable_on(scripted_peer, script) as tt, pytest.raises(TurntableError) as info:
         tt.move_to(90.0)
     message = str(info.value)
     assert "3D DISABLE from MOVING" in message and "following error" in message
     assert "44.9 deg" in message
     assert (info.value.state, info.value.error_bits) == ("3D", 0x20)
-    peer.check()
 
 
 def test_limit_error_sends_nothing(scripted_peer):
-    peer = scripted_peer(CONNECT)
-    with _turntable(peer.path) as tt, pytest.raises(LimitError) as info:
+    # the peer is checked to have seen nothing after the connect exchange
+    with _turntable_on(scripted_peer, CONNECT) as tt, pytest.raises(LimitError) as info:
         tt.move_to(400.0)
     assert str(info.value) == (
         "angle_deg: requested 400 deg is outside the allowed range [-170, 170] deg "
         "(turntable software limits SL/SR)"
     )
-    peer.check()  # nothing after the connect exchange
