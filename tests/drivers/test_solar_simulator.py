@@ -128,12 +128,21 @@ def test_interlock_fault_refuses_the_lamp():
         assert not handle.models["lamp"].lamp_on
 
 
-def test_interlock_opening_while_lit_is_reported(solar_sim):
+@pytest.mark.parametrize(
+    ("fault", "error", "match", "timeout_s"),
+    [
+        ("interlock", InterlockError, "interlock open", 1.0),
+        ("lamp-fault:1@2", LampFaultError, "fault", 2.0),
+    ],
+)
+def test_a_fault_while_lit_is_raised_by_the_stability_wait(
+    solar_sim, fault, error, match, timeout_s
+):
     with fast_solar(*solar_sim.ports) as solar:
         solar.lamp_on()
-        solar_sim.servers["lamp"].inject("interlock")
-        with pytest.raises(InterlockError, match="interlock open"):
-            solar.wait_until_stable(timeout_s=1.0)
+        solar_sim.servers["lamp"].inject(fault)
+        with pytest.raises(error, match=match):
+            solar.wait_until_stable(timeout_s=timeout_s)
         assert not solar_sim.models["lamp"].lamp_on
 
 
@@ -145,14 +154,6 @@ def test_lamp_fault_is_raised_and_a_restart_recovers(solar_sim):
         solar.lamp_off()
         solar.lamp_on()  # the fault was a single event
         assert solar.wait_until_stable(timeout_s=2.0) > 0
-
-
-def test_lamp_fault_during_stabilisation_is_raised(solar_sim):
-    with fast_solar(*solar_sim.ports) as solar:
-        solar.lamp_on()
-        solar_sim.servers["lamp"].inject("lamp-fault:1@2")
-        with pytest.raises(LampFaultError, match="fault"):
-            solar.wait_until_stable(timeout_s=2.0)
 
 
 @pytest.mark.parametrize("device", ["lamp", "shutter"])
