@@ -12,19 +12,18 @@ between 0.8 and 1.2 suns.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import TypeVar
 
 import pytest
 
 from drivers.errors import LimitError
-from drivers.sim.pty_server import start_simulator
+from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.solar_simulator import SUNS_RANGE, SolarSimulator, SolarSimulatorProtocol
 from drivers.turntable import Turntable, TurntableProtocol
-from tests.drivers.helpers import FAST_LAMP, FAST_SHUTTER, FAST_SMC100
+from tests.drivers.helpers import FAST_SMC100, fast_solar
 
 pytestmark = pytest.mark.timeout(20)
 
@@ -49,51 +48,57 @@ def _connected(device: DeviceT) -> Iterator[DeviceT]:
     device.close()
 
 
+def _device(
+    backend: str,
+    *,
+    hardware: Callable[[], DeviceT],
+    simulator: str,
+    time_scale: float,
+    on_simulator: Callable[[SimHandle], DeviceT],
+) -> Iterator[DeviceT]:
+    """The device of ``backend`` connected for one test, closed after it: the rig's
+    (``hardware()``), or ``on_simulator(handle)`` on a fresh ``simulator`` on a pty or a socket."""
+    if backend == "hardware":
+        yield from _connected(hardware())
+        return
+    transport = "pty" if backend == "sim-pty" else "tcp"
+    with start_simulator(simulator, transport=transport, time_scale=time_scale) as handle:
+        yield from _connected(on_simulator(handle))
+
+
 @pytest.fixture(params=TURNTABLE_BACKENDS)
 def turntable(request: pytest.FixtureRequest) -> Iterator[TurntableProtocol]:
-    if request.param == "hardware":
-        yield from _connected(
-            Turntable(
-                os.environ["TOFTWIN_TURNTABLE_PORT"],
-                address=int(os.environ.get("TOFTWIN_TURNTABLE_ADDRESS", "1")),
-            )
-        )
-        return
-    transport = "pty" if request.param == "sim-pty" else "tcp"
-    with start_simulator("turntable", transport=transport, time_scale=50.0) as handle:
-        yield from _connected(
-            Turntable(
-                handle.ports[0],
-                settle_s=0.0,
-                poll_interval_s=0.005,
-                stall_timeout_s=0.5,
-                settings=FAST_SMC100,
-            )
-        )
+    yield from _device(
+        request.param,
+        hardware=lambda: Turntable(
+            os.environ["TOFTWIN_TURNTABLE_PORT"],
+            address=int(os.environ.get("TOFTWIN_TURNTABLE_ADDRESS", "1")),
+        ),
+        simulator="turntable",
+        time_scale=50.0,
+        on_simulator=lambda handle: Turntable(
+            handle.ports[0],
+            settle_s=0.0,
+            poll_interval_s=0.005,
+            stall_timeout_s=0.5,
+            settings=FAST_SMC100,
+        ),
+    )
 
 
 @pytest.fixture(params=SOLAR_BACKENDS)
 def solar(request: pytest.FixtureRequest) -> Iterator[SolarSimulatorProtocol]:
-    if request.param == "hardware":
-        yield from _connected(
-            SolarSimulator(
-                os.environ["TOFTWIN_LAMP_PORT"],
-                os.environ["TOFTWIN_SHUTTER_PORT"],
-                warmup_s=float(os.environ.get("TOFTWIN_WARMUP_S", "1800")),
-            )
-        )
-        return
-    transport = "pty" if request.param == "sim-pty" else "tcp"
-    with start_simulator("solar-simulator", transport=transport, time_scale=5000.0) as handle:
-        yield from _connected(
-            SolarSimulator(
-                *handle.ports,
-                warmup_s=0.2,
-                poll_interval_s=0.01,
-                lamp_settings=dataclasses.replace(FAST_LAMP),
-                shutter_settings=FAST_SHUTTER,
-            )
-        )
+    yield from _device(
+        request.param,
+        hardware=lambda: SolarSimulator(
+            os.environ["TOFTWIN_LAMP_PORT"],
+            os.environ["TOFTWIN_SHUTTER_PORT"],
+            warmup_s=float(os.environ.get("TOFTWIN_WARMUP_S", "1800")),
+        ),
+        simulator="solar-simulator",
+        time_scale=5000.0,
+        on_simulator=lambda handle: fast_solar(*handle.ports, warmup_s=0.2),
+    )
 
 
 def _stable_timeout(device: SolarSimulatorProtocol) -> float:
