@@ -138,13 +138,21 @@ class BackgroundRunner:
     def __init__(self, lease: RigLease, stop_wait_s: float) -> None:
         self.lease = lease
         self.stop_wait_s = stop_wait_s
-        self._lock = threading.Lock()
+        # Re-entrant: stop() looks its run up (find) while holding it. find() takes it too, so
+        # a reader that no longer finds the run reads a final state already written.
+        self._lock = threading.RLock()
         self._run: Run[Any] | None = None
 
     # -- queries --------------------------------------------------------------------------------
     def find(self, kind: Kind[P], run_id: str) -> Run[P] | None:
-        """The run of ``run_id`` if it is the one running, else None."""
-        run = self._run
+        """The run of ``run_id`` if it is the one running, else None.
+
+        None only once the run's final state is written (:meth:`_main` clears the run and
+        records the state in one critical section, which this waits for): a status read after
+        this call that finds no run reads the final state, never a stale ``running``.
+        """
+        with self._lock:
+            run = self._run
         if run is None or run.kind.name != kind.name or run.id != run_id:
             return None
         return run

@@ -346,9 +346,10 @@ def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
 
 def job_status(sessions: sessionmaker, jobs: CalibrationJobs, job_id: str) -> dict[str, Any]:
     """``GET /calibrations/{id}`` (404 for an unknown job)."""
+    live = jobs.live(job_id)  # first: a job no longer running has its final row written
     with sessions() as s:
         row = queries.require_calibration_job(s, job_id)
-    return job_public(row, jobs.live(job_id))
+    return job_public(row, live)
 
 
 def job_file(sessions: sessionmaker, job_id: str, name: str) -> Path:

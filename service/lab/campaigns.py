@@ -105,11 +105,14 @@ def campaign_status(
     Counts results per pose instead of reading every result, so that a campaign of tens of
     thousands of results answers in a few milliseconds.
     """
+    # What the runner knows first, then the rows: a campaign the runner no longer runs has its
+    # final state written by then (BackgroundRunner.find), so a finished campaign never reads
+    # as "running" without its live figures.
+    live = runner.live(campaign_id)
     with sessions() as s:
         row = queries.require_campaign(s, campaign_id)
         poses = queries.planned_poses(s, campaign_id)
         per_pose = queries.results_per_pose(s, campaign_id)
-        live = runner.live(campaign_id)
         done = sum(per_pose.values())
         current, eta = None, None
         if live is not None and row.state == "running":
@@ -120,9 +123,12 @@ def campaign_status(
             first = next((p for p in poses if per_pose.get(p.pose_index, 0) < p.repeats), None)
             if first is not None:
                 have = queries.done_repeats(s, campaign_id, first.pose_index)
-                repeat = next(r for r in range(first.repeats) if r not in have)
-                current = {"pose_index": first.pose_index, "repeat": repeat,
-                           "turntable_deg": first.turntable_deg, "solar_suns": first.solar_suns}
+                # None if the pose's last repeat was committed between the two reads
+                repeat = next((r for r in range(first.repeats) if r not in have), None)
+                if repeat is not None:
+                    current = {"pose_index": first.pose_index, "repeat": repeat,
+                               "turntable_deg": first.turntable_deg,
+                               "solar_suns": first.solar_suns}
     base = f"/api/v1/campaigns/{campaign_id}"
     return {
         "id": row.id, "name": row.name, "scene_name": row.scene_name, "state": row.state,

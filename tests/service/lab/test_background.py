@@ -215,3 +215,31 @@ def test_a_refused_start_gives_the_rig_back_and_runs_nothing(runner, lease):
         runner.start(kind, "a1", until_stopped, Steps(), prepare=refuse)
     assert lease.campaign_id is None and runner.find(kind, "a1") is None
     assert runner.emergency_stop() is None
+
+
+def test_a_run_is_not_found_gone_before_its_final_state_is_written(runner, lease):
+    """A status read (``live``, then the row) never sees the run gone and the row still
+    ``running``: ``find`` waits for the critical section that clears the run and writes the
+    final state (a campaign's status once read a stale ``running`` there and failed)."""
+    book = Book()
+    writing, release = threading.Event(), threading.Event()
+
+    def slow_finish(run: Run[Steps], to: str, error: str | None) -> None:
+        writing.set()
+        release.wait(5.0)  # the final row is being written
+        book.finished.append((run.id, to, error))
+
+    kind = make_kind("campaign", book, lease, finish=slow_finish)
+    steps = Steps()
+    steps.go.set()
+    runner.start(kind, "a1", until_stopped, steps)
+    assert writing.wait(5.0)
+    seen: list[Any] = []
+    reader = threading.Thread(target=lambda: seen.append(
+        (runner.live(kind, "a1"), list(book.finished))))
+    reader.start()
+    reader.join(0.3)
+    assert reader.is_alive(), "the run read as gone while its final state was being written"
+    release.set()
+    reader.join(5.0)
+    assert seen == [(None, [("a1", "completed", None)])]
