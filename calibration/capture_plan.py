@@ -114,11 +114,6 @@ class CapturePlan:
         """Rig states the plan visits (for progress)."""
         return len(self.captures)
 
-    @property
-    def n_frames(self) -> int:
-        """Frames the plan captures."""
-        return sum(s.frames for s in self.captures)
-
 
 def mount(objects: Sequence[ObjectSpec] | None, instruction: str) -> MountStep:
     """A :class:`MountStep` from any sequence of objects (or None)."""

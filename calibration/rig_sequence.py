@@ -156,12 +156,6 @@ class RigCalibrationPlan:
         if self.solar_reference_suns is not None:
             check_reference_suns(self.solar_reference_suns)
 
-    @property
-    def n_captures(self) -> int:
-        """Rig states the sequence visits (for progress)."""
-        return (len(self.fixtures) * len(self.sweep_deg) + 2
-                + len(self.solar_levels_suns) + 1)
-
     def summary(self) -> dict[str, Any]:
         """The plan as JSON values: the fixtures by name, the rest as given (what
         ``toftwin calibrate rig --print-plan`` prints)."""

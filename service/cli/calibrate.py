@@ -122,7 +122,7 @@ def rig_command(
 ) -> None:
     """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
     from calibration.report import write_report
-    from calibration.rig_sequence import build_rig_plan
+    from calibration.rig_sequence import build_rig_plan, rig_capture_plan
     from service.lab.acquisition import run_rig_calibration
 
     try:
@@ -140,7 +140,8 @@ def rig_command(
     settings = rig_settings(simulated=simulated, reality=reality, camera_spp=camera_spp,
                             camera_integrator="direct", camera_seed=seed)
     with (open_command_rig(settings, source) as (rig, world),
-          step_progress(quiet, "calibrating", plan.n_captures) as progress):
+          step_progress(quiet, "calibrating",
+                        rig_capture_plan(plan, source.spec).n_captures) as progress):
         rig_name = "lab" if world is None else "simulated"
         try:
             result = run_rig_calibration(rig, _operator(world), source.spec, source.base_dir, plan,

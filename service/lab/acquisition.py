@@ -12,7 +12,7 @@ alike.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -39,25 +39,11 @@ from sim_core.scene_spec import SceneSpec
 from sim_core.twin_file import TwinParameters
 
 
-class AcquisitionStopped(Exception):  # noqa: N818 - a stop asked for, not an error
-    """The acquisition was asked to stop; raised before the next capture."""
-
-    def __init__(self, done: int, total: int) -> None:
-        super().__init__(f"acquisition stopped after {done} of {total} captures")
-        self.done, self.total = done, total
-
-
-def never_stop() -> bool:
-    """A stop check that never asks to stop."""
-    return False
-
-
 def acquire(
     rig: Rig,
     operator: Operator,
     plan: CapturePlan,
     progress: Progress = no_progress,
-    should_stop: Callable[[], bool] = never_stop,
     *,
     total: int | None = None,
 ) -> dict[str, AveragedCapture]:
@@ -65,9 +51,10 @@ def acquire(
 
     Before each capture ``progress(done, total, step.message)`` is called (``done`` captures
     so far; ``total`` defaults to the plan's captures: a procedure whose fit reports further
-    steps passes its own), then ``should_stop()``: if it is true, :class:`AcquisitionStopped`
-    is raised and nothing more is captured (a progress callback may raise to stop as well).
-    The plan's ``restore`` mount is done at the end, and also when a step fails or stops.
+    steps passes its own). That call is where a run stops: a callback that raises (a job's
+    cancel or emergency stop, as the fits' progress does too) stops the acquisition before the
+    next capture. The plan's ``restore`` mount is done at the end, and also when a step fails
+    or stops.
 
     Returns
     -------
@@ -76,7 +63,6 @@ def acquire(
 
     Raises
     ------
-    AcquisitionStopped
     DeviceError
         The rig failed or was not in the planned state for an exposure (:meth:`Rig.apply`,
         :meth:`Rig.capture`).
@@ -87,8 +73,6 @@ def acquire(
         for step in plan.steps:
             if isinstance(step, CaptureStep):
                 progress(len(captures), total, step.message)
-                if should_stop():
-                    raise AcquisitionStopped(len(captures), total)
                 captures[step.name] = _capture(rig, step)
             else:
                 operator.mount(step.objects, step.instruction)
@@ -113,7 +97,6 @@ def run_rig_calibration(
     plan: RigCalibrationPlan | None = None,
     progress: Progress = no_progress,
     rig_name: str = "rig",
-    should_stop: Callable[[], bool] = never_stop,
 ) -> RigCalibration:
     """``toftwin calibrate rig``: :func:`calibration.rig_sequence.rig_capture_plan`, acquired
     on ``rig``, fitted by :func:`calibration.rig_sequence.fit_rig_calibration`.
@@ -122,7 +105,7 @@ def run_rig_calibration(
     are swapped for the board during the sequence and mounted again at the end.
     """
     plan = plan or RigCalibrationPlan()
-    captures = acquire(rig, operator, rig_capture_plan(plan, spec), progress, should_stop)
+    captures = acquire(rig, operator, rig_capture_plan(plan, spec), progress)
     return fit_rig_calibration(captures, spec, base_dir, plan, rig.camera.use_case, progress,
                                rig_name)
 
@@ -138,7 +121,6 @@ def run_material_calibration(
     prior: str | Mapping[str, Any] | Material | None = None,
     progress: Progress = no_progress,
     seed: int = 0,
-    should_stop: Callable[[], bool] = never_stop,
 ) -> MaterialCalibration:
     """``toftwin calibrate material``: :func:`calibration.rig_material.material_capture_plan`
     (a bad model or prior fails before the rig moves), acquired on ``rig`` (the sample mounted
@@ -147,7 +129,7 @@ def run_material_calibration(
     plan = plan or MaterialSweepPlan()
     capture_plan = material_capture_plan(spec, plan, model, prior)
     t0 = time.perf_counter()
-    captures = acquire(rig, operator, capture_plan, progress, should_stop, total=plan.n_steps)
+    captures = acquire(rig, operator, capture_plan, progress, total=plan.n_steps)
     sweep_s = time.perf_counter() - t0
     result = fit_material_sweep(captures, spec, base_dir, calibration, plan,
                                 rig.camera.use_case, model, prior, progress, seed)
@@ -164,13 +146,12 @@ def run_twin_comparison(
     solar_suns: float = 1.0,
     settings: RenderSettings | None = None,
     progress: Progress = no_progress,
-    should_stop: Callable[[], bool] = never_stop,
 ) -> TwinComparison:
     """Does a calibration help? :func:`calibration.verification.comparison_capture_plan`
     acquired on ``rig`` (with what is mounted: no operator needed), compared by
     :func:`calibration.verification.compare_twins`."""
     plan = comparison_capture_plan(angles_deg, solar_suns)
-    captures = acquire(rig, _NoOperator(), plan, progress, should_stop)
+    captures = acquire(rig, _NoOperator(), plan, progress)
     return compare_twins(captures, spec, base_dir, calibration, angles_deg, settings, progress)
 
 
@@ -181,5 +162,5 @@ class _NoOperator:
         raise AssertionError(f"this plan mounts nothing, yet asked: {instruction}")
 
 
-__all__ = ["AcquisitionStopped", "Captures", "acquire", "never_stop", "run_material_calibration",
-           "run_rig_calibration", "run_twin_comparison"]
+__all__ = ["Captures", "acquire", "run_material_calibration", "run_rig_calibration",
+           "run_twin_comparison"]

@@ -173,6 +173,8 @@ class CalibrationJobs:
     # -- commands ------------------------------------------------------------------------------
     def create(self, req: CalibrationCreate) -> str:
         """Validate ``req``, claim the rig, store the job and start it; returns its id."""
+        from calibration.rig_sequence import rig_capture_plan
+
         plan = req.plan()  # the command line's builder: the same plan for the same inputs
         rig = self.lease.require()
         check_angle(rig, plan.sweep_deg[0], "sweep.from_deg")
@@ -185,7 +187,7 @@ class CalibrationJobs:
                 queries.create_calibration_job(
                     s, job_id=job_id, plan=req.model_dump(mode="json"),
                     activate=req.activate, out_dir=str(self.out_dir(job_id)),
-                    steps_total=plan.n_captures)
+                    steps_total=rig_capture_plan(plan, self.scene.spec).n_captures)
 
         self.background.start(self.kind, job_id,
                               lambda run: self._work(run, plan, req.activate), _Progress(),

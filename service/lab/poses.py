@@ -84,12 +84,13 @@ class PosePlan:
     #: (:func:`sim_core.adaptive.noise_fraction`); None: ``spp`` everywhere
     noise_fraction: float | None = None
 
-    def render_request(self, spec: SceneSpec, threads: int | None) -> RenderRequest:
+    def render_request(self, threads: int | None) -> RenderRequest:
         """How this unit's simulations render: the scene's ``render:`` section with the plan's
         samples per pixel, effects and noise-fraction target, the unit's own seed
         (:func:`unit_seed`) and the worker's threads."""
         return request_from_spec(
-            spec.render, spp=self.spp, seed=unit_seed(self.seed, self.pose_index, self.repeat),
+            self.scene.spec.render, spp=self.spp,
+            seed=unit_seed(self.seed, self.pose_index, self.repeat),
             threads=threads, effects=self.effects,
             accuracy=AccuracyTarget(noise_fraction=self.noise_fraction))
 
@@ -212,13 +213,12 @@ def _submit_one(
     executor: Executor, plan: PosePlan, m: Measurement, threads: int | None, twin: Twin,
     label: str,
 ) -> tuple[str, JobFuture]:
-    spec = m.spec
     frame_id = new_frame_id()
     job = make_job(
-        spec, plan.scene.base_dir,
+        m.spec, plan.scene.base_dir,
         turntable_deg=m.rig.turntable_angle_deg,
         solar_suns=m.rig.irradiance_suns,
-        request=plan.render_request(spec, threads),
+        request=plan.render_request(threads),
         scene_name=plan.scene.name,
         extra={
             "frame_id": frame_id, "rig": m.rig.to_dict(), "campaign_id": plan.campaign_id,
