@@ -34,11 +34,14 @@ FILTERS: dict[str, Callable[..., str]] = {"number": number}
 
 
 @cache
-def jinja_environment(package: str, folder: str = "templates") -> jinja2.Environment:
-    """The environment of the templates in ``folder`` of ``package`` (shipped as package data),
-    made once per folder: autoescape on for every template, :class:`jinja2.StrictUndefined`,
-    ``trim_blocks`` and ``lstrip_blocks``, the filters of :data:`FILTERS`."""
-    env = jinja2.Environment(loader=jinja2.PackageLoader(package, folder), autoescape=True,
+def jinja_environment(package: str, folders: tuple[str, ...] = ("templates",)
+                      ) -> jinja2.Environment:
+    """The environment of the templates in ``folders`` of ``package`` (shipped as package data;
+    a name is looked up in the folders in turn), made once per package and folders: autoescape
+    on for every template, :class:`jinja2.StrictUndefined`, ``trim_blocks`` and
+    ``lstrip_blocks``, the filters of :data:`FILTERS`."""
+    loader = jinja2.ChoiceLoader([jinja2.PackageLoader(package, f) for f in folders])
+    env = jinja2.Environment(loader=loader, autoescape=True,
                              undefined=jinja2.StrictUndefined, trim_blocks=True,
                              lstrip_blocks=True)
     env.filters.update(FILTERS)

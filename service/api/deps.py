@@ -9,6 +9,7 @@ from __future__ import annotations
 import secrets
 import threading
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from typing import Annotated, Any
 
 from fastapi import Depends, HTTPException, Query, Request, status
@@ -95,6 +96,18 @@ BackgroundDep = Annotated[BackgroundRunner, Depends(_of_lab("background"))]
 Limit = Annotated[int, Query(ge=1, le=1000)]
 #: ... from row ``offset`` (0: the first)
 Offset = Annotated[int, Query(ge=0, le=2**31)]
+
+
+@dataclass(frozen=True)
+class Page:
+    """The page a list route answers (its ``limit`` and ``offset`` query parameters): at most
+    ``limit`` rows, newest first, from row ``offset``."""
+
+    limit: Limit = 100
+    offset: Offset = 0
+
+
+PageDep = Annotated[Page, Depends()]
 
 
 def require_token(

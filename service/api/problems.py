@@ -220,8 +220,8 @@ async def _device_error(_: Request, exc: DeviceError) -> JSONResponse:
 
 
 async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
-    kind = PROBLEM_TYPES.get(exc.problem)
-    return problem_response(kind, exc.status_code, exc.detail)
+    kind = PROBLEM_TYPES[exc.problem]
+    return problem_response(kind, kind.status, exc.detail)
 
 
 async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:

@@ -16,8 +16,12 @@ import jinja2
 from sim_core.html import jinja_environment
 
 STATIC_DIR = Path(__file__).parent / "static"
+#: where the templates are found: ``templates``, then ``static`` (the campaign report, one
+#: self-contained file, inlines the stylesheet of a pose's figures the page links)
+TEMPLATE_FOLDERS = ("templates", "static")
 
 
 def environment() -> jinja2.Environment:
-    """The page's and the report's templates (``service/web/templates``)."""
-    return jinja_environment(__name__)
+    """The page's and the report's templates (``service/web/templates``, and the page's static
+    files for the report to inline)."""
+    return jinja_environment(__name__, TEMPLATE_FOLDERS)

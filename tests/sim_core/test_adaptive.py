@@ -15,22 +15,16 @@ from sim_core.adaptive import (
     render_adaptive,
 )
 from sim_core.errors import InvalidInputError
-from sim_core.render import LightField, RenderSettings, render
+from sim_core.render import LightField, RenderSettings
 from sim_core.tof import ambiguity_range_m, phase_from_phasor, range_from_phase
-from tests.sim_core.scenes import small_example
 
 F = 60.24e6
 TARGET_M = 4e-3
 
 
-@pytest.fixture(scope="module")
-def corner():
-    return small_example("corner", width=40)
-
-
-@pytest.fixture(scope="module")
-def reference(corner):
-    return render(corner, RenderSettings(spp=16384, max_bounces=3, seed=777)).light_field
+#: the ``corner`` and its converged ``reference`` (tests/sim_core/conftest.py)
+CORNER_WIDTH_PX = 40
+REFERENCE_SPP, REFERENCE_SEED = 16384, 777
 
 
 def ranges(lf):

@@ -13,8 +13,7 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from service.api.deps import (
     CalibrationsDep,
-    Limit,
-    Offset,
+    PageDep,
     SessionDep,
     SessionsDep,
     SettingsDep,
@@ -53,14 +52,11 @@ def create_calibration_job(
 
 @router.get("", response_model=list[CalibrationJobPublic])
 def list_calibration_jobs(
-    session: SessionDep,
-    calibrations: CalibrationsDep,
-    limit: Limit = 100,
-    offset: Offset = 0,
+    session: SessionDep, calibrations: CalibrationsDep, page: PageDep
 ) -> list[dict]:
     """Calibration jobs, newest first."""
     return [job_public(row, calibrations.live(row.id))
-            for row in queries.list_calibration_jobs(session, limit, offset)]
+            for row in queries.list_calibration_jobs(session, page.limit, page.offset)]
 
 @router.get("/{job_id}", response_model=CalibrationJobPublic, responses=errors(404))
 def get_calibration_job(

@@ -14,8 +14,8 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from service.api.deps import (
     LeaseDep,
-    Limit,
     Offset,
+    PageDep,
     RunnerDep,
     SceneDep,
     SessionDep,
@@ -57,14 +57,10 @@ def create_campaign(
 
 @router.get("", response_model=list[CampaignPublic])
 def list_campaigns(
-    sessions: SessionsDep,
-    runner: RunnerDep,
-    session: SessionDep,
-    limit: Limit = 100,
-    offset: Offset = 0,
+    sessions: SessionsDep, runner: RunnerDep, session: SessionDep, page: PageDep
 ) -> list[dict]:
     """Campaigns, newest first."""
-    rows = queries.list_campaigns(session, limit, offset)
+    rows = queries.list_campaigns(session, page.limit, page.offset)
     return [campaign_status(sessions, runner, row.id) for row in rows]
 
 

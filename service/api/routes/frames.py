@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Path
 from fastapi.responses import FileResponse, Response
 
-from service.api.deps import Limit, Offset, SessionDep, SessionsDep, StoreDep, TokenDep, errors
+from service.api.deps import PageDep, SessionDep, SessionsDep, StoreDep, TokenDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
 from service.lab import campaigns as lab_campaigns
@@ -21,15 +21,10 @@ FrameIdPath = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A fram
 
 
 @router.get("", response_model=list[FramePublic])
-def list_frames(
-    store: StoreDep,
-    session: SessionDep,
-    limit: Limit = 100,
-    offset: Offset = 0,
-) -> list[dict]:
+def list_frames(store: StoreDep, session: SessionDep, page: PageDep) -> list[dict]:
     """Stored frames, newest first."""
     return [frame_public(store, row, with_metadata=False)
-            for row in queries.list_frames(session, limit, offset)]
+            for row in queries.list_frames(session, page.limit, page.offset)]
 
 
 @router.get("/{frame_id}", response_model=FramePublic, responses=errors(404, 410))

@@ -13,7 +13,7 @@ import jinja2
 from calibration.report import write_report
 from calibration.rig_sequence import RigCalibration
 from service.api.routes import api_docs, page
-from service.web import environment
+from service.web import STATIC_DIR, TEMPLATE_FOLDERS, environment
 from sim_core.html import jinja_environment, number
 from sim_core.twin_file import parse_calibration
 from tests.service.api.conftest import AUTH
@@ -38,7 +38,7 @@ def test_no_module_but_the_factory_makes_a_jinja_environment():
 
 
 def test_the_page_the_api_docs_and_both_reports_share_the_factory_s_rules():
-    web = jinja_environment("service.web")
+    web = jinja_environment("service.web", TEMPLATE_FOLDERS)
     assert environment() is web and page.templates.env is web and api_docs.templates.env is web
     for env in (web, jinja_environment("calibration")):
         assert env.autoescape is True and env.undefined is jinja2.StrictUndefined
@@ -69,3 +69,16 @@ def test_a_calibration_s_provenance_is_text_on_the_page_and_in_its_report(client
     assert shown_as_text(html)
     assert f"<h1>Calibration of {ESCAPED}</h1>" in html
     assert f"<tr><td>{ESCAPED}</td><td>{ESCAPED}</td></tr>" in html  # a view not used, and why
+
+
+def test_a_pose_s_figures_look_the_same_on_the_page_and_in_the_report(client):
+    figures_css = (STATIC_DIR / "figures.css").read_text()
+    assert ".tof-figures" in figures_css
+    page = client.get("/")
+    assert '<link rel="stylesheet" href="/static/figures.css">' in page.text
+    assert client.get("/static/figures.css").text == figures_css
+    cid = client.post("/api/v1/campaigns", headers=AUTH,
+                      json={"name": "css", "poses": [{"turntable_deg": 0.0}]}).json()["id"]
+    report = client.get(f"/api/v1/campaigns/{cid}/report").text
+    assert figures_css.strip() in report  # one self-contained file: the rules inlined, not linked
+    assert "/static/" not in report

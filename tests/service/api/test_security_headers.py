@@ -82,7 +82,7 @@ def test_every_get_route_carries_the_headers_and_every_html_page_is_covered(lab)
     assert html == HTML_ROUTES, html ^ HTML_ROUTES
 
 
-@pytest.mark.parametrize("path", ["/static/page.js", "/static/page.css",
+@pytest.mark.parametrize("path", ["/static/page.js", "/static/page.css", "/static/figures.css",
                                   "/static/swagger-ui/swagger-ui-bundle.js",
                                   "/api/v1/openapi.json"])
 def test_static_files_carry_them(lab, path):

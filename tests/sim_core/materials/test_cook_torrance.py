@@ -11,15 +11,7 @@ from sim_core.errors import InvalidInputError
 from sim_core.materials import CookTorrance, material_preset
 from sim_core.materials.kernels import fresnel_dielectric, lobe_probabilities
 
-from .harness import (
-    albedo_quadrature,
-    check_albedo_at_most_one,
-    check_albedo_consistency,
-    check_chi2,
-    check_out_of_range_rejected,
-    direction_deg,
-    spherical,
-)
+from . import harness
 
 
 def fresnel_eq_11_12(theta: float, n2: float, n1: float = 1.0) -> float:
@@ -70,8 +62,8 @@ def test_value_matches_paper_equations(
     theta_i: float, theta_r: float, dphi: float, fresnel_angle: str, params: dict[str, float]
 ) -> None:
     mat = CookTorrance(**params, fresnel_angle=fresnel_angle)
-    wi = spherical(math.radians(theta_i), 0.0)
-    wo = spherical(math.radians(theta_r), math.radians(dphi))
+    wi = harness.spherical(math.radians(theta_i), 0.0)
+    wo = harness.spherical(math.radians(theta_r), math.radians(dphi))
     expected = reference_value(theta_i, theta_r, dphi, **params, fresnel_angle=fresnel_angle)
     assert mat.eval_local(wi, wo)[0] == pytest.approx(expected, rel=1e-9)
 
@@ -81,8 +73,8 @@ def test_normal_distribution_carries_the_cos4_normalisation() -> None:
     # present: eq. (9) alone would give a value cos⁴40° ≈ 0.34 times as large.
     m, ks = 0.5, 1.0
     mat = CookTorrance(kd=0.0, ks=ks, m=m, n2=1.5, fresnel_angle="half")
-    wi = spherical(math.radians(10.0), 0.0)
-    wo = spherical(math.radians(70.0), 0.0)  # same side: half vector 40° off the normal
+    wi = harness.spherical(math.radians(10.0), 0.0)
+    wo = harness.spherical(math.radians(70.0), 0.0)  # same side: half vector 40° off the normal
     h = (wi + wo) / np.linalg.norm(wi + wo)
     cos_a = h[0, 2]
     cos_o = float(wi[0] @ h[0])
@@ -103,8 +95,8 @@ def test_normal_distribution_carries_the_cos4_normalisation() -> None:
 
 
 def test_incidence_fresnel_is_not_reciprocal_and_half_fresnel_is() -> None:
-    wi = spherical(math.radians(20.0), 0.0)
-    wo = spherical(math.radians(60.0), math.radians(180.0))
+    wi = harness.spherical(math.radians(20.0), 0.0)
+    wo = harness.spherical(math.radians(60.0), math.radians(180.0))
     paper = CookTorrance(kd=0.0, ks=0.9, m=0.3, n2=2.26, fresnel_angle="incidence")
     half = CookTorrance(kd=0.0, ks=0.9, m=0.3, n2=2.26, fresnel_angle="half")
     forward, backward = paper.eval_local(wi, wo)[0], paper.eval_local(wo, wi)[0]
@@ -139,8 +131,8 @@ def test_presets_carry_the_table_2_averages(
 
 def test_index_matched_surface_reflects_only_diffusely() -> None:
     mat = CookTorrance(kd=0.4, ks=0.6, m=0.2, n2=1.0)
-    wi = spherical(np.radians([0.0, 30.0, 89.0]), 0.0)
-    wo = spherical(np.radians([0.0, 30.0, 89.0]), np.pi)
+    wi = harness.spherical(np.radians([0.0, 30.0, 89.0]), 0.0)
+    wo = harness.spherical(np.radians([0.0, 30.0, 89.0]), np.pi)
     np.testing.assert_allclose(mat.eval_local(wi, wo), 0.4 / math.pi, rtol=1e-12)
 
 
@@ -159,8 +151,8 @@ def test_the_glossy_tile_samples_its_dim_specular_lobe_in_proportion_to_its_albe
     # Measured: the lobe's albedo (quadrature) agrees with ks F(θo) within 8 % up to 70°.
     spec = CookTorrance(kd=0.0, ks=0.25, m=0.06, n2=1.46)
     for theta in (0.0, 40.0, 70.0):
-        wo = direction_deg(theta)
-        a_spec = albedo_quadrature(spec, wo)
+        wo = harness.direction_deg(theta)
+        a_spec = harness.albedo_quadrature(spec, wo)
         estimate = 0.25 * fresnel_dielectric(math.cos(math.radians(theta)), 1.46)
         assert estimate == pytest.approx(a_spec, rel=0.08)
 
@@ -179,21 +171,22 @@ MATERIALS = [
 def test_sampling_estimate_of_albedo_matches_quadrature(
     material: CookTorrance, theta_o: float
 ) -> None:
-    check_albedo_consistency(material, direction_deg(theta_o, 75.0), n_samples=100_000, seed=3)
+    harness.check_albedo_consistency(material, harness.direction_deg(theta_o, 75.0),
+                                     n_samples=100_000, seed=3)
 
 
 @pytest.mark.parametrize("material", MATERIALS, ids=repr)
 @pytest.mark.parametrize("theta_o", [25.0, 70.0])
 def test_sampler_histogram_matches_pdf(material: CookTorrance, theta_o: float) -> None:
-    check_chi2(material, direction_deg(theta_o, 75.0), seed=7)
+    harness.check_chi2(material, harness.direction_deg(theta_o, 75.0), seed=7)
 
 
 @pytest.mark.parametrize("fresnel_angle", ["incidence", "half"])
 def test_albedo_of_the_most_reflective_parameters_stays_below_one(fresnel_angle: str) -> None:
-    wos = np.stack([direction_deg(t) for t in (0.0, 45.0, 75.0, 89.0, 89.99)])
+    wos = np.stack([harness.direction_deg(t) for t in (0.0, 45.0, 75.0, 89.0, 89.99)])
     for m in (1e-6, 0.05, 0.5, 1.0):
         mat = CookTorrance(kd=0.0, ks=1.0, m=m, n2=3.0, fresnel_angle=fresnel_angle)
-        check_albedo_at_most_one(mat, wos, n_samples=50_000)
+        harness.check_albedo_at_most_one(mat, wos, n_samples=50_000)
 
 
 @pytest.mark.parametrize(
@@ -210,7 +203,7 @@ def test_albedo_of_the_most_reflective_parameters_stays_below_one(fresnel_angle:
 def test_out_of_range_parameter_is_rejected_with_its_name_value_and_range(
     field: str, value: float, allowed: str
 ) -> None:
-    check_out_of_range_rejected(CookTorrance, {"kd": 0.0, "ks": 0.0}, field, value, allowed)
+    harness.check_out_of_range_rejected(CookTorrance, {"kd": 0.0, "ks": 0.0}, field, value, allowed)
 
 
 def test_kd_plus_ks_above_one_is_rejected() -> None:

@@ -10,13 +10,7 @@ import pytest
 from sim_core.materials import BSDFSample, Lambertian, SeedMicrofacet
 from sim_core.materials.microfacet import finish_sample
 
-from .harness import (
-    check_albedo_at_most_one,
-    check_albedo_consistency,
-    check_chi2,
-    chi2_goodness_of_fit,
-    direction_deg,
-)
+from . import harness
 
 
 class UniformPdfClaim(Lambertian):
@@ -54,30 +48,31 @@ class WeightOffByTwoPercent(SeedMicrofacet):
         return BSDFSample(wi=s.wi, pdf=s.pdf, weight=0.98 * s.weight)
 
 
-WO = direction_deg(35.0, 30.0)
+WO = harness.direction_deg(35.0, 30.0)
 
 
 def test_chi2_rejects_a_pdf_that_does_not_describe_the_sampler() -> None:
-    assert chi2_goodness_of_fit(UniformPdfClaim(albedo=0.5), WO).p_value < 1e-6
+    assert harness.chi2_goodness_of_fit(UniformPdfClaim(albedo=0.5), WO).p_value < 1e-6
     with pytest.raises(AssertionError, match="chi2"):
-        check_chi2(UniformPdfClaim(albedo=0.5), WO)
+        harness.check_chi2(UniformPdfClaim(albedo=0.5), WO)
 
 
 def test_chi2_rejects_a_sampler_five_percent_too_wide() -> None:
     material = SlightlyWideSampler(ks=0.6, kd=0.1, sigma=0.05)
-    assert chi2_goodness_of_fit(material, WO).p_value < 1e-6
+    assert harness.chi2_goodness_of_fit(material, WO).p_value < 1e-6
     # while the correct model passes on the same samples
-    assert chi2_goodness_of_fit(SeedMicrofacet(ks=0.6, kd=0.1, sigma=0.05), WO).p_value > 1e-3
+    glossy = SeedMicrofacet(ks=0.6, kd=0.1, sigma=0.05)
+    assert harness.chi2_goodness_of_fit(glossy, WO).p_value > 1e-3
 
 
 def test_albedo_consistency_rejects_a_wrong_pdf_and_a_wrong_weight() -> None:
     with pytest.raises(AssertionError, match="sampled albedo"):
-        check_albedo_consistency(UniformPdfClaim(albedo=0.5), WO)
+        harness.check_albedo_consistency(UniformPdfClaim(albedo=0.5), WO)
     with pytest.raises(AssertionError, match="sampled albedo"):
-        check_albedo_consistency(WeightOffByTwoPercent(ks=0.6, kd=0.3, sigma=0.2), WO)
+        harness.check_albedo_consistency(WeightOffByTwoPercent(ks=0.6, kd=0.3, sigma=0.2), WO)
 
 
 def test_energy_check_rejects_a_material_reflecting_three_percent_too_much() -> None:
-    wos = np.stack([direction_deg(0.0), direction_deg(80.0)])
+    wos = np.stack([harness.direction_deg(0.0), harness.direction_deg(80.0)])
     with pytest.raises(AssertionError, match="sampled albedo"):
-        check_albedo_at_most_one(TooBright(albedo=1.0), wos)
+        harness.check_albedo_at_most_one(TooBright(albedo=1.0), wos)

@@ -28,7 +28,7 @@ from sim_core.materials.kernels import (
 )
 from sim_core.materials.microfacet import FixedLobeMixture, check_parameter
 
-from .harness import check_albedo_consistency, check_chi2, direction_deg, spherical
+from . import harness
 
 
 def vec(kernel, *args):
@@ -52,7 +52,7 @@ def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("alpha", [1e-3, 0.05, 0.3, 1.0, math.sqrt(2.0)])
 def test_beckmann_d_is_normalised_in_projected_area(alpha: float) -> None:
     def integrand(theta: float) -> float:
-        h = spherical(theta)
+        h = harness.spherical(theta)
         return float(d_of(h, alpha)[0]) * math.cos(theta) * math.sin(theta) * 2 * math.pi
 
     # Split where the lobe lives so that adaptive quadrature cannot step over it.
@@ -158,8 +158,8 @@ def test_schlick_power_fresnel_endpoints_and_schlick_case() -> None:
 
 def test_vcavity_g_is_symmetric_bounded_and_one_at_normal_incidence() -> None:
     rng = np.random.default_rng(3)
-    wi = spherical(rng.uniform(0, 0.5 * np.pi, 500), rng.uniform(0, 2 * np.pi, 500))
-    wo = spherical(rng.uniform(0, 0.5 * np.pi, 500), rng.uniform(0, 2 * np.pi, 500))
+    wi = harness.spherical(rng.uniform(0, 0.5 * np.pi, 500), rng.uniform(0, 2 * np.pi, 500))
+    wo = harness.spherical(rng.uniform(0, 0.5 * np.pi, 500), rng.uniform(0, 2 * np.pi, 500))
     h = vec(half_vector, *wi.T, *wo.T)
     g1 = vec(vcavity_g, h[:, 2], wi[:, 2], wo[:, 2], dot(wi, h))
     g2 = vec(vcavity_g, h[:, 2], wo[:, 2], wi[:, 2], dot(wo, h))
@@ -208,7 +208,8 @@ def test_check_parameter_accepts_bounds_and_numpy_scalars() -> None:
 def test_fixed_lobe_mixture_has_the_brdf_of_its_base_and_a_consistent_sampler() -> None:
     tile = material_preset("black-glossy-tile")
     naive = FixedLobeMixture(tile)
-    wi, wo = spherical(np.radians([5.0, 40.0, 70.0]), 0.0), spherical(np.radians(40.0), np.pi)
+    wi = harness.spherical(np.radians([5.0, 40.0, 70.0]), 0.0)
+    wo = harness.spherical(np.radians(40.0), np.pi)
     wo = np.repeat(wo, 3, axis=0)
     np.testing.assert_array_equal(naive.eval_local(wi, wo), tile.eval_local(wi, wo))
     assert naive.kernel_kind == tile.kernel_kind and naive.albedo_bound == tile.albedo_bound
@@ -217,8 +218,9 @@ def test_fixed_lobe_mixture_has_the_brdf_of_its_base_and_a_consistent_sampler() 
     beckmann = CookTorrance(kd=0.0, ks=0.25, m=0.06, n2=1.46).pdf_local(wi, wo)
     np.testing.assert_allclose(naive.pdf_local(wi, wo), 0.5 * beckmann + 0.5 * cos_i / math.pi,
                                rtol=1e-12)
-    check_chi2(naive, direction_deg(40.0, 75.0), seed=11)
-    check_albedo_consistency(naive, direction_deg(40.0, 75.0), n_samples=100_000, seed=12)
+    harness.check_chi2(naive, harness.direction_deg(40.0, 75.0), seed=11)
+    harness.check_albedo_consistency(naive, harness.direction_deg(40.0, 75.0),
+                                     n_samples=100_000, seed=12)
 
 
 def test_fixed_lobe_mixture_refuses_a_model_without_lobes_and_a_starved_lobe() -> None:

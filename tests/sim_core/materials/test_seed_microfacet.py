@@ -10,15 +10,7 @@ import pytest
 from sim_core.errors import InvalidInputError
 from sim_core.materials import SeedMicrofacet, material_preset
 
-from .harness import (
-    check_albedo_at_most_one,
-    check_albedo_consistency,
-    check_chi2,
-    check_out_of_range_rejected,
-    direction_deg,
-    repeat,
-    spherical,
-)
+from . import harness
 
 
 def reference_value(
@@ -31,7 +23,7 @@ def reference_value(
     sigma: float,
     f0: float,
 ) -> float:
-    """Eqs. (9)-(10) in scalar math, angles in degrees; half-angle relations from spherical
+    """Eqs. (9)-(10) in scalar math, angles in degrees; half-angle relations from harness.spherical
     trigonometry (cos γ = sqrt((1 + wi·wo)/2), cos θh = (cos θi + cos θr) / (2 cos γ))."""
     ti, tr, dp = (math.radians(x) for x in (theta_i, theta_r, dphi))
     cos_gamma = math.sqrt(
@@ -67,8 +59,8 @@ def test_value_matches_paper_equations_9_and_10(
         sigma=params["sigma"],
         f0=params["f0"],
     )
-    wi = spherical(math.radians(theta_i), 0.0)
-    wo = spherical(math.radians(theta_r), math.radians(dphi))
+    wi = harness.spherical(math.radians(theta_i), 0.0)
+    wo = harness.spherical(math.radians(theta_r), math.radians(dphi))
     expected = reference_value(theta_i, theta_r, dphi, **params)
     assert m.eval_local(wi, wo)[0] == pytest.approx(expected, rel=1e-9)
 
@@ -109,26 +101,27 @@ MATERIALS = [
 def test_sampling_estimate_of_albedo_matches_quadrature(
     material: SeedMicrofacet, theta_o: float
 ) -> None:
-    check_albedo_consistency(material, direction_deg(theta_o, 30.0), n_samples=100_000)
+    harness.check_albedo_consistency(material, harness.direction_deg(theta_o, 30.0),
+                                     n_samples=100_000)
 
 
 @pytest.mark.parametrize("material", MATERIALS, ids=repr)
 @pytest.mark.parametrize("theta_o", [10.0, 60.0, 85.0])
 def test_sampler_histogram_matches_pdf(material: SeedMicrofacet, theta_o: float) -> None:
-    check_chi2(material, direction_deg(theta_o, 30.0), seed=int(theta_o))
+    harness.check_chi2(material, harness.direction_deg(theta_o, 30.0), seed=int(theta_o))
 
 
 def test_albedo_of_the_most_reflective_parameters_stays_below_one() -> None:
     # ks = 1, F = 1: everything the V-cavity lets out is reflected; worst case for energy.
-    wos = np.stack([direction_deg(t) for t in (0.0, 45.0, 75.0, 89.0, 89.99)])
+    wos = np.stack([harness.direction_deg(t) for t in (0.0, 45.0, 75.0, 89.0, 89.99)])
     for sigma in (1e-6, 0.01, 0.3, 1.0):
         m = SeedMicrofacet(ks=1.0, kd=0.0, fresnel_exponent=0.0, sigma=sigma, f0=1.0)
-        check_albedo_at_most_one(m, wos, n_samples=50_000)
+        harness.check_albedo_at_most_one(m, wos, n_samples=50_000)
 
 
 def test_lobe_choice_follows_ks_and_kd() -> None:
     rng = np.random.default_rng(5)
-    wo = repeat(direction_deg(30.0), 4000)
+    wo = harness.repeat(harness.direction_deg(30.0), 4000)
     u = rng.random((4000, 3))
     diffuse_only = SeedMicrofacet(ks=0.0, kd=0.7)
     s = diffuse_only.sample_local(wo, u)
@@ -142,7 +135,7 @@ def test_lobe_choice_follows_ks_and_kd() -> None:
 
 def test_black_body_reflects_nothing() -> None:
     m = SeedMicrofacet(ks=0.0, kd=0.0)
-    wo = repeat(direction_deg(40.0), 100)
+    wo = harness.repeat(harness.direction_deg(40.0), 100)
     s = m.sample_local(wo, np.random.default_rng(0).random((100, 3)))
     assert np.all(s.weight == 0.0)
     assert np.all(m.eval_local(s.wi, wo) == 0.0)
@@ -165,7 +158,8 @@ def test_black_body_reflects_nothing() -> None:
 def test_out_of_range_parameter_is_rejected_with_its_name_value_and_range(
     field: str, value: float, allowed: str
 ) -> None:
-    check_out_of_range_rejected(SeedMicrofacet, {"ks": 0.0, "kd": 0.0}, field, value, allowed)
+    harness.check_out_of_range_rejected(SeedMicrofacet, {"ks": 0.0, "kd": 0.0}, field, value,
+                                        allowed)
 
 
 def test_ks_plus_kd_above_one_is_rejected() -> None:
@@ -177,7 +171,7 @@ def test_ks_plus_kd_above_one_is_rejected() -> None:
 def test_tiny_diffuse_lobe_next_to_full_specular_keeps_a_positive_density() -> None:
     # p_diff = kd / (ks + kd) is not computed as 1 - p_spec, which would round to 0 here.
     m = SeedMicrofacet(ks=1.0 - 1e-250, kd=1e-250, sigma=1e-6)
-    wi = spherical(np.radians([10.0, 60.0]), 0.0)
-    wo = spherical(np.radians([50.0, 20.0]), 1.0)
+    wi = harness.spherical(np.radians([10.0, 60.0]), 0.0)
+    wo = harness.spherical(np.radians([50.0, 20.0]), 1.0)
     assert np.all(m.eval_local(wi, wo) > 0.0)
     assert np.all(m.pdf_local(wi, wo) > 0.0)

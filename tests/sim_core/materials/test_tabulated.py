@@ -37,15 +37,7 @@ from sim_core.scene import build_scene
 from sim_core.scene_spec import parse_scene_spec
 from tests.hard_cases.helpers import NO_MTF, camera, lambert, pixel_rays, rectangle
 
-from .harness import (
-    albedo_quadrature,
-    check_albedo_at_most_one,
-    check_albedo_consistency,
-    check_chi2,
-    direction_deg,
-    repeat,
-    spherical,
-)
+from . import harness
 
 HEADER = "incidence_zenith_deg,reflection_zenith_deg,azimuth_difference_deg,brdf_per_sr"
 
@@ -120,7 +112,7 @@ def test_reproduces_its_table_through_the_renderers_kernel() -> None:
         assert np.max(np.abs(got - table.brdf_per_sr) / table.brdf_per_sr) < 1e-2
         np.testing.assert_array_equal(got, materials[row].eval_local(wi, wo))
     # the short rows next to the long ones are untouched
-    wi, wo = spherical(np.array([0.3, 1.0])), spherical(np.array([0.5, 0.2]), np.pi)
+    wi, wo = harness.spherical(np.array([0.3, 1.0])), harness.spherical(np.array([0.5, 0.2]), np.pi)
     for row in (0, 2):
         got = _eval_like_the_renderer(kinds, params, np.full(2, row), wi, wo)
         np.testing.assert_array_equal(got, materials[row].eval_local(wi, wo))
@@ -144,7 +136,7 @@ def test_retro_reflection_gap_is_closed_smoothly() -> None:
     3 % of the analytic model: the gap is diffuse there."""
     mat, truth = material_of("diffuse"), material_preset("white-matte-tile")
     theta = np.radians([20.0, 35.0, 50.0, 65.0])
-    w = spherical(theta, 0.3)
+    w = harness.spherical(theta, 0.3)
     np.testing.assert_allclose(mat.eval_local(w, w), truth.eval_local(w, w), rtol=0.03)
 
 
@@ -154,7 +146,8 @@ def test_retro_reflection_gap_is_closed_smoothly() -> None:
 @pytest.mark.parametrize("case", CASES)
 @pytest.mark.parametrize("theta_o", [0.0, 40.0, 71.0, 87.0])
 def test_sampling_estimate_of_albedo_matches_quadrature(case: str, theta_o: float) -> None:
-    check_albedo_consistency(material_of(case), direction_deg(theta_o, 75.0), seed=3)
+    harness.check_albedo_consistency(material_of(case), harness.direction_deg(theta_o, 75.0),
+                                     seed=3)
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -170,24 +163,24 @@ def test_sampler_histogram_matches_pdf(case: str, theta_o: float) -> None:
     samples detect (see ``test_default_histogram_passes_for_the_diffuse_table``).
     """
     step = CASES[case][1]
-    check_chi2(material_of(case), direction_deg(theta_o, 0.0), seed=7,
+    harness.check_chi2(material_of(case), harness.direction_deg(theta_o, 0.0), seed=7,
                n_theta=round(90 / step), n_phi=round(360 / step), order=4)
 
 
 @pytest.mark.parametrize("theta_o", [25.0, 70.0])
 def test_default_histogram_passes_for_the_diffuse_table(theta_o: float) -> None:
-    check_chi2(material_of("diffuse"), direction_deg(theta_o, 75.0), seed=7)
+    harness.check_chi2(material_of("diffuse"), harness.direction_deg(theta_o, 75.0), seed=7)
 
 
 @pytest.mark.parametrize("case", CASES)
 def test_albedo_stays_below_its_bound_and_one(case: str) -> None:
     mat = material_of(case)
-    wos = np.stack([direction_deg(t, 30.0) for t in (0.0, 45.0, 75.0, 80.0, 85.0, 89.99)])
-    check_albedo_at_most_one(mat, wos, n_samples=50_000, use_quadrature=True)
+    wos = np.stack([harness.direction_deg(t, 30.0) for t in (0.0, 45.0, 75.0, 80.0, 85.0, 89.99)])
+    harness.check_albedo_at_most_one(mat, wos, n_samples=50_000, use_quadrature=True)
     # the bound is the interpolant's largest row albedo, so it is attained at a row (the row at
     # 90 deg is approached by grazing views); 1e-6: the harness quadrature's own accuracy
     rows = np.minimum(mat.grid.theta_r_deg, 90.0 - 1e-7)
-    quad = max(albedo_quadrature(mat, direction_deg(t)) for t in rows)
+    quad = max(harness.albedo_quadrature(mat, harness.direction_deg(t)) for t in rows)
     assert quad <= mat.albedo_bound * (1 + 1e-6) and mat.albedo_bound <= 1.0
     assert mat.albedo_bound == pytest.approx(quad, rel=1e-4)
 
@@ -197,16 +190,16 @@ def test_albedo_stays_below_its_bound_and_one(case: str) -> None:
 def test_albedo_agrees_with_the_sampled_model(case: str, theta_o: float) -> None:
     """Within the table's resolution: 2 % (the lobe at normal view falls in the retro gap)."""
     name = CASES[case][0]
-    wo = direction_deg(theta_o, 20.0)
-    assert albedo_quadrature(material_of(case), wo) == pytest.approx(
-        albedo_quadrature(material_preset(name), wo), rel=0.02)
+    wo = harness.direction_deg(theta_o, 20.0)
+    assert harness.albedo_quadrature(material_of(case), wo) == pytest.approx(
+        harness.albedo_quadrature(material_preset(name), wo), rel=0.02)
 
 
 def test_kernel_sample_pdf_is_pdf_brdf_and_matches_the_batch_api() -> None:
     mat = material_of("glossy")
     kind, p = mat.kernel_kind, mat.kernel_params()
     rng = np.random.default_rng(4)
-    wo = spherical(np.arccos(rng.uniform(-0.2, 1.0, 300)), rng.uniform(0, 2 * np.pi, 300))
+    wo = harness.spherical(np.arccos(rng.uniform(-0.2, 1.0, 300)), rng.uniform(0, 2 * np.pi, 300))
     u = rng.random((300, 3))
     s = mat.sample_local(wo, u)
     for j in range(300):
@@ -233,8 +226,8 @@ def test_values_and_densities_are_finite_and_zero_below_the_horizon(
     case, ti, pi, to, po, coincident
 ) -> None:
     mat = material_of(case)
-    wo = spherical(to, po)
-    wi = wo.copy() if coincident else spherical(ti, pi)
+    wo = harness.spherical(to, po)
+    wi = wo.copy() if coincident else harness.spherical(ti, pi)
     f, pdf = mat.eval_local(wi, wo)[0], mat.pdf_local(wi, wo)[0]
     assert math.isfinite(f) and f >= 0.0 and math.isfinite(pdf) and pdf >= 0.0
     if wi[0, 2] <= 0.0 or wo[0, 2] <= 0.0:
@@ -249,7 +242,7 @@ def test_values_and_densities_are_finite_and_zero_below_the_horizon(
 @example("diffuse", 5e-324, 1.0, 1.0, 0.0, 1.0)
 def test_samples_are_valid_with_their_exact_density(case, to, po, u0, u1, u2) -> None:
     mat = material_of(case)
-    wo = spherical(to, po)
+    wo = harness.spherical(to, po)
     s = mat.sample_local(wo, np.array([[u0, u1, u2]]))
     assert np.all(np.isfinite(s.wi)) and math.isfinite(s.weight[0]) and s.weight[0] >= 0.0
     assert s.pdf[0] == mat.pdf_local(s.wi, wo)[0]
@@ -271,7 +264,7 @@ def _lattice(values: np.ndarray | float, step: float = 10.0) -> GoniometerTable:
 @given(theta, phi, theta, phi, unit, unit, unit)
 def test_a_table_of_zeros_reflects_nothing_and_still_samples(ti, pi, to, po, u0, u1, u2) -> None:
     mat = _zero_material()
-    wi, wo = spherical(ti, pi), spherical(to, po)
+    wi, wo = harness.spherical(ti, pi), harness.spherical(to, po)
     assert mat.eval_local(wi, wo)[0] == 0.0
     assert mat.albedo_bound == 0.0
     s = mat.sample_local(wo, np.array([[u0, u1, u2]]))
@@ -288,11 +281,11 @@ def _zero_material() -> Tabulated:
 def test_a_lambertian_table_is_lambertian_everywhere_with_albedo_one() -> None:
     mat = Tabulated(_lattice(1.0 / math.pi))
     rng = np.random.default_rng(5)
-    wi = spherical(np.arccos(rng.random(500)), rng.uniform(0, 2 * np.pi, 500))
-    wo = spherical(np.arccos(rng.random(500)), rng.uniform(0, 2 * np.pi, 500))
+    wi = harness.spherical(np.arccos(rng.random(500)), rng.uniform(0, 2 * np.pi, 500))
+    wo = harness.spherical(np.arccos(rng.random(500)), rng.uniform(0, 2 * np.pi, 500))
     np.testing.assert_allclose(mat.eval_local(wi, wo), 1.0 / math.pi, rtol=1e-12)
     assert mat.albedo_bound == pytest.approx(1.0, abs=1e-9) and mat.albedo_scale == 1.0
-    check_albedo_consistency(mat, direction_deg(30.0), seed=2)
+    harness.check_albedo_consistency(mat, harness.direction_deg(30.0), seed=2)
 
 
 # -------------------------------------------------------------------------------------------
@@ -310,7 +303,7 @@ def test_an_albedo_within_the_measurement_tolerance_is_scaled_to_one() -> None:
     mat = Tabulated(_lattice(excess / math.pi))
     assert mat.albedo_scale == pytest.approx(1.0 / excess, rel=1e-9)
     assert mat.albedo_bound <= 1.0
-    wi = wo = spherical(0.4)
+    wi = wo = harness.spherical(0.4)
     assert mat.eval_local(wi, wo)[0] == pytest.approx(1.0 / math.pi, rel=1e-9)
 
 
@@ -394,13 +387,13 @@ def test_a_header_tuple_without_the_table_reflects_nothing() -> None:
 def test_pdf_integrates_to_one_over_the_hemisphere() -> None:
     """Exactly (a fine midpoint rule on the density), for a wo between θr rows."""
     mat = material_of("glossy")
-    wo = direction_deg(47.0, 130.0)
+    wo = harness.direction_deg(47.0, 130.0)
     n_t, n_p = 900, 1800
     t = (np.arange(n_t) + 0.5) * (0.5 * np.pi / n_t)
     p = (np.arange(n_p) + 0.5) * (2 * np.pi / n_p)
     tt, pp = np.meshgrid(t, p, indexing="ij")
-    d = spherical(tt.ravel(), pp.ravel())
-    pdf = mat.pdf_local(d, repeat(wo, len(d)))
+    d = harness.spherical(tt.ravel(), pp.ravel())
+    pdf = mat.pdf_local(d, harness.repeat(wo, len(d)))
     mass = np.sum(pdf * np.sin(tt).ravel()) * (0.5 * np.pi / n_t) * (2 * np.pi / n_p)
     assert mass == pytest.approx(1.0, abs=2e-4)
 

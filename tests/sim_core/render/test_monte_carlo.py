@@ -1,20 +1,12 @@
 """Statistical behaviour of the path integrator: convergence, determinism, seeds."""
 
 import numpy as np
-import pytest
 
 from sim_core.render import RenderSettings, render
-from tests.sim_core.scenes import small_example
 
-
-@pytest.fixture(scope="module")
-def corner():
-    return small_example("corner", width=32)
-
-
-@pytest.fixture(scope="module")
-def reference(corner):
-    return render(corner, RenderSettings(spp=4096, max_bounces=3, seed=12345)).light_field
+#: the ``corner`` and its converged ``reference`` (tests/sim_core/conftest.py)
+CORNER_WIDTH_PX = 32
+REFERENCE_SPP, REFERENCE_SEED = 4096, 12345
 
 
 def test_monte_carlo_error_falls_as_one_over_sqrt_spp(corner, reference):
