@@ -1,0 +1,174 @@
+"""Verdicts: what an estimator may say of each key it estimates.
+
+Every estimate of a calibration or an object fit carries one of three verdicts, so that no
+number leaves the project with error bars it has not earned:
+
+- ``determined``: the fit explains its data (its residual is what the noise makes) and the
+  key's standard deviation is within the key's limit; ``std`` is that standard deviation, never
+  smaller than the residual supports (:func:`honest_std`).
+- ``not determined``: the data do not pin the key down (its standard deviation is above the
+  key's limit, too few views or pixels, a direction the plan cannot see); the file keeps the
+  prior or nominal value, ``reason`` says why.
+- ``unexplained``: the model does not explain the data that drive the key (a reduced chi-square
+  well above what the noise allows, views that disagree beyond their errors); ``reason`` says
+  where and by how much. The estimate is printed but must not be trusted.
+
+A procedure builds a :class:`Verdicts` (a flat mapping from each key, named as in the file it
+writes, ``camera.fx_px``, ``mount.pose_offset.position_m``, ``objects.body.reflectance_scale``,
+to its :class:`Verdict`), and the command writes it next to the file as ``verdicts.json``
+(:func:`write_verdicts`).
+
+The goodness of fit is judged by the reduced chi-square ``chi2 / dof`` of whitened residuals:
+for a model that explains the data its expectation is 1 with a standard deviation of
+``sqrt(2 / dof)``; :data:`CHI2_UNEXPLAINED` is the value above which a residual is read as model
+error rather than noise, however many residuals there are (with 10^5 residuals 1.05 is already
+significant, but a 5 % excess of variance is the size of the noise model's own uncertainty).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from sim_core.files import atomic_write
+from sim_core.json_safe import json_safe
+
+VerdictName = Literal["determined", "not determined", "unexplained"]
+VERDICTS: tuple[VerdictName, ...] = ("determined", "not determined", "unexplained")
+#: reduced chi-square above which a fit's residual is model error, not noise (module docstring)
+CHI2_UNEXPLAINED = 2.0
+#: the file a command writes beside its calibration or object file
+VERDICTS_FILE = "verdicts.json"
+
+Std = float | list[float] | None
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One key's verdict, its standard deviation (a number, one per component, or None) in the
+    key's unit, and why (None for a plain ``determined``)."""
+
+    verdict: VerdictName
+    std: Std = None
+    reason: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"verdict: got {self.verdict!r}; allowed: {', '.join(VERDICTS)}")
+        if self.verdict != "determined" and not self.reason:
+            raise ValueError(f"a {self.verdict!r} verdict needs its reason")
+
+    @property
+    def determined(self) -> bool:
+        return self.verdict == "determined"
+
+    def to_json(self) -> dict[str, Any]:
+        return json_safe({"verdict": self.verdict, "std": self.std, "reason": self.reason},
+                         non_finite=None)
+
+
+class Verdicts(Mapping[str, Verdict]):
+    """The verdicts of one procedure's keys, in the order they were judged."""
+
+    def __init__(self, items: Mapping[str, Verdict] | None = None) -> None:
+        self._items: dict[str, Verdict] = dict(items or {})
+
+    def __getitem__(self, key: str) -> Verdict:
+        return self._items[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"Verdicts({self.counts()})"
+
+    def add(self, key: str, verdict: Verdict) -> None:
+        """Judge ``key`` (once: a key judged twice is a bug of the procedure)."""
+        if key in self._items:
+            raise ValueError(f"{key}: judged twice")
+        self._items[key] = verdict
+
+    def update_from(self, other: Mapping[str, Verdict], prefix: str = "") -> None:
+        """Add every verdict of ``other``, its keys under ``prefix`` (``"camera."``)."""
+        for key, verdict in other.items():
+            self.add(prefix + key, verdict)
+
+    def counts(self) -> dict[str, int]:
+        """How many keys have each verdict."""
+        return {v: sum(1 for x in self._items.values() if x.verdict == v) for v in VERDICTS}
+
+    def to_json(self) -> dict[str, dict[str, Any]]:
+        return {key: v.to_json() for key, v in self._items.items()}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Mapping[str, Any]]) -> Verdicts:
+        return cls({k: Verdict(v["verdict"], v.get("std"), v.get("reason"))
+                    for k, v in data.items()})
+
+
+def honest_std(std: float, reduced_chi2: float) -> float:
+    """The standard deviation a fit may claim: its statistical one (from the whitened
+    Jacobian, which assumes the residual is noise) scaled by ``sqrt(reduced_chi2)`` when the
+    residual is larger than the noise (never scaled down: a residual smaller than the noise
+    model says does not make the estimate better than its noise)."""
+    if not math.isfinite(std) or not math.isfinite(reduced_chi2):
+        return math.inf
+    return std * math.sqrt(max(1.0, reduced_chi2))
+
+
+def judge(
+    std: float | Sequence[float],
+    limit: float,
+    *,
+    reduced_chi2: float = 1.0,
+    chi2_limit: float = CHI2_UNEXPLAINED,
+    unit: str = "",
+    where: str = "the fit",
+) -> Verdict:
+    """The verdict of a key with standard deviation ``std`` (one per component: the largest
+    counts) against ``limit``, from a fit whose residual has ``reduced_chi2``.
+
+    ``std`` is taken as the fit's statistical one and made honest (:func:`honest_std`) first.
+    Unexplained beats not determined: a fit that does not explain its data says so whatever its
+    error bars; ``where`` names the data in the reason (``"views fixture@+30, side@-80"``).
+    """
+    stds = [float(std)] if isinstance(std, int | float) else [float(s) for s in std]
+    honest = [honest_std(s, reduced_chi2) for s in stds]
+    reported: Std = honest[0] if isinstance(std, int | float) else honest
+    worst = max(honest) if honest else math.inf
+    if not math.isfinite(reduced_chi2) or reduced_chi2 > chi2_limit:
+        chi2_txt = f"{reduced_chi2:.3g}" if math.isfinite(reduced_chi2) else "not finite"
+        return Verdict("unexplained", reported,
+                       f"{where}: reduced chi-square {chi2_txt} after the fit, above "
+                       f"{chi2_limit:g} (noise explains about 1): the model does not explain "
+                       "these data")
+    if not math.isfinite(worst) or worst > limit:
+        worst_txt = f"{worst:.3g}" if math.isfinite(worst) else "unbounded"
+        return Verdict("not determined", reported if math.isfinite(worst) else None,
+                       f"standard deviation {worst_txt}{unit} above the limit {limit:g}{unit}")
+    return Verdict("determined", reported)
+
+
+def write_verdicts(folder: str | Path, verdicts: Verdicts) -> Path:
+    """``folder/verdicts.json``: the flat mapping key -> ``{verdict, std, reason}``, written
+    whole or not at all."""
+    path = Path(folder) / VERDICTS_FILE
+    text = json.dumps(verdicts.to_json(), indent=2, allow_nan=False) + "\n"
+    atomic_write(path, text.encode())
+    return path
+
+
+def read_verdicts(path: str | Path) -> Verdicts:
+    """The verdicts a command wrote (:func:`write_verdicts`)."""
+    return Verdicts.from_json(json.loads(Path(path).read_text(encoding="utf-8")))
+
+
+__all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
+           "honest_std", "judge", "read_verdicts", "write_verdicts"]
