@@ -128,6 +128,7 @@ def judge(
     limit: float,
     *,
     reduced_chi2: float = 1.0,
+    spread: float | Sequence[float] | None = None,
     chi2_limit: float = CHI2_UNEXPLAINED,
     unit: str = "",
     where: str = "the fit",
@@ -135,13 +136,23 @@ def judge(
     """The verdict of a key with standard deviation ``std`` (one per component: the largest
     counts) against ``limit``, from a fit whose residual has ``reduced_chi2``.
 
-    ``std`` is taken as the fit's statistical one and made honest (:func:`honest_std`) first.
-    Unexplained beats not determined: a fit that does not explain its data says so whatever its
-    error bars; ``where`` names the data in the reason (``"views fixture@+30, side@-80"``).
+    ``std`` is taken as the fit's statistical one and made honest (:func:`honest_std`) first;
+    ``spread`` (same shape), the estimate's spread over views or resamples (a jackknife, a
+    bootstrap), is a floor under it: the views' disagreement is an error the noise model may
+    not know. Unexplained beats not determined: a fit that does not explain its data says so
+    whatever its error bars; ``where`` names the data in the reason (``"views +30, -80 deg"``).
     """
-    stds = [float(std)] if isinstance(std, int | float) else [float(s) for s in std]
-    honest = [honest_std(s, reduced_chi2) for s in stds]
-    reported: Std = honest[0] if isinstance(std, int | float) else honest
+    scalar = isinstance(std, int | float)
+    stds = [float(std)] if scalar else [float(s) for s in std]
+    if spread is None:
+        floors = [0.0] * len(stds)
+    else:
+        floors = [float(spread)] if isinstance(spread, int | float) else [float(s) for s in spread]
+        if len(floors) != len(stds):
+            raise ValueError(f"spread: {len(floors)} values for {len(stds)} standard deviations")
+    honest = [max(honest_std(s, reduced_chi2), f if not math.isnan(f) else math.inf)
+              for s, f in zip(stds, floors, strict=True)]
+    reported: Std = honest[0] if scalar else honest
     worst = max(honest) if honest else math.inf
     if not math.isfinite(reduced_chi2) or reduced_chi2 > chi2_limit:
         chi2_txt = f"{reduced_chi2:.3g}" if math.isfinite(reduced_chi2) else "not finite"

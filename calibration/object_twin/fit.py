@@ -29,7 +29,7 @@ from __future__ import annotations
 import datetime as dt
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,13 @@ from typing import Any
 import numpy as np
 
 from calibration.captures import AveragedCapture
+from calibration.object_twin.judgement import (
+    POSITION_KEY,
+    ROTATION_KEY,
+    object_verdicts,
+    scale_key,
+    unfit_views,
+)
 from calibration.object_twin.point_cloud import (
     EDGE_JUMP_M,
     MIN_AMPLITUDE_DN,
@@ -48,6 +55,7 @@ from calibration.object_twin.refine import refine_object_twin
 from calibration.object_twin.reflectance import object_pixels, scale_ratio
 from calibration.object_twin.render_model import FIT_RENDER, TwinRenderer, measured_phasor
 from calibration.object_twin.views import calibrated_camera, capture_spec, mount_from_camera
+from calibration.verdicts import CHI2_UNEXPLAINED, Verdicts
 from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError
 from sim_core.geometry import triangle_areas
@@ -70,10 +78,11 @@ MIN_VALID_PIXELS = 300
 
 @dataclass(frozen=True)
 class ObjectFit:
-    """The fitted object twin and its report (plain JSON)."""
+    """The fitted object twin, its report (plain JSON) and each key's verdict."""
 
     object_twin: ObjectTwinFile
     report: dict[str, Any]
+    verdicts: Verdicts = field(default_factory=Verdicts)
 
 
 def _check_captures(captures: Sequence[AveragedCapture], min_valid_pixels: int,
@@ -141,6 +150,7 @@ def fit_object(
     min_amplitude_dn: float = MIN_AMPLITUDE_DN,
     edge_jump_m: float = EDGE_JUMP_M,
     rig_name: str = "",
+    drop_unfit_views: bool = True,
 ) -> ObjectFit:
     """Fit the mount's pose offset and the objects' reflectance scales (module docstring).
 
@@ -160,6 +170,11 @@ def fit_object(
         The view checks and the point cloud's filters.
     rig_name : str
         Recorded in the provenance.
+    drop_unfit_views : bool
+        When the fit does not explain its data (reduced chi-square above
+        :data:`calibration.verdicts.CHI2_UNEXPLAINED`) and some views explain theirs, fit again
+        without the others (at least two views kept); the report's ``dropped_views`` names
+        them with their chi-square. Otherwise every key is ``unexplained``.
 
     Raises
     ------
@@ -209,33 +224,58 @@ def fit_object(
     areas = triangle_areas(model.triangles_m)
     centroid = (model.triangles_m.mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
     refined = refine_object_twin(renderer, captures, reg.offset, centroid, scales, fitted)
+    angles = [c.turntable_angle_deg for c in captures]
+    verdicts = object_verdicts(refined, pixels, angles)
+    unfit = unfit_views(refined.chi2_per_view, angles)
+    if (drop_unfit_views and refined.chi2_after > CHI2_UNEXPLAINED and unfit
+            and len(captures) - len(unfit) >= 2):
+        kept = [c for i, c in enumerate(captures) if i not in unfit]
+        again = fit_object(spec, base, calibration, kept, render_settings=render_settings,
+                           min_valid_pixels=min_valid_pixels, min_amplitude_dn=min_amplitude_dn,
+                           edge_jump_m=edge_jump_m, rig_name=rig_name, drop_unfit_views=False)
+        dropped = [{"turntable_angle_deg": angles[i],
+                    "reduced_chi2": refined.chi2_per_view[i],
+                    "reason": f"the model does not explain this view (reduced chi-square "
+                              f"{refined.chi2_per_view[i]:.3g} after the fit with every view, "
+                              f"above {CHI2_UNEXPLAINED:g}): left out"} for i in unfit]
+        again.report["dropped_views"] = dropped
+        again.report["with_every_view"] = json_safe(
+            {"refined": refined.summary(),
+             "verdicts": verdicts.to_json()}, non_finite=None)
+        again.report["seconds"]["total"] = time.perf_counter() - t0
+        procedures = again.object_twin.provenance.procedures
+        procedures["object_fit"] = again.report
+        return again
     final_pred = refined.predicted
     objects_report = {}
     for n in model.names:
         px = pixels[n]
-        entry: dict[str, Any] = {"determined": px.determined, "pixels": px.n_pixels,
+        verdict = verdicts[scale_key(n)]
+        entry: dict[str, Any] = {"determined": verdict.determined, "verdict": verdict.verdict,
+                                 "pixels": px.n_pixels,
                                  "mean_amplitude_dn": px.mean_amplitude_dn}
         if px.determined:
             k = scale_ratio(measured, final_pred, px.masks, weights)
             entry.update({
                 "reflectance_scale": refined.scales[n],
-                "std": refined.std_scale[n],
+                "std": verdict.std,
                 "linear_estimate": linear[n],
                 "amplitude_ratio_after": k,
-                "determined": refined.determined.get(n, False),
             })
-            if not refined.determined.get(n, False):
-                entry["reason"] = f"standard deviation {refined.std_scale[n]:.3f} is too large"
+            if not verdict.determined:
+                entry["reason"] = verdict.reason
         else:
             entry.update({"reflectance_scale": 1.0, "reason": px.reason})
         objects_report[n] = entry
-    pose_determined = all(refined.determined[k] for k in
-                          ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg"))
+    pose_determined = (verdicts[POSITION_KEY].determined
+                       and verdicts[ROTATION_KEY].determined)
     report = json_safe({
         "views": views,
         "icp": reg.summary(),
         "refined": refined.summary(),
         "pose_determined": pose_determined,
+        "verdicts": verdicts.to_json(),
+        "dropped_views": [],
         "objects": objects_report,
         "roughness": {"determined": False, "reason": "the glossy films' specular lobes are about "
                       "a degree wide: they appear in at most a small patch of one view, which "
@@ -249,7 +289,7 @@ def fit_object(
                     "total": time.perf_counter() - t0},
     }, non_finite=None)
     determined_scales = {n: ObjectParameters(reflectance_scale=refined.scales[n])
-                         for n in fitted if objects_report[n]["determined"]}
+                         for n in fitted if verdicts[scale_key(n)].determined}
     twin = ObjectTwinFile(
         mount=MountParameters(pose_offset=refined.offset),
         objects=determined_scales,
@@ -259,7 +299,7 @@ def fit_object(
             frames_used=int(sum(c.n_frames for c in captures)),
             procedures={"object_fit": report}),
     )
-    return ObjectFit(twin, report)
+    return ObjectFit(twin, report, verdicts)
 
 
 def _version() -> str:

@@ -101,6 +101,14 @@ class RefinedFit:
     chi2_after: float
     n_residuals: int
     evaluations: int
+    #: each view's reduced chi-square at the solution (its residuals' mean square)
+    chi2_per_view: tuple[float, ...] = ()
+    #: the spread of the estimate over the views (delete-one-view jackknife, linearised at the
+    #: solution): translations [m], angles [deg], scales [1]; inf where leaving a view out
+    #: leaves a parameter undetermined
+    jackknife_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    jackknife_rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    jackknife_scale: dict[str, float] = field(default_factory=dict)
     line_steps: tuple[float, ...] = ()
     recentres: int = 0
     predicted: list[PredictedView] = field(repr=False, default_factory=list)
@@ -114,6 +122,10 @@ class RefinedFit:
                     "reflectance_scale": dict(self.std_scale)},
             "determined": dict(self.determined),
             "reduced_chi2_before": self.chi2_before, "reduced_chi2_after": self.chi2_after,
+            "reduced_chi2_per_view": list(self.chi2_per_view),
+            "jackknife": {"position_m": list(self.jackknife_position_m),
+                          "rotation_deg": list(self.jackknife_rotation_deg),
+                          "reflectance_scale": dict(self.jackknife_scale)},
             "residuals": self.n_residuals, "evaluations": self.evaluations,
             "line_steps": list(self.line_steps), "recentred_regions": self.recentres,
         }
@@ -201,6 +213,15 @@ class _Problem:
             d = zm - pred.phasor
             out.extend([(d.real / sig[:, 0])[:, m].ravel(), (d.imag / sig[:, 1])[:, m].ravel()])
         return np.concatenate(out)
+
+    def view_slices(self) -> list[slice]:
+        """Each view's rows of :meth:`residual` (and of the Jacobian), in the views' order."""
+        out, start = [], 0
+        for zm, m in zip(self.measured, self.masks, strict=True):
+            n = 2 * zm.shape[0] * int(m.sum())
+            out.append(slice(start, start + n))
+            start += n
+        return out
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         f0 = self.residual(x)
@@ -318,6 +339,43 @@ def _height_search(prob: _Problem, x: np.ndarray, axis: np.ndarray) -> np.ndarra
     return best
 
 
+def jackknife_covariance(jac: np.ndarray, r: np.ndarray, views: list[slice]) -> np.ndarray:
+    """The delete-one-view jackknife covariance of a least-squares solution, linearised at it.
+
+    Leaving view ``v`` out moves the Gauss-Newton solution by
+    ``d_v = (J^T J - J_v^T J_v)^-1 J_v^T r_v`` (``J = dr/dx`` and ``r`` whitened, at the
+    solution where ``J^T r = 0``, so the other views' gradient is ``-J_v^T r_v``); the
+    jackknife covariance is ``(n - 1) / n * sum_v (d_v - mean d)(d_v - mean d)^T`` (Efron and
+    Stein). It measures how far the views agree with each other, whatever the residual's
+    noise model says: where leaving a view out leaves a direction undetermined (a singular or
+    near-singular system), every variance is inf. Fewer than two views: inf everywhere.
+    """
+    n_par = jac.shape[1]
+    live = [sl for sl in views if sl.stop > sl.start]
+    if len(live) < 2:
+        return np.full((n_par, n_par), np.inf)
+    jtj = jac.T @ jac
+    moves = []
+    for sl in live:
+        jv = jac[sl]
+        a = jtj - jv.T @ jv
+        if not np.all(np.isfinite(a)) or np.linalg.cond(a) > 1e12:
+            return np.full((n_par, n_par), np.inf)
+        moves.append(np.linalg.solve(a, jv.T @ r[sl]))
+    d = np.array(moves)
+    d -= d.mean(axis=0)
+    n = len(live)
+    return (n - 1) / n * d.T @ d
+
+
+def conv_std(cov: np.ndarray, conv: np.ndarray) -> np.ndarray:
+    """The standard deviations of ``conv @ x`` for ``x`` of covariance ``cov`` (inf stays
+    inf)."""
+    if not np.all(np.isfinite(cov)):
+        return np.full(conv.shape[0], np.inf)
+    return np.sqrt(np.clip(np.diag(conv @ cov @ conv.T), 0.0, None))
+
+
 def _steps(n_scales: int) -> np.ndarray:
     """The forward-difference steps (scales step down: a material allows ks + kd <= 1 only)."""
     return np.array([STEP_MM] * 3 + [STEP_DEG] * 3 + [-STEP_SCALE] * n_scales)
@@ -385,18 +443,22 @@ def refine_object_twin(
     assert prob is not None and r is not None and jac is not None
     dof = max(1, r.size - x.size)
     s2 = float(r @ r) / dof
+    slices = prob.view_slices()
+    chi2_per_view = tuple(float(np.mean(r[sl] ** 2)) if sl.stop > sl.start else float("nan")
+                          for sl in slices)
+    # to the offset's own parameters (translation at the axis point)
+    conv = np.eye(x.size)
+    for i in range(6):
+        h = np.zeros(x.size)
+        h[i] = 1e-3
+        conv[:6, i] = (offset_of(x + h, lever) - offset_of(x - h, lever)) / 2e-3
     try:
-        # to the offset's own parameters (translation at the axis point)
-        conv = np.eye(x.size)
-        for i in range(6):
-            h = np.zeros(x.size)
-            h[i] = 1e-3
-            conv[:6, i] = (offset_of(x + h, lever) - offset_of(x - h, lever)) / 2e-3
         cov = s2 * conv @ np.linalg.inv(jac.T @ jac) @ conv.T
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         corr = cov / np.outer(std, std)
     except np.linalg.LinAlgError:
         std, corr = np.full(x.size, np.inf), None
+    jk = conv_std(jackknife_covariance(jac, r, slices), conv)
     determined = {}
     for i, name in enumerate(POSE_NAMES):
         limit = UNDETERMINED_STD["position_mm" if i < 3 else "rotation_deg"]
@@ -412,5 +474,9 @@ def refine_object_twin(
         std_rotation_deg=tuple(float(v) for v in std[3:6]),
         std_scale=std_scale, determined=determined, chi2_before=chi2_before,
         chi2_after=s2, n_residuals=int(r.size), evaluations=evaluations,
+        chi2_per_view=chi2_per_view,
+        jackknife_position_m=tuple(float(v) * 1e-3 for v in jk[:3]),
+        jackknife_rotation_deg=tuple(float(v) for v in jk[3:6]),
+        jackknife_scale={n: float(jk[6 + i]) for i, n in enumerate(fitted)},
         line_steps=tuple(line_steps), recentres=recentres,
         predicted=prob.predict(x), correlation=corr)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import math
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -22,6 +22,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.text import Text
 
+from calibration.verdicts import VERDICTS
 from sim_core.errors import InvalidInputError
 
 if TYPE_CHECKING:
@@ -48,6 +49,16 @@ def print_error(message: str) -> None:
 def print_warning(message: str, label: str = "warning:") -> None:
     """``warning: MESSAGE`` (or another label) on stderr, the message as it is."""
     err_console.print(Text.assemble((label, "yellow"), " ", str(message)), soft_wrap=True)
+
+
+def print_verdicts(verdicts: Mapping[str, Any], path: Path) -> None:
+    """How many keys have each verdict (``calibration.verdicts``), and on stderr each key that
+    is not determined or unexplained with its reason; ``path`` is the verdicts file."""
+    counts = {v: sum(1 for x in verdicts.values() if x.verdict == v) for v in VERDICTS}
+    console.print(f"verdicts ({path}): " + ", ".join(f"{n} {v}" for v, n in counts.items()))
+    for key, verdict in verdicts.items():
+        if not verdict.determined:
+            print_warning(f"{key}: {verdict.reason}", label=f"{verdict.verdict}:")
 
 
 def fail_invalid(exc: InvalidInputError) -> None:

@@ -4,8 +4,9 @@ Drives the rig (the real one, or the simulated lab with ``--simulated [--reality
 same rig path as ``toftwin calibrate rig``) to each ``--angles`` turntable angle with the solar
 simulator's shutter closed, averages ``--frames`` frames per angle, runs
 :func:`calibration.object_twin.fit.fit_object` with the ``--calibration`` (or the nominal rig)
-and writes ``DIR/object.yaml`` (the object file a scene's ``object_twin:`` names) and
-``DIR/object-report.json``, each atomically.
+and writes ``DIR/object.yaml`` (the object file a scene's ``object_twin:`` names),
+``DIR/object-report.json`` and ``DIR/verdicts.json`` (each key's verdict:
+:mod:`calibration.object_twin.judgement`), each atomically.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from service.cli.common import (
     err_console,
     fail_invalid,
     number_option,
+    print_verdicts,
     print_warning,
     rig_scene,
 )
@@ -38,8 +40,6 @@ from sim_core.errors import InvalidInputError
 
 #: default turntable angles [deg]: three views, the faces seen from three sides
 DEFAULT_ANGLES = "-60,-30,0,30,60"
-#: how many angles the fit takes (each once)
-MAX_FIT_ANGLES = 36
 
 
 def fit_object_command(
@@ -68,18 +68,23 @@ def fit_object_command(
     seed: CameraSeedOption = 0,
 ) -> None:
     """Capture the mounted object at --angles, fit its pose and reflectance: DIR/object.yaml."""
-    from calibration.angles import AngleLimits, parse_angles
-    from calibration.captures import average_frames
+    from calibration.angles import parse_angles
     from calibration.object_twin.fit import fit_object
-    from drivers.rig import RigState
+    from calibration.object_twin.plan import (
+        FIT_ANGLES,
+        captures_in_order,
+        object_fit_capture_plan,
+    )
+    from calibration.verdicts import write_verdicts
+    from service.lab.acquisition import NO_MOUNTS, acquire
     from sim_core.files import atomic_write
     from sim_core.scene import scene_twin
     from sim_core.twin_file import load_calibration, write_object_twin
 
     try:
         check_rig_options(out, reality, simulated)
-        angle_list = parse_angles(angles, field="--angles",
-                                  limits=AngleLimits(max_count=MAX_FIT_ANGLES, distinct=True))
+        plan = object_fit_capture_plan(parse_angles(angles, field="--angles", limits=FIT_ANGLES),
+                                       frames, field="--angles")
         source = rig_scene(scene)
         cal = (load_calibration(calibration) if calibration is not None
                else scene_twin(source.spec.model_copy(update={"object_twin": None}),
@@ -90,16 +95,12 @@ def fit_object_command(
                             camera_integrator="path", camera_seed=seed)
     with open_command_rig(settings, source) as (rig, world):
         rig_name = "lab" if world is None else "simulated"
-        captures = []
-        with rig.hold():
-            for a in angle_list:
-                err_console.print(f"capturing {frames} frames at {a:g} deg")
-                target = RigState(a, 0.0, False)
-                rig.apply(target)
-                captures.append(average_frames(rig.capture(frames, target=target)))
+        captures = acquire(rig, NO_MOUNTS, plan,
+                           lambda _done, _total, message: err_console.print(message))
     try:
         err_console.print("fitting the object twin")
-        fit = fit_object(source.spec, source.base_dir, cal, captures, rig_name=rig_name)
+        fit = fit_object(source.spec, source.base_dir, cal, captures_in_order(plan, captures),
+                         rig_name=rig_name)
     except InvalidInputError as exc:
         fail_invalid(exc)
     out.mkdir(parents=True)
@@ -110,7 +111,7 @@ def fit_object_command(
     console.print(f"object twin written to {path} (report {report}): offset "
                   f"{[round(v * 1e3, 2) for v in off.position_m]} mm, "
                   f"{[round(v, 3) for v in off.rotation_deg]} deg")
-    undetermined = [n for n, e in fit.report["objects"].items() if not e["determined"]]
-    if undetermined or not fit.report["pose_determined"]:
-        print_warning(f"{'pose, ' if not fit.report['pose_determined'] else ''}"
-                      f"{', '.join(undetermined)} (see the report)", label="not determined:")
+    for view in fit.report["dropped_views"]:
+        print_warning(f"{view['turntable_angle_deg']:g} deg: {view['reason']}",
+                      label="view left out:")
+    print_verdicts(fit.verdicts, write_verdicts(out, fit.verdicts))

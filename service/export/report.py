@@ -48,10 +48,10 @@ def _median(values: list[float | None]) -> float | None:
     return float(np.median(vals)) if vals else None
 
 
-def verdict_rows(first: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Per pose the object twin's verdict (the ``verdict`` macro's rows) and the medians:
-    depth RMSE [m] and grey PSNR [dB] against the nominal twin, the fitted twin and the noise
-    ceiling, and the share of the nominal twin's excess explained."""
+def explained_rows(first: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Per pose the difference the object twin explains (the ``explained`` macro's rows) and the
+    medians: depth RMSE [m] and grey PSNR [dB] against the nominal twin, the fitted twin and the
+    noise ceiling, and the share of the nominal twin's excess explained."""
     rows = []
     for r in first:
         ex = (r["metrics"].get("explained") or {}).get("explained") or {}
@@ -68,16 +68,17 @@ def verdict_rows(first: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dic
 
 def explained_context(camp: Any, first: list[dict[str, Any]]) -> dict[str, Any]:
     """The explained difference of a campaign with an object fit (issue 14, section 4): the
-    fitted object twin, its plots, and the verdict per pose with the medians."""
+    fitted object twin, its plots, and the difference it explains per pose with the medians."""
     if camp.object_twin_json is None:
         return {"fitted": False}
     twin = json.loads(camp.object_twin_json)
     report = json.loads(camp.object_fit_report_json or "{}")
     off = (twin.get("mount") or {}).get("pose_offset") or {}
     scales = {k: v.get("reflectance_scale") for k, v in (twin.get("objects") or {}).items()}
-    rows, medians = verdict_rows(first)
+    rows, medians = explained_rows(first)
     return {"fitted": True, "position_m": off.get("position_m"),
             "rotation_deg": off.get("rotation_deg"), "scales": scales,
+            "verdicts": report.get("verdicts") or {},
             "report": json.dumps(report, indent=1)[:20000],
             "plots": [Markup(plot_svg(p, first)) for p in EXPLAINED_PLOTS],
             "rows": rows, "medians": medians}

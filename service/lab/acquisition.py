@@ -6,7 +6,7 @@ runs any plan on the rig (:func:`acquire`: the operator mounts, the rig moves, c
 is and captures, the frames are averaged by :func:`calibration.captures.average_frames`), with
 progress and the stop check in one place; and, for each procedure, the plan -> acquire -> fit in
 one call, for the command line (``toftwin calibrate ...``) and the service's calibration jobs
-alike.
+alike (and the object fit's captures, for ``toftwin fit-object`` and a campaign's object fit).
 """
 
 from __future__ import annotations
@@ -84,9 +84,11 @@ def acquire(
 
 def _capture(rig: Rig, step: CaptureStep) -> AveragedCapture:
     target = RigState(step.turntable_angle_deg, step.solar_suns, step.shutter_open)
-    rig.apply(target)
-    # checked against the target for the whole exposure (Rig.capture)
-    return average_frames(rig.capture(step.frames, target=target), keep_frames=step.keep_frames)
+    with rig.hold():  # nobody moves the rig between the move and the exposure
+        rig.apply(target)
+        # checked against the target for the whole exposure (Rig.capture)
+        frames = rig.capture(step.frames, target=target)
+    return average_frames(frames, keep_frames=step.keep_frames)
 
 
 def run_rig_calibration(
@@ -151,16 +153,19 @@ def run_twin_comparison(
     acquired on ``rig`` (with what is mounted: no operator needed), compared by
     :func:`calibration.verification.compare_twins`."""
     plan = comparison_capture_plan(angles_deg, solar_suns)
-    captures = acquire(rig, _NoOperator(), plan, progress)
+    captures = acquire(rig, NO_MOUNTS, plan, progress)
     return compare_twins(captures, spec, base_dir, calibration, angles_deg, settings, progress)
 
 
-class _NoOperator:
-    """For plans without mounts."""
+class NoMounts:
+    """The operator of plans without mounts (what stands on the turntable stays)."""
 
     def mount(self, objects: Sequence[Any] | None, instruction: str) -> None:
         raise AssertionError(f"this plan mounts nothing, yet asked: {instruction}")
 
 
-__all__ = ["Captures", "acquire", "run_material_calibration", "run_rig_calibration",
+#: the operator of plans without mounts
+NO_MOUNTS = NoMounts()
+
+__all__ = ["NO_MOUNTS", "Captures", "acquire", "run_material_calibration", "run_rig_calibration",
            "run_twin_comparison"]

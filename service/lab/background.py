@@ -54,6 +54,10 @@ P = TypeVar("P")
 Ending = tuple[str, str | None]
 
 
+class Stopped(Exception):  # noqa: N818 - a stop asked for, not an error
+    """A worker saw its stop (:meth:`Run.raise_if_stopped`); it ends in :attr:`Run.stopping`."""
+
+
 @dataclass(frozen=True)
 class Stop:
     """Where a stop leads: the state to record and its error (None: no error)."""
@@ -81,6 +85,12 @@ class Run(Generic[P]):
     def stopping(self) -> Ending:
         """The state (and error) a stop asked for."""
         return self.stop_to, self.stop_error
+
+    def raise_if_stopped(self) -> None:
+        """Raise :class:`Stopped` once a stop was asked for: what a worker's progress calls
+        between its steps (an acquisition's captures, a fit's stages)."""
+        if self.stop.is_set():
+            raise Stopped(self.id)
 
     def request_stop(self, stop: Stop, override: bool = False) -> None:
         """Ask the worker to stop into ``stop``; a stop already asked for stands unless

@@ -1,8 +1,10 @@
 """A campaign's object fit: capture its first poses, fit the object twin, store it.
 
 A campaign created with ``object_fit`` runs this stage before its poses (and again on a resume
-until it has succeeded): at its first ``poses`` distinct turntable angles it captures ``frames``
-frames each, averaged (:func:`calibration.captures.average_frames`), and fits what stands on the
+until it has succeeded): at its first ``poses`` distinct turntable angles (:func:`fit_poses`) it
+captures ``frames`` frames each, averaged, the shutter closed (the object fit's capture plan,
+:func:`calibration.object_twin.plan.object_fit_capture_plan`, taken by the service's
+acquisition, :func:`service.lab.acquisition.acquire`), and fits what stands on the
 turntable (:func:`calibration.object_twin.fit_object`: the mount's pose offset and each object's
 reflectance, with the campaign's pinned calibration). The object twin, its hash and the fit's
 report are stored with the campaign in one transaction; every pose then also simulates the
@@ -16,14 +18,12 @@ captures (the rig is released while it computes).
 from __future__ import annotations
 
 import json
-import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from calibration.captures import AveragedCapture, average_frames
+from calibration.captures import AveragedCapture
 from calibration.object_twin.fit import fit_object
-from drivers.rig import Rig, RigState
 from service.compute.jobs import RENDER_LOCK
 from service.lab.calibration import Twin
 from service.lab.requests import ObjectFitIn
@@ -60,28 +60,6 @@ def fit_poses(poses: Sequence[Any], n: int) -> list[FitPose]:
     return out
 
 
-def capture_for_fit(
-    rig: Rig, poses: Sequence[FitPose], frames: int, stop: threading.Event,
-    current: Callable[[FitPose, int], None],
-) -> list[AveragedCapture] | None:
-    """Averaged captures at ``poses``' angles, the solar simulator's shutter closed (the rig
-    held per pose); None if ``stop`` was set.
-
-    Device faults propagate (:class:`drivers.errors.DeviceError`): the campaign pauses.
-    """
-    captures = []
-    for i, pose in enumerate(poses):
-        if stop.is_set():
-            return None
-        current(pose, i)
-        with rig.hold():
-            # The fit reads the camera's own light: the solar simulator's shutter is closed.
-            target = RigState(pose.turntable_deg, 0.0, shutter_open=False)
-            rig.apply(target)
-            captures.append(average_frames(rig.capture(frames, target=target)))
-    return captures
-
-
 def run_fit(
     scene: SceneSource, twin: Twin, captures: Sequence[AveragedCapture], use_case: Any
 ) -> tuple[ObjectTwinFile, dict[str, Any]]:
@@ -102,4 +80,4 @@ def fitted_twin(twin: Twin, object_twin_json: str) -> Twin:
                                     parse_object_twin(json.loads(object_twin_json))))
 
 
-__all__ = ["FitPose", "ObjectFitIn", "capture_for_fit", "fit_poses", "fitted_twin", "run_fit"]
+__all__ = ["FitPose", "ObjectFitIn", "fit_poses", "fitted_twin", "run_fit"]

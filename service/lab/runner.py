@@ -37,12 +37,14 @@ from typing import Any
 
 from sqlalchemy.orm import sessionmaker
 
+from calibration.object_twin.plan import captures_in_order, object_fit_capture_plan
 from drivers.errors import DeviceError
 from service.compute.executors import Executor
 from service.errors import ConflictError
-from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, failed
+from service.lab.acquisition import NO_MOUNTS, acquire
+from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, Stopped, failed
 from service.lab.calibration import Twin, calibration_from_json
-from service.lab.object_fit import FitPose, capture_for_fit, fit_poses, fitted_twin, run_fit
+from service.lab.object_fit import fit_poses, fitted_twin, run_fit
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec, ObjectFitIn
 from service.lab.scenes import SceneSource, require_mounted
@@ -260,21 +262,24 @@ class CampaignRunner:
         """
         fit = ObjectFitIn.model_validate_json(camp.object_fit_json)
         targets = fit_poses(poses, fit.poses)
+        plan = object_fit_capture_plan([p.turntable_deg for p in targets], fit.frames)
 
-        def current(pose: FitPose, i: int) -> None:
-            run.progress.current = {"stage": "object_fit", "pose_index": i, "repeat": 0,
-                           "turntable_deg": pose.turntable_deg, "solar_suns": pose.solar_suns}
+        def progress(done: int, _total: int, _message: str) -> None:
+            run.raise_if_stopped()
+            run.progress.current = {"stage": "object_fit", "pose_index": done, "repeat": 0,
+                                    "turntable_deg": targets[done].turntable_deg,
+                                    "solar_suns": targets[done].solar_suns}
 
         rig = self.lease.require()
         try:
-            captures = capture_for_fit(rig, targets, fit.frames, run.stop, current)
+            captures = captures_in_order(plan, acquire(rig, NO_MOUNTS, plan, progress))
+        except Stopped:
+            return None, run.stopping
         except DeviceError as exc:
             _log.warning("campaign %s paused: device fault: %s", run.id, exc)
             if run.stop.is_set():
                 return None, run.stopping
             return None, ("paused", f"device fault ({type(exc).__name__}): {exc}")
-        if captures is None:
-            return None, run.stopping
         try:
             object_twin, report = run_fit(scene, twin, captures, rig.camera.use_case)
         except InvalidInputError as exc:

@@ -4,7 +4,7 @@ static files (CSS, JavaScript), shipped in the package (no CDN: the lab may be o
 :func:`environment` is the templates' environment, made by the project's one factory
 (:func:`sim_core.html.jinja_environment`); the page (through FastAPI's ``Jinja2Templates``),
 the API docs and the report use it, so they share their macros: a pose's image panels with
-colour bars, its Table 5 rows, the object twin's verdict.
+colour bars, its Table 5 rows, the difference the object twin explains.
 """
 
 from __future__ import annotations

@@ -88,3 +88,18 @@ def test_verdicts_are_written_whole_as_a_flat_mapping_and_read_back(tmp_path):
     }
     assert dict(read_verdicts(path)) == dict(verdicts)
     assert verdicts.counts() == {"determined": 1, "not determined": 1, "unexplained": 0}
+
+
+@given(std=STD, spread=STD, chi2=st.floats(min_value=0.0, max_value=CHI2_UNEXPLAINED))
+def test_the_spread_over_views_is_a_floor_under_the_reported_error(std, spread, chi2):
+    v = judge(std, 1.0, reduced_chi2=chi2, spread=spread)
+    if v.std is not None:
+        assert v.std >= honest_std(std, chi2) or math.isnan(std)
+        assert v.std >= spread or math.isnan(spread)
+    if v.determined:  # a spread beyond the limit (or NaN) is never determined
+        assert math.isfinite(spread) and spread <= 1.0
+
+
+def test_a_spread_of_another_shape_is_a_bug():
+    with pytest.raises(ValueError, match="2 values for 3"):
+        judge([0.1, 0.1, 0.1], 1.0, spread=[0.1, 0.1])

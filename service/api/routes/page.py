@@ -2,8 +2,9 @@
 
 The page (``page.html``, ``static/page.js``) talks to the REST API like any client; the
 fragments are rendered with the same template macros as the campaign report (a pose's image
-panels with colour bars, its Table 5 rows, the object twin's verdict, the active calibration),
-so that each is made in one place. Everything here is read-only and needs no token.
+panels with colour bars, its Table 5 rows, the object fit's verdicts and the difference the object
+twin explains, the active calibration), so that each is made in one place. Everything here is
+read-only and needs no token.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from service.api.routes.poses import PoseId, require_pose
 from service.errors import GoneError, NotFoundError
 from service.export.panels import pose_panels
 from service.export.plots import CAMPAIGN_PLOTS, EXPLAINED_PLOTS
-from service.export.report import ceiling_tof, verdict_rows
+from service.export.report import ceiling_tof, explained_rows
 from service.export.results_table import result_rows
 from service.lab.calibration import active_public, calibration_residuals
 from service.lab.campaigns import campaign_status
@@ -61,20 +62,20 @@ def panel_links(store, row) -> list[dict[str, Any]]:
 def pose_fragment(request: Request, pose_id: PoseId, session: SessionDep,
                   store: StoreDep) -> HTMLResponse:
     """A pose: its images with colour bars, its depth difference and pixel shares (first), its
-    Table 5 rows and (object fit) its verdict."""
+    Table 5 rows and (object fit) the difference the object twin explains."""
     row = require_pose(session, pose_id)
     metrics = json.loads(row.metrics_json)
     try:
         panels, gap = panel_links(store, row), None
     except (GoneError, OSError) as exc:
         panels, gap = [], str(exc)
-    verdict = None
+    explained = None
     if metrics.get("explained"):
-        verdict = verdict_rows([{"pose_index": row.pose_index,
+        explained = explained_rows([{"pose_index": row.pose_index,
                                  "turntable_deg": row.turntable_deg, "metrics": metrics}])[0]
     return templates.TemplateResponse(request, "_pose_fragment.html", {
         "row": row, "panels": panels, "gap": gap, "header": TABLE_HEADER,
-        "table": metrics.get("table", []), "error": metrics.get("error"), "verdict": verdict,
+        "table": metrics.get("table", []), "error": metrics.get("error"), "explained": explained,
         "tof": metrics.get("tof"), "ceiling_tof": ceiling_tof(metrics)})
 
 
@@ -87,14 +88,19 @@ def campaigns_fragment(request: Request, session: SessionDep, sessions: Sessions
     return templates.TemplateResponse(request, "_campaigns.html", {"campaigns": rows})
 
 
-@router.get("/ui/campaigns/{campaign_id}/verdict", response_class=HTMLResponse)
-def verdict_fragment(request: Request, campaign_id: CampaignId,
+@router.get("/ui/campaigns/{campaign_id}/explained", response_class=HTMLResponse)
+def explained_fragment(request: Request, campaign_id: CampaignId,
                      sessions: SessionsDep) -> HTMLResponse:
-    """The object twin's verdict per pose of a campaign with an object fit (empty without)."""
+    """A campaign's object fit (empty without): its verdict on each key it estimated, and the
+    difference the object twin explains per pose."""
+    with sessions() as s:
+        report = json.loads(queries.require_campaign(s, campaign_id).object_fit_report_json
+                            or "{}")
     first = [r for r in result_rows(sessions, campaign_id) if r["repeat"] == 0]
-    rows, medians = verdict_rows([r for r in first if r["metrics"].get("explained")])
-    return templates.TemplateResponse(request, "_verdict_fragment.html",
-                                      {"rows": rows, "medians": medians if rows else None})
+    rows, medians = explained_rows([r for r in first if r["metrics"].get("explained")])
+    return templates.TemplateResponse(request, "_explained_fragment.html", {
+        "rows": rows, "medians": medians if rows else None,
+        "fit_verdicts": report.get("verdicts") or {}})
 
 
 @router.get("/ui/calibration", response_class=HTMLResponse)

@@ -407,8 +407,8 @@ async function refreshLive(status) {
   } else {
     $("#cc-latest").innerHTML = '<p class="hint">no pose yet</p>';
   }
-  if (status.object_fit) await fragment(`/ui/campaigns/${id}/verdict`, $("#cc-verdict"));
-  else $("#cc-verdict").replaceChildren();
+  if (status.object_fit) await fragment(`/ui/campaigns/${id}/explained`, $("#cc-explained"));
+  else $("#cc-explained").replaceChildren();
   refreshCampaigns();
 }
 

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.timeout(120)
 
 #: every route that answers HTML (by route name): the operator page, its fragments, the
 #: campaign report, the API docs and a calibration job's report.html
-HTML_ROUTES = {"page", "pose_fragment", "campaigns_fragment", "verdict_fragment",
+HTML_ROUTES = {"page", "pose_fragment", "campaigns_fragment", "explained_fragment",
                "calibration_fragment", "get_campaign_report", "api_docs",
                "get_calibration_job_file"}
 #: where the token is typed: no inline style either

@@ -64,7 +64,7 @@ def test_a_command_drives_the_same_real_rig_from_the_same_environment(real_rig_e
                                    "--frames", "1"])
     # The command captured at 20 deg on the controller at address 2 (the object fit itself
     # then finds only the simulated camera's plane, which fits no mesh: not this test's subject).
-    assert "capturing 1 frames at 20 deg" in res.output, res.output
+    assert "object fit: 1 frames at 20 deg" in res.output, res.output
     assert "fitting the object twin" in res.output, res.output
     assert tt.models["turntable"].current_position() == pytest.approx(20.0, abs=0.01)
     assert not camera.device.claimed

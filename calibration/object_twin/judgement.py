@@ -1,0 +1,90 @@
+"""What the object fit may claim: a verdict for each key of the object file.
+
+The object file (:class:`sim_core.twin_file.ObjectTwinFile`) carries the mount's pose offset
+(``mount.pose_offset.position_m`` [m], ``mount.pose_offset.rotation_deg`` [deg]) and each
+fitted object's ``objects.<name>.reflectance_scale``. Each gets its verdict
+(:mod:`calibration.verdicts`) from the fit's own evidence:
+
+- the goodness of fit: the reduced chi-square of the whitened phasor residuals, overall and per
+  view (:class:`calibration.object_twin.refine.RefinedFit`); above
+  :data:`calibration.verdicts.CHI2_UNEXPLAINED` the model does not explain the data and every
+  key is ``unexplained``, naming the views that do not fit;
+- the error: the Jacobian's standard deviation scaled by the residual (never below it), with
+  the spread over the views (the delete-one-view jackknife) as a floor: views that disagree
+  beyond their noise widen the error instead of averaging into a confident wrong number;
+- identifiability: a standard deviation above the key's limit (:data:`LIMITS`, those of
+  :data:`calibration.object_twin.refine.UNDETERMINED_STD`), or an object with too few pixels or
+  too little signal (:mod:`calibration.object_twin.reflectance`), is ``not determined``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+from calibration.object_twin.refine import UNDETERMINED_STD, RefinedFit
+from calibration.object_twin.reflectance import ObjectPixels
+from calibration.verdicts import CHI2_UNEXPLAINED, Verdict, Verdicts, judge
+
+POSITION_KEY = "mount.pose_offset.position_m"
+ROTATION_KEY = "mount.pose_offset.rotation_deg"
+#: each key's limit: a standard deviation above it is not determined
+LIMITS = {POSITION_KEY: UNDETERMINED_STD["position_mm"] * 1e-3,
+          ROTATION_KEY: UNDETERMINED_STD["rotation_deg"],
+          "reflectance_scale": UNDETERMINED_STD["scale"]}
+
+
+def scale_key(name: str) -> str:
+    """The object file's key of an object's reflectance scale."""
+    return f"objects.{name}.reflectance_scale"
+
+
+def unfit_views(chi2_per_view: Sequence[float], angles_deg: Sequence[float],
+                limit: float = CHI2_UNEXPLAINED) -> list[int]:
+    """The indices of the views whose reduced chi-square is above ``limit`` (or not finite),
+    worst first."""
+    def badness(i: int) -> float:
+        c = chi2_per_view[i]
+        return c if math.isfinite(c) else math.inf
+
+    return sorted((i for i, c in enumerate(chi2_per_view) if not c <= limit), key=badness,
+                  reverse=True)
+
+
+def _where(refined: RefinedFit, angles_deg: Sequence[float]) -> str:
+    """The views a reason names: those that do not fit, with their chi-square."""
+    bad = unfit_views(refined.chi2_per_view, angles_deg)
+    if not bad:
+        return f"all {len(angles_deg)} views together"
+    return "views " + ", ".join(f"{angles_deg[i]:+g} deg (chi-square "
+                                f"{refined.chi2_per_view[i]:.3g})" for i in bad)
+
+
+def object_verdicts(refined: RefinedFit, pixels: Mapping[str, ObjectPixels],
+                    angles_deg: Sequence[float]) -> Verdicts:
+    """The verdict of each key the object file carries (module docstring); ``pixels`` are the
+    mounted objects' pixel reports, ``angles_deg`` the views' turntable angles in the fit's
+    order."""
+    where = _where(refined, angles_deg)
+    chi2 = refined.chi2_after
+    out = Verdicts()
+    out.add(POSITION_KEY, judge(refined.std_position_m, LIMITS[POSITION_KEY],
+                                reduced_chi2=chi2, spread=refined.jackknife_position_m,
+                                unit=" m", where=where))
+    out.add(ROTATION_KEY, judge(refined.std_rotation_deg, LIMITS[ROTATION_KEY],
+                                reduced_chi2=chi2, spread=refined.jackknife_rotation_deg,
+                                unit=" deg", where=where))
+    for name, px in pixels.items():
+        if not px.determined:
+            out.add(scale_key(name), Verdict("not determined", None,
+                                             px.reason or "too few pixels of it in the views"))
+            continue
+        out.add(scale_key(name), judge(refined.std_scale[name], LIMITS["reflectance_scale"],
+                                       reduced_chi2=chi2,
+                                       spread=refined.jackknife_scale.get(name, 0.0),
+                                       where=where))
+    return out
+
+
+__all__ = ["LIMITS", "POSITION_KEY", "ROTATION_KEY", "object_verdicts", "scale_key",
+           "unfit_views"]

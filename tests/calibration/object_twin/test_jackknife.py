@@ -1,0 +1,89 @@
+"""The object fit's spread over views: the delete-one-view jackknife at the solution."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from calibration.object_twin.refine import conv_std, jackknife_covariance
+
+
+def _views(n_views: int, rows: int, n_par: int, rng: np.random.Generator):
+    jac = rng.normal(size=(n_views * rows, n_par))
+    slices = [slice(i * rows, (i + 1) * rows) for i in range(n_views)]
+    return jac, slices
+
+
+def _solution_residual(a: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The residual r = z - A x at the least-squares solution (so J = dr/dx = -A)."""
+    x, *_ = np.linalg.lstsq(a, z, rcond=None)
+    return z - a @ x
+
+
+def test_on_a_linear_problem_it_is_the_exact_delete_one_refit_jackknife():
+    rng = np.random.default_rng(1)
+    a, slices = _views(5, 40, 3, rng)
+    z = a @ np.array([1.0, -2.0, 0.5]) + rng.normal(size=a.shape[0])
+    r = _solution_residual(a, z)
+    fits = []
+    for sl in slices:
+        keep = np.ones(a.shape[0], bool)
+        keep[sl] = False
+        fits.append(np.linalg.lstsq(a[keep], z[keep], rcond=None)[0])
+    d = np.array(fits) - np.mean(fits, axis=0)
+    exact = (len(fits) - 1) / len(fits) * d.T @ d
+    np.testing.assert_allclose(jackknife_covariance(-a, r, slices), exact, rtol=1e-9,
+                               atol=1e-12)
+
+
+def test_a_view_that_disagrees_widens_the_spread_far_beyond_the_noise():
+    rng = np.random.default_rng(2)
+    a, slices = _views(4, 50, 2, rng)
+    z = a @ np.array([0.3, -0.7]) + rng.normal(size=a.shape[0])
+    honest = np.sqrt(np.diag(jackknife_covariance(-a, _solution_residual(a, z), slices)))
+    z[slices[2]] += a[slices[2]] @ np.array([2.0, 0.0])  # one view sees the object elsewhere
+    biased = np.sqrt(np.diag(jackknife_covariance(-a, _solution_residual(a, z), slices)))
+    statistical = np.sqrt(np.diag(np.linalg.inv(a.T @ a)))
+    assert honest[0] < 3 * statistical[0]
+    assert biased[0] > 5 * statistical[0] and biased[0] > 5 * honest[0]
+
+
+def test_one_view_or_a_direction_only_one_view_sees_is_unbounded():
+    rng = np.random.default_rng(3)
+    a, slices = _views(1, 30, 2, rng)
+    assert np.all(np.isinf(jackknife_covariance(a, rng.normal(size=30), slices)))
+    a, slices = _views(3, 20, 2, rng)
+    a[20:, 1] = 0.0  # only the first view moves with the second parameter
+    assert np.all(np.isinf(jackknife_covariance(a, rng.normal(size=60), slices)))
+    assert np.all(np.isinf(conv_std(np.full((2, 2), np.inf), np.eye(2))))
+
+
+@settings(max_examples=50, deadline=None)
+@given(n_views=st.integers(2, 6), rows=st.integers(3, 30), n_par=st.integers(1, 4),
+       seed=st.integers(0, 2**32 - 1), scale=st.floats(1e-6, 1e6))
+def test_the_covariance_is_symmetric_and_its_variances_finite_or_inf(n_views, rows, n_par,
+                                                                    seed, scale):
+    rng = np.random.default_rng(seed)
+    a, slices = _views(n_views, rows, n_par, rng)
+    cov = jackknife_covariance(a * scale, rng.normal(size=a.shape[0]), slices)
+    if np.all(np.isfinite(cov)):
+        np.testing.assert_allclose(cov, cov.T, rtol=1e-9, atol=1e-300)
+        assert np.all(np.diag(cov) >= 0.0)
+        std = conv_std(cov, np.eye(n_par))
+        assert np.all(np.isfinite(std)) and np.all(std >= 0.0)
+    else:
+        assert np.all(np.isinf(cov))
+
+
+@pytest.mark.parametrize("empty", [False, True])
+def test_a_view_without_pixels_is_not_counted(empty):
+    rng = np.random.default_rng(4)
+    a, _ = _views(3, 10, 2, rng)
+    if empty:  # the middle view has no rows: two views count
+        a, slices = a[np.r_[0:10, 20:30]], [slice(0, 10), slice(10, 10), slice(10, 20)]
+    else:
+        slices = [slice(0, 10), slice(10, 20), slice(20, 30)]
+    cov = jackknife_covariance(a, rng.normal(size=a.shape[0]), slices)
+    assert cov.shape == (2, 2) and np.all(np.isfinite(cov))
