@@ -38,6 +38,7 @@ determined.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,6 +84,9 @@ MAX_RECENTRES = 4
 #: standard deviations beyond which a parameter counts as not determined
 UNDETERMINED_STD = {"position_mm": 2.0, "rotation_deg": 0.5, "scale": 0.1}
 POSE_NAMES = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
+#: side of the tiles of the delete-one-tile jackknife [px]: several times the optics' blur and
+#: a silhouette's misfit band, a few tiles over an object
+BLOCK_PX = 12
 
 log = logging.getLogger(__name__)
 
@@ -103,9 +107,10 @@ class RefinedFit:
     evaluations: int
     #: each view's reduced chi-square at the solution (its residuals' mean square)
     chi2_per_view: tuple[float, ...] = ()
-    #: the spread of the estimate over the views (delete-one-view jackknife, linearised at the
-    #: solution): translations [m], angles [deg], scales [1]; inf where leaving a view out
-    #: leaves a parameter undetermined
+    #: the spread of the estimate over the views and over tiles of the views (the larger of the
+    #: delete-one-view and the delete-one-tile jackknife, linearised at the solution):
+    #: translations [m], angles [deg], scales [1]; inf where leaving a view out leaves a
+    #: parameter undetermined
     jackknife_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     jackknife_rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     jackknife_scale: dict[str, float] = field(default_factory=dict)
@@ -213,6 +218,21 @@ class _Problem:
             d = zm - pred.phasor
             out.extend([(d.real / sig[:, 0])[:, m].ravel(), (d.imag / sig[:, 1])[:, m].ravel()])
         return np.concatenate(out)
+
+    def pixel_blocks(self, block_px: int) -> list[np.ndarray]:
+        """The rows of :meth:`residual` of each ``block_px`` square tile of each view's image
+        (both parts, every frequency of the tile's pixels), tiles with no pixel left out."""
+        groups, start = [], 0
+        for zm, m in zip(self.measured, self.masks, strict=True):
+            rows_px, cols_px = np.nonzero(m)  # the masked pixels in C order, as in residual
+            n_px = rows_px.size
+            tile = (rows_px // block_px) * (m.shape[1] // block_px + 1) + cols_px // block_px
+            # row k of the view's block: part p, frequency f, pixel i -> ((p*n_f + f)*n_px + i)
+            offsets = start + np.arange(2 * zm.shape[0])[:, None] * n_px
+            for t in np.unique(tile):
+                groups.append((offsets + np.flatnonzero(tile == t)[None, :]).ravel())
+            start += 2 * zm.shape[0] * n_px
+        return groups
 
     def view_slices(self) -> list[slice]:
         """Each view's rows of :meth:`residual` (and of the Jacobian), in the views' order."""
@@ -339,32 +359,41 @@ def _height_search(prob: _Problem, x: np.ndarray, axis: np.ndarray) -> np.ndarra
     return best
 
 
-def jackknife_covariance(jac: np.ndarray, r: np.ndarray, views: list[slice]) -> np.ndarray:
-    """The delete-one-view jackknife covariance of a least-squares solution, linearised at it.
+def jackknife_covariance(jac: np.ndarray, r: np.ndarray,
+                         groups: Sequence[slice | np.ndarray],
+                         singular: str = "unbounded") -> np.ndarray:
+    """The delete-one-group jackknife covariance of a least-squares solution, linearised at it.
 
-    Leaving view ``v`` out moves the Gauss-Newton solution by
-    ``d_v = (J^T J - J_v^T J_v)^-1 J_v^T r_v`` (``J = dr/dx`` and ``r`` whitened, at the
-    solution where ``J^T r = 0``, so the other views' gradient is ``-J_v^T r_v``); the
-    jackknife covariance is ``(n - 1) / n * sum_v (d_v - mean d)(d_v - mean d)^T`` (Efron and
-    Stein). It measures how far the views agree with each other, whatever the residual's
-    noise model says: where leaving a view out leaves a direction undetermined (a singular or
-    near-singular system), every variance is inf. Fewer than two views: inf everywhere.
+    Leaving group ``g`` of residuals out (a view, a tile of a view) moves the Gauss-Newton
+    solution by ``d_g = (J^T J - J_g^T J_g)^-1 J_g^T r_g`` (``J = dr/dx`` and ``r`` whitened, at
+    the solution where ``J^T r = 0``, so the other groups' gradient is ``-J_g^T r_g``); the
+    jackknife covariance is ``(n - 1) / n * sum_g (d_g - mean d)(d_g - mean d)^T`` (Efron and
+    Stein). It measures how far the groups agree with each other, whatever the residual's noise
+    model says: over views, a view the model gets wrong; over tiles, errors correlated across
+    neighbouring pixels (the optics, a misfit silhouette), which the Jacobian's error, counting
+    every pixel as independent, does not see. Where leaving a group out leaves a direction
+    undetermined (a singular or near-singular system) every variance is inf
+    (``singular="unbounded"``), or that group is passed over (``"skip"``: tiles, where the
+    views' jackknife judges identifiability). Fewer than two groups counted: inf everywhere.
     """
     n_par = jac.shape[1]
-    live = [sl for sl in views if sl.stop > sl.start]
-    if len(live) < 2:
-        return np.full((n_par, n_par), np.inf)
     jtj = jac.T @ jac
     moves = []
-    for sl in live:
-        jv = jac[sl]
-        a = jtj - jv.T @ jv
+    for g in groups:
+        jg = jac[g]
+        if jg.shape[0] == 0:
+            continue
+        a = jtj - jg.T @ jg
         if not np.all(np.isfinite(a)) or np.linalg.cond(a) > 1e12:
+            if singular == "skip":
+                continue
             return np.full((n_par, n_par), np.inf)
-        moves.append(np.linalg.solve(a, jv.T @ r[sl]))
+        moves.append(np.linalg.solve(a, jg.T @ r[g]))
+    if len(moves) < 2:
+        return np.full((n_par, n_par), np.inf)
     d = np.array(moves)
     d -= d.mean(axis=0)
-    n = len(live)
+    n = len(moves)
     return (n - 1) / n * d.T @ d
 
 
@@ -458,7 +487,9 @@ def refine_object_twin(
         corr = cov / np.outer(std, std)
     except np.linalg.LinAlgError:
         std, corr = np.full(x.size, np.inf), None
-    jk = conv_std(jackknife_covariance(jac, r, slices), conv)
+    jk_views = conv_std(jackknife_covariance(jac, r, slices), conv)
+    jk_tiles = conv_std(jackknife_covariance(jac, r, prob.pixel_blocks(BLOCK_PX), "skip"), conv)
+    jk = np.maximum(jk_views, jk_tiles)
     determined = {}
     for i, name in enumerate(POSE_NAMES):
         limit = UNDETERMINED_STD["position_mm" if i < 3 else "rotation_deg"]

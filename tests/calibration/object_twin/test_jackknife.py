@@ -87,3 +87,56 @@ def test_a_view_without_pixels_is_not_counted(empty):
         slices = [slice(0, 10), slice(10, 20), slice(20, 30)]
     cov = jackknife_covariance(a, rng.normal(size=a.shape[0]), slices)
     assert cov.shape == (2, 2) and np.all(np.isfinite(cov))
+
+
+def test_over_tiles_it_sees_errors_correlated_across_neighbouring_pixels():
+    # One 48 x 48 view, a brightness and a slope fitted, the noise blurred over ~3 px (as the
+    # optics blur a misfit): the Jacobian's error counts each pixel as independent and is far
+    # too small; the spread over 12 px tiles is the estimates' real spread.
+    from scipy import ndimage
+
+    rng = np.random.default_rng(5)
+    cols = np.tile(np.arange(48.0), 48)
+    a = np.stack([np.ones(48 * 48), (cols - 23.5) / 24.0], axis=1)
+    tiles = ((np.arange(48 * 48) // 48) // 12) * 4 + (np.arange(48 * 48) % 48) // 12
+    groups = [np.flatnonzero(tiles == t) for t in range(16)]
+    estimates, spreads = [], []
+    for _ in range(150):
+        noise = ndimage.gaussian_filter(rng.normal(size=(48, 48)), 3.0).ravel()
+        noise /= noise.std()
+        x, *_ = np.linalg.lstsq(a, noise, rcond=None)
+        estimates.append(x)
+        spreads.append(np.sqrt(np.diag(jackknife_covariance(-a, noise - a @ x, groups))))
+    real = np.std(estimates, axis=0)
+    statistical = np.sqrt(np.diag(np.linalg.inv(a.T @ a)))
+    assert np.all(real > 4 * statistical)
+    np.testing.assert_allclose(np.median(spreads, axis=0), real, rtol=0.5)
+
+
+def test_a_tile_whose_removal_leaves_a_direction_undetermined_is_passed_over_when_asked():
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(40, 2))
+    a[10:, 1] = 0.0  # only the first tile sees the second parameter
+    groups = [np.arange(0, 10), np.arange(10, 20), np.arange(20, 30), np.arange(30, 40)]
+    r = rng.normal(size=40)
+    assert np.all(np.isinf(jackknife_covariance(a, r, groups)))
+    skipped = jackknife_covariance(a, r, groups, "skip")
+    assert np.all(np.isfinite(skipped))
+
+
+def test_the_tiles_split_every_view_s_residual_rows_once_each_by_pixel():
+    from calibration.object_twin.refine import _Problem
+
+    rng = np.random.default_rng(7)
+    masks = [rng.random((30, 40)) < 0.3, np.zeros((30, 40), bool), rng.random((30, 40)) < 0.5]
+    masks[1][5:9, 33:38] = True
+    measured = [np.zeros((n_f, 30, 40), complex) for n_f in (1, 2, 2)]
+    prob = _Problem(None, measured, masks, [], (), {}, np.zeros(3))  # type: ignore[arg-type]
+    n_rows = sum(2 * z.shape[0] * int(m.sum()) for z, m in zip(measured, masks, strict=True))
+    groups = prob.pixel_blocks(12)
+    rows = np.concatenate(groups)
+    assert np.array_equal(np.sort(rows), np.arange(n_rows))  # every row, once
+    # each group is one tile of one view: 2 * n_f rows per pixel of the tile
+    view1 = [g for g in groups if g.min() >= 2 * int(masks[0].sum())
+             and g.max() < 2 * int(masks[0].sum()) + 4 * int(masks[1].sum())]
+    assert sorted(g.size for g in view1) == sorted([4 * 4 * 3, 4 * 4 * 2])  # cols 33-35, 36-37
