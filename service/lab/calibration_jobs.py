@@ -47,7 +47,7 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.errors import DeviceError
 from service.errors import ConflictError, GoneError, NotFoundError
-from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop
+from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, Stopped
 from service.lab.calibration import activate
 from service.lab.poses import check_angle
 from service.lab.requests import CalibrationCreate
@@ -67,10 +67,6 @@ _PARTIAL = ".partial-"
 #: what a job interrupted by the service's end says
 INTERRUPTED = ("the service stopped while the calibration ran; a calibration cannot be resumed: "
                "start a new one (POST /api/v1/calibrations)")
-
-
-class _CancelledError(Exception):
-    """Raised inside the sequence (from its progress callback) to stop it."""
 
 
 @dataclass
@@ -106,8 +102,7 @@ class _WaitingOperator:
         progress.waiting = (instruction, message)
         try:
             while not progress.mounted.wait(0.2):
-                if run.stop.is_set():
-                    raise _CancelledError()
+                run.raise_if_stopped()
         finally:
             progress.waiting = None
 
@@ -278,14 +273,12 @@ class CalibrationJobs:
                 operator, rig_name = _WaitingOperator(self, run), "lab"
 
             def progress(done: int, total: int, message: str) -> None:
-                if run.stop.is_set():
-                    raise _CancelledError()
+                run.raise_if_stopped()
                 self._note(job_id, message, done, total)
 
             result = run_rig_calibration(rig, operator, self.scene.spec, self.scene.base_dir,
                                          plan, progress, rig_name=rig_name)
-            if run.stop.is_set():
-                raise _CancelledError()
+            run.raise_if_stopped()
             self._note(job_id, "writing the report")
             write_report(partial, result)
             os.replace(partial, self.out_dir(job_id))
@@ -293,7 +286,7 @@ class CalibrationJobs:
             if activate_result:
                 activate(self.sessions, result.calibration, f"calibration job {job_id}")
                 activated = True
-        except _CancelledError:
+        except Stopped:
             to, error = run.stopping
         except InvalidInputError as exc:  # the sequence refused what it measured
             to, error = "failed", (f"{exc}. The rig's data could not give a trustworthy "
