@@ -52,8 +52,17 @@ from calibration.verdicts import CHI2_UNEXPLAINED, Verdict, Verdicts, honest_std
 from sim_core.errors import InvalidInputError
 from sim_core.json_safe import json_safe
 
-__all__ = ["MIN_GROUPS", "N_RESAMPLES", "P_UNEXPLAINED", "PARAMS_PREFIX", "FitEvidence",
-           "SliceGoodness", "brdf_verdicts", "fit_evidence", "incidence_groups"]
+__all__ = [
+    "MIN_GROUPS",
+    "N_RESAMPLES",
+    "PARAMS_PREFIX",
+    "P_UNEXPLAINED",
+    "FitEvidence",
+    "SliceGoodness",
+    "brdf_verdicts",
+    "fit_evidence",
+    "incidence_groups",
+]
 
 #: bootstrap resamples of the slices
 N_RESAMPLES = 40
