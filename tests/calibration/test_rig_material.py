@@ -247,6 +247,14 @@ def test_the_cli_writes_the_material_file_the_slices_and_the_report(tmp_path):
 
     table = read_goniometer_csv(tmp_path / "sample.slices.csv")
     assert len(table) == written["fit"]["n_samples"]
+    # issue 27: every parameter's verdict beside the material file, and printed
+    verdicts = json.loads((tmp_path / "sample.verdicts.json").read_text(encoding="utf-8"))
+    assert set(verdicts) == {f"params.{n}" for n in ("kd", "ks", "m", "n2")}
+    assert verdicts["params.kd"]["verdict"] == "determined"
+    for name in held:
+        assert verdicts[f"params.{name}"]["verdict"] == "not determined"
+        assert f"params.{name}: NOT DETERMINED" in res.stdout
+    assert "verdicts: " in res.stdout and report["verdicts"] == verdicts
 
 
 # -- verdicts on angle sets a user could choose (issue 27) ---------------------------------------
