@@ -88,7 +88,9 @@ class SliceGoodness:
 
     @property
     def unexplained(self) -> bool:
-        return (not math.isfinite(self.reduced_chi2)) or (
+        """Above the limit and improbable under the noise; an infinite chi-square is, a NaN
+        one (no noise level to judge against) is not judged."""
+        return self.reduced_chi2 == math.inf or (
             self.reduced_chi2 > CHI2_UNEXPLAINED and self.p_value < P_UNEXPLAINED)
 
     def reason(self) -> str:
@@ -201,10 +203,13 @@ def fit_evidence(fit: BrdfFit, groups: Sequence[str] | None = None, *,
         rows = idx[label_arr[idx] == name]
         if not len(rows):
             continue
-        z = r[rows] / noise if math.isfinite(noise) and noise > 0 else np.full(len(rows), np.inf)
-        chi2_sum = float(np.sum(z * z))
-        red = chi2_sum / len(rows)
-        pval = float(chi2_dist.sf(chi2_sum, len(rows))) if math.isfinite(chi2_sum) else 0.0
+        if math.isfinite(noise) and noise > 0:
+            z = r[rows] / noise
+            chi2_sum = float(np.sum(z * z))
+            red = chi2_sum / len(rows)
+            pval = float(chi2_dist.sf(chi2_sum, len(rows))) if math.isfinite(chi2_sum) else 0.0
+        else:  # no noise level (a residual of exactly 0, no dof): nothing to judge against
+            red, pval = math.nan, math.nan
         g = SliceGoodness(name, len(rows), red, pval)
         if g.unexplained:
             g = SliceGoodness(name, len(rows), red, pval,
@@ -223,7 +228,8 @@ def _driven(problem: FitProblem, x: np.ndarray, keep: np.ndarray,
         return tuple(names)
     x_new, _ = problem.refine(x, keep)
     return tuple(n for n, a, b in zip(names, x, x_new, strict=True)
-                 if not (abs(b - a) <= std[n]))  # an infinite or NaN std moves nothing: NaN
+                 # beyond an infinite std nothing moves; against an unknown (NaN) one it does
+                 if not (abs(b - a) <= std[n]))
 
 
 def _bootstrap(problem: FitProblem, x: np.ndarray, idx: np.ndarray, labels: np.ndarray,
@@ -300,7 +306,9 @@ def brdf_verdicts(fit: BrdfFit, groups: Sequence[str] | None = None, *,
             continue
         std = max(analytic, ev.bootstrap_std.get(name, math.inf))
         if ev.reduced_chi2 is not None and not ev.reduced_chi2 <= CHI2_UNEXPLAINED:
-            out.add(key, judge(std, limit, reduced_chi2=ev.reduced_chi2,
+            # judge scales the statistical std by the chi-square itself: give it unscaled
+            stat = max(fit.uncertainty[name], ev.bootstrap_std.get(name, math.inf))
+            out.add(key, judge(stat, limit, reduced_chi2=ev.reduced_chi2,
                                where=f"all slices ({len(ev.slices)})"))
             continue
         drivers = [s for s in bad if name in s.drives]

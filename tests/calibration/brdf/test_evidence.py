@@ -140,6 +140,7 @@ def test_a_slice_without_finite_chi_square_is_unexplained():
     assert g.unexplained and "retro@+30" in g.reason()
     assert not SliceGoodness("retro@+30", 4, 3.0, 0.01).unexplained  # 3 on 4 rows: chance
     assert SliceGoodness("retro@+30", 40, 3.0, 1e-9).unexplained
+    assert not SliceGoodness("retro@+30", 40, math.nan, math.nan).unexplained  # not judged
 
 
 def test_the_sweep_s_held_and_conditional_parameters_are_not_determined():
