@@ -21,6 +21,11 @@ fit itself shows beyond it, and :func:`brdf_verdicts` turns it into a
   :data:`P_UNEXPLAINED` (a slice of 5 rows exceeds 2 by chance 8 % of the time). The fit is then
   repeated without it (least squares from the optimum): a parameter it moves by more than its
   standard deviation is driven by data the model cannot explain and is ``unexplained``.
+- **Rows left out**: RANSAC's outliers are rows the model is not asked to explain. A few are
+  gross errors of the instrument (the synthetic campaigns have 10 %); when more than
+  :data:`MAX_OUTLIER_FRACTION` of the rows are left out, the model explains only its consensus
+  set and every fitted parameter is ``unexplained``; a slice most of whose rows are left out is
+  named as dropped (:attr:`FitEvidence.dropped`).
 - **Spread over resamples**: the least-squares fit repeated from the optimum on
   :data:`N_RESAMPLES` bootstrap resamples of the slices (whole groups drawn with replacement,
   so a view's shared error shows; single rows when there are fewer than
@@ -53,6 +58,7 @@ from sim_core.errors import InvalidInputError
 from sim_core.json_safe import json_safe
 
 __all__ = [
+    "MAX_OUTLIER_FRACTION",
     "MIN_GROUPS",
     "N_RESAMPLES",
     "PARAMS_PREFIX",
@@ -70,6 +76,8 @@ N_RESAMPLES = 40
 MIN_GROUPS = 5
 #: a slice above CHI2_UNEXPLAINED is unexplained when its chi-square is this improbable
 P_UNEXPLAINED = 1e-3
+#: share of the rows RANSAC may leave out before the fit is read as explaining only a part
+MAX_OUTLIER_FRACTION = 1.0 / 3.0
 #: the material file's key of a parameter is this prefix and its name
 PARAMS_PREFIX = "params."
 
@@ -123,6 +131,22 @@ class FitEvidence:
     n_resamples: int
     resampled: str
     analytic_std: dict[str, float] = field(default_factory=dict)
+    n_rows: int = 0
+    n_outliers: int = 0
+    dropped: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def outlier_fraction(self) -> float:
+        return self.n_outliers / self.n_rows if self.n_rows else 0.0
+
+    def outliers_reason(self) -> str | None:
+        """Why the fit explains only a part of its rows (None when it does not)."""
+        if self.outlier_fraction <= MAX_OUTLIER_FRACTION:
+            return None
+        return (f"the robust fit left {self.n_outliers} of {self.n_rows} rows out as outliers "
+                f"({100 * self.outlier_fraction:.0f} %, more than "
+                f"{100 * MAX_OUTLIER_FRACTION:.0f} %): the model explains only a part of the "
+                "data")
 
     @property
     def unexplained_slices(self) -> list[SliceGoodness]:
@@ -135,7 +159,8 @@ class FitEvidence:
                                 "p_value": s.p_value, "unexplained": s.unexplained,
                                 "drives": list(s.drives)} for s in self.slices},
             "bootstrap_std": self.bootstrap_std, "n_resamples": self.n_resamples,
-            "resampled": self.resampled, "analytic_std": self.analytic_std})
+            "resampled": self.resampled, "analytic_std": self.analytic_std,
+            "rows": self.n_rows, "outliers": self.n_outliers, "dropped": self.dropped})
 
 
 def incidence_groups(fit: BrdfFit) -> list[str]:
@@ -199,8 +224,13 @@ def fit_evidence(fit: BrdfFit, groups: Sequence[str] | None = None, *,
     label_arr = np.asarray(labels, dtype=object)
     order = list(dict.fromkeys(labels))
     slices = []
+    dropped = {}
     for name in order:
         rows = idx[label_arr[idx] == name]
+        n_all = int(np.sum(label_arr == name))
+        if 2 * len(rows) < n_all:
+            dropped[name] = (f"{n_all - len(rows)} of its {n_all} rows left out as outliers "
+                             "(beyond the robust fit's threshold)")
         if not len(rows):
             continue
         if math.isfinite(noise) and noise > 0:
@@ -216,7 +246,8 @@ def fit_evidence(fit: BrdfFit, groups: Sequence[str] | None = None, *,
                               _driven(problem, x, idx[label_arr[idx] != name], analytic))
         slices.append(g)
     boot, n_ok, how = _bootstrap(problem, x, idx, label_arr, n_resamples, seed)
-    return FitEvidence(overall, tuple(slices), boot, n_ok, how, analytic)
+    return FitEvidence(overall, tuple(slices), boot, n_ok, how, analytic, len(labels),
+                       int(np.sum(~inlier)), dropped)
 
 
 def _driven(problem: FitProblem, x: np.ndarray, keep: np.ndarray,
@@ -310,6 +341,10 @@ def brdf_verdicts(fit: BrdfFit, groups: Sequence[str] | None = None, *,
             stat = max(fit.uncertainty[name], ev.bootstrap_std.get(name, math.inf))
             out.add(key, judge(stat, limit, reduced_chi2=ev.reduced_chi2,
                                where=f"all slices ({len(ev.slices)})"))
+            continue
+        partial = ev.outliers_reason()
+        if partial:
+            out.add(key, Verdict("unexplained", std, partial))
             continue
         drivers = [s for s in bad if name in s.drives]
         if drivers:

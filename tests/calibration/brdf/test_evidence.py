@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from calibration.brdf import fit_brdf
 from calibration.brdf.evidence import (
+    MAX_OUTLIER_FRACTION,
     SliceGoodness,
     brdf_verdicts,
     fit_evidence,
@@ -23,8 +24,9 @@ from calibration.rig_material.slices import SliceCheck, SliceRows, Slices
 from calibration.rig_material.verdicts import slice_groups, sweep_verdicts
 from calibration.verdicts import CHI2_UNEXPLAINED
 from sim_core.errors import InvalidInputError
-from sim_core.materials import CookTorrance
+from sim_core.materials import CookTorrance, make_material
 from sim_core.materials.goniometer import GoniometerTable
+from tests.calibration.brdf.synthetic import measure
 
 ALBEDO = 0.25
 INCIDENCE_DEG = (5.0, 15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0)
@@ -176,3 +178,15 @@ def test_the_sweep_s_held_and_conditional_parameters_are_not_determined():
             name = key.removeprefix("params.")
             assert abs(fit.params[name] - getattr(truth, name)) <= 3 * v[key].std \
                 or abs(fit.params[name] / getattr(truth, name) - 1) <= 0.05
+
+
+def test_a_model_that_explains_only_its_consensus_set_is_unexplained():
+    # a glossy tile fitted as a Lambertian: RANSAC keeps the diffuse rows, drops the lobe
+    syn = measure(make_material("cook-torrance", kd=0.5, ks=0.4, m=0.1, n2=1.5), 3,
+                  noise=0.03, outlier_fraction=0.0)
+    fit = fit_brdf(syn.table, "lambertian", seed=3)
+    ev = fit_evidence(fit)
+    assert ev.outlier_fraction > MAX_OUTLIER_FRACTION
+    v = brdf_verdicts(fit, evidence=ev)["params.albedo"]
+    assert v.verdict == "unexplained" and "rows out as outliers" in v.reason
+    assert ev.to_dict()["outliers"] == fit.n_outliers
