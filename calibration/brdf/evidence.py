@@ -173,7 +173,7 @@ def _problem(fit: BrdfFit) -> tuple[FitProblem, np.ndarray]:
     return FitProblem(free, fit.table), np.array([fit.params[n] for n in free.names])
 
 
-def _noise_level(fit: BrdfFit, problem: FitProblem, r_in: np.ndarray, p: int) -> float:
+def _noise_level(problem: FitProblem, r_in: np.ndarray, p: int) -> float:
     """The residual's noise level: 1 for chi residuals, else the RMS residual over the dof
     (NaN without degrees of freedom: nothing can be judged then)."""
     if not problem.relative:
@@ -214,10 +214,12 @@ def fit_evidence(fit: BrdfFit, groups: Sequence[str] | None = None, *,
     idx = np.flatnonzero(inlier)
     r = problem.residuals(x)
     assert r is not None  # the fit's optimum is feasible
-    noise = _noise_level(fit, problem, r[idx], p)
+    noise = _noise_level(problem, r[idx], p)
     dof = len(idx) - p
     overall = None
     if not problem.relative:
+        # no dof cannot happen (fit_brdf refuses fewer distinct inliers than p + 1); if it
+        # did, nothing would be explained: inf, judged unexplained
         overall = float(np.sum(r[idx] ** 2) / dof) if dof > 0 else math.inf
     analytic = {n: honest_std(fit.uncertainty[n], overall if overall is not None else 1.0)
                 for n in names}
