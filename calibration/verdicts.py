@@ -182,4 +182,35 @@ def read_verdicts(path: str | Path) -> Verdicts:
 
 
 __all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
-           "honest_std", "judge", "read_verdicts", "write_verdicts"]
+           "honest_std", "judge", "read_verdicts", "verdict_lines", "verdicts_beside",
+           "write_verdicts", "write_verdicts_beside"]
+
+
+def verdicts_beside(out: str | Path) -> Path:
+    """Where a command whose output is one file writes its verdicts: beside it, the file's name
+    without its suffix and ``.verdicts.json`` (``sample.yaml`` -> ``sample.verdicts.json``).
+
+    >>> verdicts_beside("out/sample.yaml").as_posix()
+    'out/sample.verdicts.json'
+    """
+    path = Path(out)
+    return path.with_name(path.stem + ".verdicts.json")
+
+
+def write_verdicts_beside(out: str | Path, verdicts: Verdicts) -> Path:
+    """:func:`write_verdicts` for a command whose output is the file ``out``: the same flat
+    mapping, at :func:`verdicts_beside`, written whole or not at all."""
+    path = verdicts_beside(out)
+    text = json.dumps(verdicts.to_json(), indent=2, allow_nan=False) + "\n"
+    atomic_write(path, text.encode())
+    return path
+
+
+def verdict_lines(verdicts: Verdicts) -> list[str]:
+    """What a command prints of its verdicts: the count of each, then every key that is not
+    determined or unexplained with its reason."""
+    counts = verdicts.counts()
+    lines = ["verdicts: " + ", ".join(f"{counts[v]} {v}" for v in VERDICTS)]
+    lines += [f"  {key}: {v.verdict.upper()}: {v.reason}" for key, v in verdicts.items()
+              if not v.determined]
+    return lines

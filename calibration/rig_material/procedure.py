@@ -11,6 +11,9 @@
    (:mod:`calibration.rig_material.slices`), one goniometer table.
 4. The model is fitted to the table; parameters the slices do not determine are held at the
    prior (:mod:`calibration.rig_material.fit`).
+5. Every parameter of the material file is judged on the fit's own evidence: the slices'
+   chi-square against their noise, the spread over resampled views, what the slices determine
+   (:mod:`calibration.rig_material.verdicts`).
 
 The procedure sees frames and the rig's reported states only; the sample's true material is
 whatever the operator mounted.
@@ -24,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from calibration.brdf.evidence import FitEvidence
 from calibration.capture_plan import CapturePlan, Captures
 from calibration.captures import Progress, no_progress
 from calibration.rig_material.fit import DEFAULT_MODEL, SliceFit, fit_slices, prior_material
@@ -31,7 +35,9 @@ from calibration.rig_material.plan import MaterialSweepPlan, sample_object
 from calibration.rig_material.reference import reference_view
 from calibration.rig_material.slices import Slices, extract_slices
 from calibration.rig_material.sweep import sample_captures, sweep_capture_plan
+from calibration.rig_material.verdicts import sweep_evidence, sweep_verdicts
 from calibration.twin_prediction import CameraUseCase, mounted_spec
+from calibration.verdicts import Verdicts
 from sim_core.json_safe import json_safe
 from sim_core.materials import Material
 from sim_core.scene import build_camera
@@ -55,6 +61,10 @@ class MaterialCalibration:
         :func:`sim_core.twin_file.twin_hash` of the calibration the references used.
     seconds : dict of str to float
         Wall time of the sweep, the references and the fit.
+    verdicts : Verdicts
+        Every parameter of the material file judged (``params.kd``, ...).
+    evidence : FitEvidence or None
+        What the verdicts are judged on (chi-square per view, the spread over views).
     """
 
     slices: Slices
@@ -63,6 +73,8 @@ class MaterialCalibration:
     frames_used: int
     calibration_hash: str | None
     seconds: dict[str, float] = field(default_factory=dict)
+    verdicts: Verdicts = field(default_factory=Verdicts)
+    evidence: FitEvidence | None = None
 
     def report(self) -> dict[str, Any]:
         """Plain JSON: the parameters' statuses, the fit, the slices' sizes and check."""
@@ -78,6 +90,8 @@ class MaterialCalibration:
             "frames_used": self.frames_used,
             "calibration_hash": self.calibration_hash,
             "seconds": self.seconds,
+            "verdicts": self.verdicts.to_json(),
+            "evidence": self.evidence.to_dict() if self.evidence is not None else None,
         })
 
 
@@ -162,12 +176,14 @@ def fit_material_sweep(
     table = slices.table(source="rig slices",
                          wavelength_nm=float(build_camera(spec).wavelength_m * 1e9))
     result = fit_slices(table, model, prior_mat, seed=seed)
+    evidence = sweep_evidence(result, slices, seed)
+    verdicts = sweep_verdicts(result, slices, seed, evidence)
     t3 = time.perf_counter()
     progress(total, total, "done")
     n_frames = plan.n_captures * plan.frames_per_state
     return MaterialCalibration(slices, result, plan, n_frames,
                                twin_hash(calibration) if calibration is not None else None,
-                               {"references": t2 - t1, "fit": t3 - t2})
+                               {"references": t2 - t1, "fit": t3 - t2}, verdicts, evidence)
 
 
 def _spec_of(material: Material) -> dict[str, Any]:

@@ -156,7 +156,9 @@ def rig_command(
 @calibrate_app.command("material")
 def material_command(
     out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML); the slices "
-                                      "go to OUT.slices.csv, the report to OUT.report.json.")],
+                                      "go to OUT.slices.csv, the report to OUT.report.json, "
+                                      "each parameter's verdict to OUT.verdicts.json (OUT: the "
+                                      "file without its suffix).")],
     simulated: Annotated[
         bool, typer.Option("--simulated", help="Measure on the simulated lab's rig.")
     ] = False,
@@ -250,7 +252,19 @@ def material_command(
         console.print(f"  {name:>16} = {st.value:.4g}  {note}")
     for w in result.slices.check.warnings:
         print_warning(w)
-    console.print(f"material file written to {path} (slices {csv_path}, report {report_path})")
+    verdicts_path = _print_and_write_verdicts(out, result.verdicts)
+    console.print(f"material file written to {path} (slices {csv_path}, report {report_path}, "
+                  f"verdicts {verdicts_path})")
+
+
+def _print_and_write_verdicts(out: Path, verdicts) -> Path:
+    """Print the verdicts' counts and every key not determined with its reason; write them to
+    ``OUT.verdicts.json`` beside the output file."""
+    from calibration.verdicts import verdict_lines, write_verdicts_beside
+
+    for line in verdict_lines(verdicts):
+        console.print(line, markup=False, highlight=False)
+    return write_verdicts_beside(out, verdicts)
 
 
 def _material_arg(value: str | None, option: str):
@@ -309,7 +323,9 @@ def brdf_command(
                                          "reflection_zenith_deg, azimuth_difference_deg, "
                                          "brdf_per_sr (optional wavelength_nm, brdf_std_per_sr).")],
     model: Annotated[str, typer.Option("--model", help=f"One of {', '.join(BRDF_MODELS)}.")],
-    out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML).")],
+    out: Annotated[Path, typer.Option("--out", help="Material file to write (YAML); each "
+                                      "parameter's verdict goes to OUT.verdicts.json (OUT: the "
+                                      "file without its suffix).")],
     wavelength_nm: Annotated[
         float | None,
         number_option("--wavelength-nm", help="Band to fit when the file holds several [nm].",
@@ -331,6 +347,7 @@ def brdf_command(
 ) -> None:
     """Fit a material model to goniometer data and write a material file (issue 14)."""
     from calibration.brdf import FitSettings, fit_brdf
+    from calibration.brdf.evidence import brdf_verdicts
     from calibration.brdf.material_file import write_material_file
     from service.cli.common import choice
     from sim_core.materials.goniometer import read_goniometer_csv
@@ -343,6 +360,8 @@ def brdf_command(
         fit = fit_brdf(table, model, fixed=fixed, seed=seed, settings=settings)
     except InvalidInputError as exc:
         fail_invalid(exc)
+    verdicts = brdf_verdicts(fit, held_reasons={n: f"held at {v:g} (--fix), not fitted"
+                                                for n, v in fixed.items()}, seed=seed)
     path = write_material_file(out, fit)
     console.print(f"{fit.kind} fitted to {len(table)} samples of {data}"
                   + (f" at {table.wavelength_nm:g} nm" if table.wavelength_nm else ""))
@@ -357,4 +376,5 @@ def brdf_command(
                   f"{100 * fit.e_fit_all:.3g} % over all samples")
     console.print(f"  outliers flagged: {fit.n_outliers} of {len(table)} (relative error beyond "
                   f"{100 * outlier_threshold:g} %)")
-    console.print(f"material file written to {path}")
+    verdicts_path = _print_and_write_verdicts(out, verdicts)
+    console.print(f"material file written to {path} (verdicts {verdicts_path})")

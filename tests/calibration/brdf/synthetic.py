@@ -37,11 +37,12 @@ class Synthetic:
     outlier: np.ndarray  # rows given a gross error
 
 
-def goniometer_angles(rng: np.random.Generator, near: str = "specular"
+def goniometer_angles(rng: np.random.Generator, near: str = "specular",
+                      incidence_deg: tuple[float, ...] = INCIDENCE_DEG
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(θi, θr, Δφ)`` [deg] of one measurement campaign (200 rows)."""
+    """``(θi, θr, Δφ)`` [deg] of one measurement campaign (50 rows per incidence angle)."""
     ti, tr, dphi = [], [], []
-    for inc in INCIDENCE_DEG:
+    for inc in incidence_deg:
         k = PER_INCIDENCE
         # 15 in the plane, 10 out of it, spread over the hemisphere
         r_in = rng.uniform(0.0, 80.0, 15)
@@ -57,22 +58,22 @@ def goniometer_angles(rng: np.random.Generator, near: str = "specular"
 
 
 def measure(material: Material | str, seed: int, near: str = "specular",
-            noise: float = NOISE_RELATIVE, outlier_fraction: float = OUTLIER_FRACTION
-            ) -> Synthetic:
-    """A noisy campaign of ``material`` (a Material or a preset name)."""
+            noise: float = NOISE_RELATIVE, outlier_fraction: float = OUTLIER_FRACTION,
+            incidence_deg: tuple[float, ...] = INCIDENCE_DEG) -> Synthetic:
+    """A noisy campaign of ``material`` (a Material or a preset name) at ``incidence_deg``."""
     if isinstance(material, str):
         material = material_preset(material)
     rng = np.random.default_rng(seed)
     rows: list[tuple[np.ndarray, ...]] = []
     for _ in range(20):  # plans until every incidence angle has its samples above the limit
-        ti, tr, dphi = goniometer_angles(rng, near)
+        ti, tr, dphi = goniometer_angles(rng, near, incidence_deg)
         f = material.eval_local(*GoniometerTable(ti, tr, dphi, np.ones_like(ti)).directions())
         keep = f >= DETECTION_LIMIT_PER_SR
         rows.append((ti[keep], tr[keep], dphi[keep], f[keep]))
         ti, tr, dphi, truth = (np.concatenate(c) for c in zip(*rows, strict=True))
-        if all(np.sum(ti == inc) >= PER_INCIDENCE for inc in INCIDENCE_DEG):
+        if all(np.sum(ti == inc) >= PER_INCIDENCE for inc in incidence_deg):
             break
-    pick = np.concatenate([np.flatnonzero(ti == inc)[:PER_INCIDENCE] for inc in INCIDENCE_DEG])
+    pick = np.concatenate([np.flatnonzero(ti == inc)[:PER_INCIDENCE] for inc in incidence_deg])
     ti, tr, dphi, truth = ti[pick], tr[pick], dphi[pick], truth[pick]
     y = truth * np.exp(rng.normal(0.0, noise, len(truth)))
     n_out = round(outlier_fraction * len(y))

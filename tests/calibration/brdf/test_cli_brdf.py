@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import yaml
 from typer.testing import CliRunner
@@ -51,6 +53,16 @@ def test_fix_pins_a_parameter(tmp_path):
     assert written["params"]["n2"] == 1.46 and written["params"]["kd"] == 0.07
     assert written["fit"]["fixed"] == {"n2": 1.46, "kd": 0.07}
     assert "fixed" in res.stdout
+    # issue 27: every parameter's verdict beside the material file, the held ones said
+    verdicts = json.loads((tmp_path / "fit.verdicts.json").read_text(encoding="utf-8"))
+    assert set(verdicts) == {"params.kd", "params.ks", "params.m", "params.n2"}
+    for key in ("params.n2", "params.kd"):
+        assert verdicts[key]["verdict"] == "not determined" and "--fix" in verdicts[key]["reason"]
+    counts = {v: sum(1 for x in verdicts.values() if x["verdict"] == v)
+              for v in ("determined", "not determined", "unexplained")}
+    assert (f"verdicts: {counts['determined']} determined, 2 not determined, "
+            f"{counts['unexplained']} unexplained") in res.stdout
+    assert "params.n2: NOT DETERMINED: held at 1.46 (--fix), not fitted" in res.stdout
 
 
 def test_bad_input_exits_2_with_the_field(tmp_path):
