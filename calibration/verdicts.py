@@ -167,10 +167,11 @@ def judge(
     return Verdict("determined", reported)
 
 
-def write_verdicts(folder: str | Path, verdicts: Verdicts) -> Path:
-    """``folder/verdicts.json``: the flat mapping key -> ``{verdict, std, reason}``, written
-    whole or not at all."""
-    path = Path(folder) / VERDICTS_FILE
+def write_verdicts(path: str | Path, verdicts: Verdicts) -> Path:
+    """The flat mapping key -> ``{verdict, std, reason}`` at ``path`` (a command's
+    ``DIR/verdicts.json``, :data:`VERDICTS_FILE`, or :func:`verdicts_beside` its output file),
+    written whole or not at all."""
+    path = Path(path)
     text = json.dumps(verdicts.to_json(), indent=2, allow_nan=False) + "\n"
     atomic_write(path, text.encode())
     return path
@@ -183,7 +184,7 @@ def read_verdicts(path: str | Path) -> Verdicts:
 
 __all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
            "honest_std", "judge", "read_verdicts", "verdict_lines", "verdicts_beside",
-           "write_verdicts", "write_verdicts_beside"]
+           "write_verdicts"]
 
 
 def verdicts_beside(out: str | Path) -> Path:
@@ -195,15 +196,6 @@ def verdicts_beside(out: str | Path) -> Path:
     """
     path = Path(out)
     return path.with_name(path.stem + ".verdicts.json")
-
-
-def write_verdicts_beside(out: str | Path, verdicts: Verdicts) -> Path:
-    """:func:`write_verdicts` for a command whose output is the file ``out``: the same flat
-    mapping, at :func:`verdicts_beside`, written whole or not at all."""
-    path = verdicts_beside(out)
-    text = json.dumps(verdicts.to_json(), indent=2, allow_nan=False) + "\n"
-    atomic_write(path, text.encode())
-    return path
 
 
 def verdict_lines(verdicts: Verdicts) -> list[str]:

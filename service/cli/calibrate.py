@@ -39,6 +39,7 @@ from service.cli.common import (
     console,
     fail_invalid,
     number_option,
+    print_verdicts,
     print_warning,
     rig_scene,
     step_progress,
@@ -46,6 +47,7 @@ from service.cli.common import (
 from sim_core.errors import InvalidInputError
 
 if TYPE_CHECKING:
+    from calibration.verdicts import Verdicts
     from drivers.sim.world import SimulatedWorld
 
 #: the board sweep's inputs as the options name them (calibration.angles.sweep_angles)
@@ -257,14 +259,12 @@ def material_command(
                   f"verdicts {verdicts_path})")
 
 
-def _print_and_write_verdicts(out: Path, verdicts) -> Path:
-    """Print the verdicts' counts and every key not determined with its reason; write them to
-    ``OUT.verdicts.json`` beside the output file."""
-    from calibration.verdicts import verdict_lines, write_verdicts_beside
+def _print_and_write_verdicts(out: Path, verdicts: Verdicts) -> Path:
+    """Print the verdicts; write them beside the output file (``OUT.verdicts.json``)."""
+    from calibration.verdicts import verdicts_beside, write_verdicts
 
-    for line in verdict_lines(verdicts):
-        console.print(line, markup=False, highlight=False)
-    return write_verdicts_beside(out, verdicts)
+    print_verdicts(verdicts)
+    return write_verdicts(verdicts_beside(out), verdicts)
 
 
 def _material_arg(value: str | None, option: str):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import math
 import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.text import Text
 
-from calibration.verdicts import VERDICTS
+from calibration.verdicts import Verdicts, verdict_lines
 from sim_core.errors import InvalidInputError
 
 if TYPE_CHECKING:
@@ -51,14 +51,11 @@ def print_warning(message: str, label: str = "warning:") -> None:
     err_console.print(Text.assemble((label, "yellow"), " ", str(message)), soft_wrap=True)
 
 
-def print_verdicts(verdicts: Mapping[str, Any], path: Path) -> None:
-    """How many keys have each verdict (``calibration.verdicts``), and on stderr each key that
-    is not determined or unexplained with its reason; ``path`` is the verdicts file."""
-    counts = {v: sum(1 for x in verdicts.values() if x.verdict == v) for v in VERDICTS}
-    console.print(f"verdicts ({path}): " + ", ".join(f"{n} {v}" for v, n in counts.items()))
-    for key, verdict in verdicts.items():
-        if not verdict.determined:
-            print_warning(f"{key}: {verdict.reason}", label=f"{verdict.verdict}:")
+def print_verdicts(verdicts: Verdicts) -> None:
+    """The verdicts' count and every key not determined or unexplained with its reason
+    (:func:`calibration.verdicts.verdict_lines`)."""
+    for line in verdict_lines(verdicts):
+        console.print(line, markup=False, highlight=False)
 
 
 def fail_invalid(exc: InvalidInputError) -> None:

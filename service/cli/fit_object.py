@@ -75,7 +75,7 @@ def fit_object_command(
         captures_in_order,
         object_fit_capture_plan,
     )
-    from calibration.verdicts import write_verdicts
+    from calibration.verdicts import VERDICTS_FILE, write_verdicts
     from service.lab.acquisition import NO_MOUNTS, acquire
     from sim_core.files import atomic_write
     from sim_core.scene import scene_twin
@@ -114,4 +114,5 @@ def fit_object_command(
     for view in fit.report["dropped_views"]:
         print_warning(f"{view['turntable_angle_deg']:g} deg: {view['reason']}",
                       label="view left out:")
-    print_verdicts(fit.verdicts, write_verdicts(out, fit.verdicts))
+    print_verdicts(fit.verdicts)
+    console.print(f"verdicts written to {write_verdicts(out / VERDICTS_FILE, fit.verdicts)}")

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from calibration.verdicts import (
     CHI2_UNEXPLAINED,
+    VERDICTS_FILE,
     Verdict,
     Verdicts,
     honest_std,
@@ -78,7 +79,7 @@ def test_verdicts_are_written_whole_as_a_flat_mapping_and_read_back(tmp_path):
     verdicts.update_from({"zero_offset_deg": judge(float("inf"), 0.1)}, prefix="turntable.")
     with pytest.raises(ValueError, match="judged twice"):
         verdicts.add("camera.fx_px", judge(0.3, 2.0))
-    path = write_verdicts(tmp_path, verdicts)
+    path = write_verdicts(tmp_path / VERDICTS_FILE, verdicts)
     data = json.loads(path.read_text())
     assert data == {
         "camera.fx_px": {"verdict": "determined", "std": 0.3, "reason": None},
