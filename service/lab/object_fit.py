@@ -28,7 +28,8 @@ from service.compute.jobs import RENDER_LOCK
 from service.lab.calibration import Twin
 from service.lab.requests import ObjectFitIn
 from service.lab.scenes import SceneSource, for_use_case
-from sim_core.twin_file import ObjectTwinFile, parse_object_twin, with_object_twin
+from service.lab.settling import settled_moves
+from sim_core.twin_file import ObjectTwinFile, TwinParameters, parse_object_twin, with_object_twin
 
 
 @dataclass(frozen=True)
@@ -62,10 +63,11 @@ def fit_poses(poses: Sequence[Any], n: int) -> list[FitPose]:
 
 def capture_for_fit(
     rig: Rig, poses: Sequence[FitPose], frames: int, stop: threading.Event,
-    current: Callable[[FitPose, int], None],
+    current: Callable[[FitPose, int], None], calibration: TwinParameters | None = None,
 ) -> list[AveragedCapture] | None:
     """Averaged captures at ``poses``' angles, the solar simulator's shutter closed (the rig
-    held per pose); None if ``stop`` was set.
+    held per pose, every move waited out for ``calibration``'s settling:
+    :func:`service.lab.settling.settled_moves`); None if ``stop`` was set.
 
     Device faults propagate (:class:`drivers.errors.DeviceError`): the campaign pauses.
     """
@@ -74,7 +76,7 @@ def capture_for_fit(
         if stop.is_set():
             return None
         current(pose, i)
-        with rig.hold():
+        with rig.hold(), settled_moves(rig, calibration):
             # The fit reads the camera's own light: the solar simulator's shutter is closed.
             target = RigState(pose.turntable_deg, 0.0, shutter_open=False)
             rig.apply(target)

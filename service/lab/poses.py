@@ -40,6 +40,7 @@ from service.lab.scenes import (
     require_mounted,
     scene_from_request,
 )
+from service.lab.settling import settled_moves
 from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import require_free, writing
@@ -165,7 +166,7 @@ def measure(
     before anything is stored.
     """
     t0 = time.perf_counter()
-    with rig.hold():
+    with rig.hold(), settled_moves(rig, plan.twin.calibration):
         wait = stable_timeout_s if plan.solar_suns > 0 else None
         state = rig.apply(plan.target, wait_stable_s=wait)
         t1 = time.perf_counter()

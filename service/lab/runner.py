@@ -267,7 +267,8 @@ class CampaignRunner:
 
         rig = self.lease.require()
         try:
-            captures = capture_for_fit(rig, targets, fit.frames, run.stop, current)
+            captures = capture_for_fit(rig, targets, fit.frames, run.stop, current,
+                                       twin.calibration)
         except DeviceError as exc:
             _log.warning("campaign %s paused: device fault: %s", run.id, exc)
             if run.stop.is_set():
