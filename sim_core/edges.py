@@ -74,12 +74,15 @@ def _stats_mm(d_m: np.ndarray) -> tuple[float | None, float | None]:
 
 def edge_depth_error(measured_range_m: np.ndarray, simulated_range_m: np.ndarray,
                      mask: np.ndarray, reference_valid: np.ndarray,
-                     jump_m: float = EDGE_JUMP_M) -> EdgeError:
+                     jump_m: float = EDGE_JUMP_M, edges: np.ndarray | None = None) -> EdgeError:
     """The range difference inside ``mask`` split into edge pixels (of the simulated frame:
-    :func:`edge_mask`) and the rest."""
+    :func:`edge_mask`; or ``edges`` when given, to compare two simulations on the same pixels)
+    and the rest."""
     both = (np.asarray(mask, bool) & np.isfinite(measured_range_m)
             & np.isfinite(simulated_range_m))
-    edges = edge_mask(simulated_range_m, reference_valid, jump_m) & both
+    if edges is None:
+        edges = edge_mask(simulated_range_m, reference_valid, jump_m)
+    edges = np.asarray(edges, bool) & both
     interior = both & ~edges
     d = measured_range_m - simulated_range_m
     e_med, e_rms = _stats_mm(d[edges])
