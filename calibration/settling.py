@@ -11,9 +11,9 @@ with the angle's noise. Model (:mod:`sim_core.settling`, the key ``turntable.set
 Weighted least squares (:func:`scipy.optimize.least_squares`) from a start found by the series'
 spectrum (several starts of the move's end and the sign: the nearest minimum is not always the
 best); the standard deviations from the whitened Jacobian, made honest by the residual and
-judged (:func:`calibration.verdicts.judge`): frequency to 2 % (so that it is within the 5 % target at
-2.5 sigma), damping ratio to 30 %, amplitude to 20 %. A series whose ringing the noise hides
-gives ``not determined``; one the model does not explain, ``unexplained``.
+judged (:func:`calibration.verdicts.judge`): frequency to 2 % (so that it is within the 5 %
+target at 2.5 sigma), damping ratio to 30 %, amplitude to 20 %. A series whose ringing the
+noise hides gives ``not determined``; one the model does not explain, ``unexplained``.
 
 The estimator sees only the measured series, never the simulated lab's reality.
 """
