@@ -43,14 +43,17 @@ KEY = "turntable.settling"
 
 @dataclass(frozen=True)
 class SettlingFit:
-    """The fitted settling (None when the fit found no ringing), the verdict of each key, and
-    the fit's figures: reduced chi-square, the fitted move end and rest angle."""
+    """The settling to write (None unless every key is determined), the verdict of each key,
+    and the fit's figures: the estimate whatever its verdicts (``estimate``: printed, not to be
+    trusted unless determined; None when it is outside the key's ranges), the reduced
+    chi-square, the fitted move end and rest angle."""
 
     settling: TurntableSettling | None
     verdicts: Verdicts
     reduced_chi2: float
     t0_s: float
     offset_deg: float
+    estimate: TurntableSettling | None = None
 
 
 def _model(p: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -130,7 +133,7 @@ def fit_settling(t_s: np.ndarray, angle_deg: np.ndarray, angle_std_deg: float) -
                   f"{MIN_SAMPLES_PER_PERIOD:g} are needed (take frames faster)")
         for key in ("amplitude_deg", "frequency_hz", "damping_ratio"):
             verdicts.add(f"{KEY}.{key}", Verdict("not determined", None, reason))
-        return SettlingFit(None, verdicts, chi2, t0, offset)
+        return SettlingFit(None, verdicts, chi2, t0, offset, _estimate(amp_abs, f, zeta))
     verdicts.add(f"{KEY}.amplitude_deg",
                  judge(std[1], AMPLITUDE_LIMIT * amp_abs, reduced_chi2=chi2, unit=" deg",
                        where=where))
@@ -138,11 +141,19 @@ def fit_settling(t_s: np.ndarray, angle_deg: np.ndarray, angle_std_deg: float) -
                  judge(std[2], FREQUENCY_LIMIT * f, reduced_chi2=chi2, unit=" Hz", where=where))
     verdicts.add(f"{KEY}.damping_ratio",
                  judge(std[3], DAMPING_LIMIT * zeta, reduced_chi2=chi2, where=where))
-    settling = None
-    if amp_abs > 0.0 and all(v.determined for v in verdicts.values()):
-        settling = TurntableSettling(amplitude_deg=min(amp_abs, 5.0), frequency_hz=f,
-                                     damping_ratio=zeta)
-    return SettlingFit(settling, verdicts, chi2, t0, offset)
+    estimate = _estimate(amp_abs, f, zeta)
+    determined = all(v.determined for v in verdicts.values())
+    return SettlingFit(estimate if determined else None, verdicts, chi2, t0, offset, estimate)
+
+
+def _estimate(amplitude_deg: float, frequency_hz: float,
+              damping_ratio: float) -> TurntableSettling | None:
+    """The fitted values as the key, or None where they leave its ranges."""
+    try:
+        return TurntableSettling(amplitude_deg=amplitude_deg, frequency_hz=frequency_hz,
+                                 damping_ratio=damping_ratio)
+    except ValueError:  # pydantic's ValidationError: e.g. an amplitude above 5 deg
+        return None
 
 
 def plane_yaw_deg(points_m: np.ndarray) -> float:
