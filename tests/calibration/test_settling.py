@@ -82,7 +82,7 @@ def test_bad_series_are_refused_naming_the_field(t, y, std, field):
     assert err.value.field == field
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=8, deadline=None)
 @given(st.floats(0.05, 1.0), st.floats(1.0, 6.0), st.floats(0.02, 0.2), st.integers(0, 99))
 def test_the_fit_never_returns_a_confident_wrong_frequency(amp, f, zeta, seed):
     truth = TurntableSettling(amplitude_deg=amp, frequency_hz=f, damping_ratio=zeta)
