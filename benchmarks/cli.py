@@ -127,6 +127,35 @@ def bench_ground_test(
     run_ground_test(spp, seed, console)
 
 
+@bench_app.command("turning")
+def bench_turning(
+    speed: Annotated[float, number_option("--speed-deg-s", help="Turning speed [deg/s].",
+                                          allowed=ranges.TURNING_SPEED)] = 10.0,
+    poses: Annotated[int, number_option("--poses", help="Poses in the sweep.",
+                                        allowed=ranges.BENCH_POSES)] = 5,
+    step: Annotated[float, number_option("--step-deg", help="Angle between the poses [deg].",
+                                         allowed=ranges.TURNING_STEP)] = 10.0,
+    spp: Annotated[int, number_option("--spp", help="Samples per pixel of the simulations.",
+                                      allowed=ranges.BENCH_SPP)] = 8,
+    camera_spp: Annotated[
+        int, number_option("--camera-spp", help="Samples per pixel of the camera twin.",
+                           allowed=ranges.CAMERA_SPP)
+    ] = 8,
+    reality: Annotated[Path | None, typer.Option(
+        "--reality", help="Reality file of the simulated lab (default: a table that rings "
+        "a little after every move).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="JSON file of the figures.")] = None,
+) -> None:
+    """A campaign that captures while turning on the simulated lab: poses per minute against
+    stop and go, and the depth error at edges."""
+    from benchmarks.turning import run_turning_campaign
+
+    try:
+        run_turning_campaign(speed, poses, step, spp, camera_spp, reality, out, console)
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+
+
 @bench_app.command("campaign")
 def bench_campaign(
     poses: Annotated[int, number_option("--poses", help="Poses per campaign.",

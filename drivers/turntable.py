@@ -628,6 +628,25 @@ class Turntable:
             time.sleep(self.settle_s)
         return self._verify(angle)
 
+    def start_move(self, angle_deg: float) -> None:
+        """Send the move to ``angle_deg`` (``PA``) and return at once, the stage moving: for a
+        capture while turning. The caller waits for READY (:meth:`move_to` to the same angle
+        does) and stops the stage on any failure (:meth:`stop`). Same checks as
+        :meth:`move_to` (limits, a finite angle); the stage must be READY (referenced)."""
+        angle = float(angle_deg)
+        low, high = self._limits
+        if not math.isfinite(angle):
+            raise DeviceInputError("angle_deg", f"got {angle_deg!r}; a finite angle is required")
+        if not low <= angle <= high:
+            raise LimitError(
+                "angle_deg", angle, low, high, "deg", "turntable software limits SL/SR"
+            )
+        status = self.status()
+        if not status.is_ready:
+            raise TurntableError(f"cannot start a move: controller is {status.describe()}; "
+                                 "move_to() the start first", state=status.state)
+        self._command("PA", angle)
+
     # -- waiting and verification -----------------------------------------------------------
     def _verify(self, target: float, reads: int = 3) -> float:
         """Read ``TP`` until it agrees with ``target``; raise after ``reads`` disagreeing reads."""

@@ -7,12 +7,17 @@ With ``ideal=True`` the sensor is ideal: no noise, SBI, ADC or depth errors (a c
 ``camera.depth``); depth comes from the phase of the (filtered) rendered phasor and grey from its
 magnitude. Otherwise the scene's depth errors (:mod:`sim_core.depth_errors`) enter the phasors
 after the optics, before the sensor.
+
+A scene that moves during the frame (the turntable turning) is rendered once per phase step at
+its pose at that step's time (:mod:`sim_core.subframes`) and each step exposes its own light
+(:func:`simulate_in_motion`); a scene that moves less than the tolerance is rendered once.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,12 +29,13 @@ from sim_core.adaptive import MAX_SPP, AdaptiveReport, render_adaptive
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.optics import apply_mtf
 from sim_core.plan import EffectPlan, plan_effects
-from sim_core.raw import RawFrame, reconstruct_raw
+from sim_core.raw import PHASE_OFFSETS_RAD, RawFrame, reconstruct_raw
 from sim_core.render import LightField, RenderSettings, render
 from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene
 from sim_core.scene_checks import assert_camera_outside_closed_meshes
 from sim_core.sensor import expose, mean_electrons
+from sim_core.subframes import N_PHASE_STEPS, moves_during_frame
 from sim_core.tof import ToFImage, reconstruct
 from sim_core.tracing import RayTracer
 
@@ -139,22 +145,10 @@ def render_light(
     )
 
 
-def expose_light(
-    scene: Scene,
-    rendered: RenderedLight,
-    ideal: bool = False,
-    noise_rng: np.random.Generator | None = None,
-    noise: bool = True,
-) -> SimulatedFrame:
-    """Optics, depth errors, sensor and reconstruction of a rendered light field.
-
-    ``noise=False`` gives the sensor's mean response (no shot or read noise, no quantisation):
-    what a calibration compares averaged frames with.
-    """
-    t0 = time.perf_counter()
-    timings = dict(rendered.timings_s)
-    lf, plan, run = rendered.light_field, rendered.plan, rendered.settings
-    t = time.perf_counter()
+def _optics(scene: Scene, plan: EffectPlan, lf: LightField,
+            ideal: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The light after the MTF chain and the camera's phase errors: DC active, DC ambient (H, W)
+    and phasors (n_f, H, W)."""
     comps = plan.mtf_components(scene)
     # Ringing of the MTF can leave tiny negative radiance next to a bright edge: clamp DC.
     dc_active = np.maximum(apply_mtf(lf.dc_active, comps), 0.0)
@@ -163,11 +157,76 @@ def expose_light(
     if not ideal and scene.depth_errors is not None:
         # The camera's own phase errors act on each pixel's correlation, after the optics.
         phasor = scene.depth_errors.apply_to_phasor(phasor)
+    return dc_active, dc_ambient, phasor
+
+
+def _stacked_steps(scene: Scene, plan: EffectPlan, steps: Sequence[RenderedLight],
+                   ideal: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each phase step's light after the optics, ``(n_f, 4, H, W)`` each: step ``i`` of
+    frequency ``k`` is ``steps[4 k + i]`` and keeps its own phasor at frequency ``k``."""
+    n_f = len(scene.camera.modulation_frequencies_hz)
+    if len(steps) != N_PHASE_STEPS * n_f:
+        raise ValueError(f"steps: {len(steps)} lights for {n_f} frequencies; expected "
+                         f"{N_PHASE_STEPS * n_f} (4 phase steps each)")
+    h, w = scene.camera.intrinsics.shape
+    active = np.empty((n_f, N_PHASE_STEPS, h, w))
+    ambient = np.empty((n_f, N_PHASE_STEPS, h, w))
+    phasor = np.empty((n_f, N_PHASE_STEPS, h, w), dtype=np.complex128)
+    for s, step in enumerate(steps):
+        k, i = divmod(s, N_PHASE_STEPS)
+        a, b, z = _optics(scene, plan, step.light_field, ideal)
+        active[k, i], ambient[k, i], phasor[k, i] = a, b, z[k]
+    return active, ambient, phasor
+
+
+def demodulated_phasor(step_phasors: np.ndarray) -> np.ndarray:
+    """The phasor the four-step demodulation sees when each step has its own, ``(n_f, H, W)``.
+
+    Step i correlates to ``C_i = Re(exp(1j tau_i) conj(p_i))`` (seed eq. 3); the raw frame's
+    phasor ``(C0 - C2) - 1j (C3 - C1)`` (:meth:`sim_core.raw.RawFrame.phasor`, seed eq. 4) is
+    twice the phasor when all four are equal, so half of it is returned: equal steps give their
+    common phasor back.
+
+    >>> p = np.full((1, 4, 1, 1), 2.0 * np.exp(-0.7j))
+    >>> bool(np.allclose(demodulated_phasor(p), p[:, 0]))
+    True
+    """
+    rot = np.exp(1j * PHASE_OFFSETS_RAD)[None, :, None, None]
+    c = np.real(rot * np.conj(step_phasors))
+    return 0.5 * ((c[:, 0] - c[:, 2]) - 1j * (c[:, 3] - c[:, 1]))
+
+
+def expose_light(
+    scene: Scene,
+    rendered: RenderedLight,
+    ideal: bool = False,
+    noise_rng: np.random.Generator | None = None,
+    noise: bool = True,
+    steps: Sequence[RenderedLight] | None = None,
+) -> SimulatedFrame:
+    """Optics, depth errors, sensor and reconstruction of a rendered light field.
+
+    ``noise=False`` gives the sensor's mean response (no shot or read noise, no quantisation):
+    what a calibration compares averaged frames with. ``steps``: when the scene moved during
+    the frame, the light of each phase step (``4 n_f``, frequency by frequency, each rendered
+    at its time: :func:`simulate_in_motion`); ``rendered`` is then the first of them.
+    """
+    t0 = time.perf_counter()
+    timings = dict(rendered.timings_s)
+    lf, plan, run = rendered.light_field, rendered.plan, rendered.settings
+    t = time.perf_counter()
+    if steps is None:
+        dc_active, dc_ambient, phasor = _optics(scene, plan, lf, ideal)
+    else:
+        dc_active, dc_ambient, phasor = _stacked_steps(scene, plan, steps, ideal)
     timings["optics"] = time.perf_counter() - t
 
     t = time.perf_counter()
     raw = None
     if ideal:
+        if steps is not None:  # what the demodulation makes of the steps' lights, noise-free
+            phasor = demodulated_phasor(phasor)
+            dc_active, dc_ambient = dc_active[0].mean(axis=0), dc_ambient[0].mean(axis=0)
         image = reconstruct(
             phasor=phasor, intensity=dc_active + dc_ambient, frequencies_hz=lf.frequencies_hz,
             z_over_range=z_over_range(scene), valid=np.abs(phasor[0]) > 0.0,
@@ -178,7 +237,8 @@ def expose_light(
         rng = None
         if noise and plan.enabled("noise"):
             rng = noise_rng or np.random.default_rng([run.seed, NOISE_STREAM])
-        raw = expose(e, scene.camera, sensor, rng, meta={"seed": run.seed})
+        meta = {"seed": run.seed} if steps is None else {"seed": run.seed, "subframes": True}
+        raw = expose(e, scene.camera, sensor, rng, meta=meta)
         timings["sensor"] = time.perf_counter() - t
         t = time.perf_counter()
         image = reconstruct_raw(raw, z_over_range(scene))
@@ -186,7 +246,8 @@ def expose_light(
         image.amplitude, image.valid, None if ideal else sensor.adc_bits
     )
     timings["reconstruct"] = time.perf_counter() - t
-    timings["total"] = rendered.seconds + (time.perf_counter() - t0)
+    timings["total"] = rendered.seconds + sum(s.seconds for s in (steps or [])[1:]) + (
+        time.perf_counter() - t0)
     return SimulatedFrame(
         image=image,
         light_field=lf,
@@ -202,7 +263,50 @@ def expose_light(
         grey_full_scale=grey_full_scale,
         adaptive=rendered.adaptive,
         calibration_hash=scene.twin_hash,
+        extra={} if steps is None else {"subframes_rendered": len({id(s) for s in steps})},
     )
+
+
+def render_in_motion(
+    scene_at: Callable[[float], Scene],
+    angles_deg: np.ndarray,
+    request: RenderRequest,
+) -> tuple[Scene, list[RenderedLight] | RenderedLight]:
+    """Render a frame whose turntable is at ``angles_deg[k, i]`` at phase step i of frequency k.
+
+    ``scene_at(angle_deg)`` poses the scene. When the angles span no more than
+    :data:`sim_core.subframes.MOTION_TOLERANCE_DEG` one render at the first step's angle comes
+    back (the scene did not move); otherwise one render per distinct angle, as a list of the
+    ``4 n_f`` steps' lights in order (:func:`expose_light`'s ``steps``). Returns the scene of
+    the first step with it.
+    """
+    a = np.asarray(angles_deg, dtype=np.float64)
+    first = scene_at(float(a.flat[0]))
+    if not moves_during_frame(a):
+        return first, render_light(first, request)
+    lights: dict[float, RenderedLight] = {}
+    steps: list[RenderedLight] = []
+    for angle in a.ravel():
+        key = round(float(angle), 9)
+        if key not in lights:
+            scene = first if not lights else scene_at(float(angle))
+            lights[key] = render_light(scene, request)
+        steps.append(lights[key])
+    return first, steps
+
+
+def simulate_in_motion(
+    scene_at: Callable[[float], Scene],
+    angles_deg: np.ndarray,
+    request: RenderRequest,
+    noise_rng: np.random.Generator | None = None,
+) -> SimulatedFrame:
+    """:func:`simulate` of a frame taken while the turntable moves: each phase step rendered
+    at its angle (:func:`render_in_motion`) and exposed with its own light."""
+    scene, light = render_in_motion(scene_at, angles_deg, request)
+    if isinstance(light, RenderedLight):
+        return expose_light(scene, light, request.ideal, noise_rng)
+    return expose_light(scene, light[0], request.ideal, noise_rng, steps=light)
 
 
 def simulate(

@@ -130,7 +130,12 @@ def electrons_per_irradiance(camera: Camera, sensor: SensorParams) -> float:
 
 @dataclass(frozen=True)
 class PixelElectrons:
-    """Mean electrons per exposure: active DC, ambient, dark, and the active phasor (n_f)."""
+    """Mean electrons per exposure: active DC, ambient, dark, and the active phasor (n_f).
+
+    A static scene has one light for every phase step: ``active``, ``ambient`` (H, W) and
+    ``phasor`` (n_f, H, W). A scene that moved during the frame has one per phase step
+    (:mod:`sim_core.subframes`): ``active``, ``ambient`` and ``phasor`` (n_f, 4, H, W).
+    """
 
     active: np.ndarray
     ambient: np.ndarray
@@ -161,11 +166,19 @@ def mean_electrons(
 
 
 def tap_means(e: PixelElectrons, sensor: SensorParams) -> tuple[np.ndarray, np.ndarray]:
-    """Mean tap charges A, B, each (n_f, 4, H, W) [e-] (peer eqs. 13-14, module docstring)."""
+    """Mean tap charges A, B, each (n_f, 4, H, W) [e-] (peer eqs. 13-14, module docstring).
+
+    Phase step i of frequency k correlates its own light (``e.phasor[k, i]`` when the scene
+    moved during the frame, :class:`PixelElectrons`) with the reference shifted by tau_i.
+    """
+    per_step = e.phasor.ndim == 4
     common = 0.5 * (e.active + e.ambient + e.dark)
+    if common.ndim == 2:
+        common = common[None, None]
     rot = np.exp(1j * PHASE_OFFSETS_RAD)[None, :, None, None]
-    modulated = 0.5 * sensor.demodulation_contrast * np.real(rot * np.conj(e.phasor)[:, None])
-    return common[None, None] + modulated, common[None, None] - modulated
+    phasor = e.phasor if per_step else e.phasor[:, None]
+    modulated = 0.5 * sensor.demodulation_contrast * np.real(rot * np.conj(phasor))
+    return common + modulated, common - modulated
 
 
 def expose(

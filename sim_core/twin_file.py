@@ -18,7 +18,8 @@ Conventions (issue 13, section 1)
   ``amplitude_rad * sin(harmonic * true phase + phase_rad)`` + the pixel's fixed-pattern
   offset, given as a range and converted with seed eq. 7 (:mod:`sim_core.depth_errors`);
 - ``illumination.power_w`` replaces the scene's nominal source power;
-- true turntable angle = reported angle + ``turntable.zero_offset_deg``;
+- true turntable angle = reported angle + ``turntable.zero_offset_deg``, plus the table's
+  ringing after a move (``turntable.settling``, :mod:`sim_core.settling`);
 - true solar level = set level x ``solar_simulator.irradiance_scale``.
 """
 
@@ -216,12 +217,28 @@ class IlluminationParameters(_Strict):
     power_w: Annotated[float, Field(gt=0.0, le=1000.0, allow_inf_nan=False)] | None = None
 
 
+class TurntableSettling(_Strict):
+    """The table's ringing after every move (issue 27): a damped oscillation of its angle.
+
+    ``amplitude_deg * exp(-zeta * omega * t) * cos(omega_d * t)`` from the end of the move, with
+    ``omega = 2 pi frequency_hz`` (the natural frequency), ``zeta = damping_ratio`` and
+    ``omega_d = omega sqrt(1 - zeta^2)`` (:mod:`sim_core.settling`). Under-damped only: a
+    ratio in (0, 1) rings and decays; 0 would ring for ever, 1 and above would not ring.
+    """
+
+    amplitude_deg: Annotated[float, Field(ge=0.0, le=5.0, allow_inf_nan=False)]
+    frequency_hz: Annotated[float, Field(ge=0.05, le=500.0, allow_inf_nan=False)]
+    damping_ratio: Annotated[float, Field(ge=0.001, le=0.9, allow_inf_nan=False)]
+
+
 class TurntableParameters(_Strict):
-    """The turntable's true axis (world frame) and the error of its zero."""
+    """The turntable's true axis (world frame), the error of its zero and its settling (absent:
+    the table stops dead)."""
 
     axis_point_m: Point3 | None = None
     axis_direction: UnitVector | None = None
     zero_offset_deg: Annotated[float, Field(ge=-180.0, le=180.0, allow_inf_nan=False)] = 0.0
+    settling: TurntableSettling | None = None
 
 
 class SolarParameters(_Strict):

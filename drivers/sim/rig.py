@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 
 from drivers.camera import UsbCamera, UsbCameraSettings
 from drivers.rig import Rig, RigState
@@ -25,8 +26,23 @@ from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
 from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
 from drivers.turntable import SMC100_SETTINGS, Turntable
+from sim_core.twin_file import TurntableSettling
 
-__all__ = ["simulated_rig"]
+__all__ = ["SimulatedRigState", "simulated_rig"]
+
+
+@dataclass(frozen=True)
+class SimulatedRigState(RigState):
+    """The rig state read from the simulators' physical models, with the table's motion ahead.
+
+    ``turntable_angle_deg`` is the table's physical angle (its ringing included, which the
+    controller does not report: :mod:`drivers.sim.smc100`); ``table_angle_after_deg(dt_s)`` is
+    the table's angle ``dt_s`` simulated seconds later if no command arrives in between (a frame
+    source renders each sub-frame of a frame at its time with it).
+    """
+
+    table_angle_after_deg: Callable[[float], float] | None = field(
+        default=None, compare=False, repr=False)
 
 
 def simulated_rig(
@@ -42,6 +58,7 @@ def simulated_rig(
     solar_faults: Iterable[str] = (),
     camera_faults: Iterable[str] = (),
     camera_settings: UsbCameraSettings | None = None,
+    turntable_settling: TurntableSettling | None = None,
 ) -> Rig:
     """Start the three simulators and return a rig with real drivers connected to them.
 
@@ -73,6 +90,9 @@ def simulated_rig(
         Faults armed at start (``"stall:1"``, ``"lamp-fault"``, ``"drop:1@3"``).
     camera_settings : UsbCameraSettings or None
         Driver settings for the camera.
+    turntable_settling : TurntableSettling or None
+        The table's ringing after every move (a reality's ``turntable.settling``); it needs a
+        turntable that is not instant (an instant one has settled at once).
 
     Examples
     --------
@@ -91,6 +111,7 @@ def simulated_rig(
             started.append(sim.stop)
             serial_sims.append(sim)
         tt_sim, solar_sim = serial_sims
+        tt_sim.models["turntable"].settling = turntable_settling
         cam_sim = UsbCameraSim(
             frame_source,
             seed=seed,
@@ -148,10 +169,12 @@ def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], Rig
             if lamp.lamp_on
             else 0.0
         )
-        return RigState(
-            turntable_angle_deg=smc.current_position(),
+        now_s = smc.clock.now()
+        return SimulatedRigState(
+            turntable_angle_deg=smc.table_angle_deg(now_s),
             solar_suns=max(0.0, suns),
             shutter_open=bool(solar.shutter.is_open),
+            table_angle_after_deg=lambda dt_s: smc.table_angle_deg(now_s + dt_s),
         )
 
     return state

@@ -23,6 +23,15 @@ framing, CR LF and the link-level faults. The model:
   answer); ``ST`` and ``MM`` without address apply to every controller.
 - While rebooting (``RS``, < 5 s) or saving the configuration (``PW0``, up to 10 s) the
   controller does not answer.
+- The table rings after every move that ends (``settling``, a reality's ``turntable.settling``;
+  :mod:`sim_core.settling`): its physical angle (:meth:`Smc100Sim.table_angle_deg`, what the
+  simulated camera sees) oscillates about the target, in the direction it moved, while the
+  controller reports the target and READY. The SMC100CC closes its loop on the encoder of the DC
+  motor; the ringing is the table and its load swinging on the compliance of the drive train
+  (worm gear, coupling) behind the motor, which the motor's encoder does not see. So ``TP``, the
+  ``TS`` state and the following error know nothing of it, as on the real stage: only the images
+  show it, and the service must wait for it to decay (issue 27). With an instant clock it has
+  decayed at once, as every timed process has.
 
 Where the manual's exact behaviour is not known to us, the choice made here is stated in
 ``docs/devices.md`` ("Simulator choices").
@@ -34,6 +43,8 @@ import math
 import re
 import threading
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from drivers.sim import SimClock
 from drivers.sim.faults import FaultInjector
@@ -47,6 +58,8 @@ from drivers.turntable import (
     READY_STATES,
     TE_ERRORS,
 )
+from sim_core.settling import envelope_deg, ringing_deg
+from sim_core.twin_file import TurntableSettling
 
 __all__ = ["FOLLOWING_ERROR_BIT", "Smc100Config", "Smc100Sim"]
 
@@ -80,6 +93,8 @@ class Smc100Config:
     config_save_time_s: float = 1.0
     following_error_time_s: float = 0.1
     smartstage_config: int = 2
+    #: the table's ringing after a move (None: it stops dead); see the module docstring
+    settling: TurntableSettling | None = None
 
 
 @dataclass(frozen=True)
@@ -260,13 +275,17 @@ class Smc100Sim:
         self.smartstage = cfg.smartstage_config
         self.parameters = {name: value for name, (value, _) in _CONFIG_PARAMETERS.items()}
         self.motion: _Motion | None = None
+        self.settling = cfg.settling
+        #: moves that ended and may still ring: (simulated end time [s], direction +-1)
+        self._rings: list[tuple[float, float]] = []
         self._busy_until: float | None = None  # rebooting or saving: no replies
         self._state_after_busy = "0A"
         self.commands_seen = 0
 
     # -- public helpers for tests and the rig ----------------------------------------------
     def current_position(self) -> float:
-        """True stage position now, in degrees (what ``TP`` would answer)."""
+        """The motor's position now, in degrees (what ``TP`` answers): the encoder sits on the
+        motor, so the table's ringing is not in it (:meth:`table_angle_deg` has it)."""
         with self._lock:
             self._advance()
             return self.position
@@ -277,7 +296,48 @@ class Smc100Sim:
             self._advance()
             return self.state
 
+    def table_angle_deg(self, at_s: float | None = None) -> float:
+        """The table's physical angle [deg] at simulated time ``at_s`` (now when None): the
+        motor's position (what ``TP`` answers) plus the ringing of the moves that ended.
+
+        A time after now is where the table will be if no command arrives before it (the
+        running profile and the ringing are known in advance): the simulated camera asks it for
+        the sub-frames of a frame it starts now.
+        """
+        with self._lock:
+            self._advance()
+            t_s = self.clock.now() if at_s is None else float(at_s)
+            motor_deg, rings = self.position, list(self._rings)
+            motion = self.motion
+            if motion is not None:
+                e = motion.elapsed(self.clock, t_s)
+                motor_deg = motion.position(e)
+                if (motion.stall_after is None and e >= motion.duration
+                        and not self.clock.instant):
+                    rings.append(self._ring_of(motion))
+            settling = self.settling
+            if settling is None or not rings:
+                return motor_deg
+            ends_s = np.array([r[0] for r in rings])
+            signs = np.array([r[1] for r in rings])
+            return motor_deg + float(np.sum(signs * ringing_deg(settling, t_s - ends_s)))
+
     # -- time evolution ----------------------------------------------------------------------
+    def _ring_of(self, motion: _Motion) -> tuple[float, float]:
+        """When ``motion`` ends (simulated time) and the direction the table then swings."""
+        v_before_stop = motion.segments[-1].v0
+        sign = 0.0 if v_before_stop == 0.0 else math.copysign(1.0, v_before_stop)
+        return motion.t_start + self.clock.duration(motion.duration), sign
+
+    def _ended(self, motion: _Motion, now: float) -> None:
+        """Record ``motion``'s ringing; forget rings decayed below 1e-12 deg (they add nothing
+        a float can hold next to an angle of order 1)."""
+        if self.settling is None or self.clock.instant:
+            return  # no ringing, or an instant clock: it has decayed at once
+        self._rings.append(self._ring_of(motion))
+        self._rings = [r for r in self._rings
+                       if float(envelope_deg(self.settling, now - r[0])) >= 1e-12]
+
     def _advance(self) -> None:
         now = self.clock.now()
         if self._busy_until is not None and now >= self._busy_until:
@@ -302,6 +362,7 @@ class Smc100Sim:
             self.position = motion.target
             self.state = motion.end_state
             self.motion = None
+            self._ended(motion, now)
 
     def _drift(self) -> None:
         """Fault ``drift``: a stage at rest in READY creeps ``offset_deg`` off its position.

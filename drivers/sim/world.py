@@ -15,6 +15,11 @@ differences are the camera's noise alone, which the noise calibration relies on.
 
 The operator's swap of what stands on the turntable is :meth:`SimulatedWorld.mount`: the
 scene's own mounted objects, or other objects (a calibration board in its fixture).
+
+A table that moves during a frame (turning, or still ringing after a move: the rig state's
+``table_angle_after_deg``, :class:`drivers.sim.rig.SimulatedRigState`) is rendered at its
+physical angle at each phase step's time (:mod:`sim_core.subframes`), so the frame smears as a
+camera's does; a table that moves less than the tolerance during the frame is rendered once.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from drivers.sim.usb_camera import CameraRequest
 from sim_core.pipeline import RenderedLight, expose_light, render_light
 from sim_core.raw import RawFrame
@@ -32,6 +39,7 @@ from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene, build_scene
 from sim_core.scene_spec import ObjectPose, ObjectSpec, SceneSpec
+from sim_core.subframes import moves_during_frame, phase_step_angles_deg
 from sim_core.twin_file import MountParameters, ObjectParameters, RealityFile, TurntableParameters
 
 #: rendered light fields kept per world (one per rig state and use case, most recent first)
@@ -107,6 +115,9 @@ class SimulatedWorld:
         self._generation = 0
         self._cache: OrderedDict[tuple, tuple[Scene, RenderedLight]] = OrderedDict()
         self._lock = threading.Lock()
+        #: whether the last frame was rendered per phase step (the table moved during it);
+        #: for tests and diagnostics: a frame's own metadata says only what a camera reports
+        self.last_rendered_per_step = False
         # Fail now, not at the first frame, if the reality does not fit the scene.
         build_scene(spec, self.base_dir, twin=self.reality)
 
@@ -153,10 +164,21 @@ class SimulatedWorld:
         sim = self.spec.ambient.solar_simulator
         return WorldState(angle, sim.irradiance_suns if sim else 0.0, sim is not None)
 
+    @staticmethod
+    def _step_angles_deg(request: CameraRequest, state: WorldState) -> np.ndarray | None:
+        """The table's angle at each phase step, (n_f, 4), when it moves during the frame by
+        more than the tolerance; None when it holds still (one render)."""
+        ahead = getattr(request.rig_state, "table_angle_after_deg", None)
+        if ahead is None:
+            return None
+        uc = request.use_case
+        angles = phase_step_angles_deg(ahead, uc.n_frequencies, uc.exposure_s)
+        return angles if moves_during_frame(angles) else None
+
     def _rendered(self, request: CameraRequest, state: WorldState) -> tuple[Scene, RenderedLight]:
         uc = request.use_case
         suns = state.solar_suns if state.shutter_open and state.solar_suns > 0.0 else 0.0
-        key = (self._generation, round(state.turntable_angle_deg, 6), round(suns, 6), uc.name,
+        key = (self._generation, round(state.turntable_angle_deg, 9), round(suns, 6), uc.name,
                tuple(uc.frequencies_hz), uc.exposure_s, uc.shape, request.seed)
         hit = self._cache.get(key)
         if hit is not None:
@@ -180,9 +202,18 @@ class SimulatedWorld:
 
     def __call__(self, request: CameraRequest) -> RawFrame:
         state = self._state(request)
+        step_angles = self._step_angles_deg(request, state)
         with self._lock:  # one render at a time; the camera thread and tests may both ask
-            scene, rendered = self._rendered(request, state)
-            frame = expose_light(scene, rendered, noise_rng=request.rng())
+            self.last_rendered_per_step = step_angles is not None
+            if step_angles is None:
+                scene, rendered = self._rendered(request, state)
+                frame = expose_light(scene, rendered, noise_rng=request.rng())
+            else:
+                lights = [self._rendered(request, dataclasses.replace(
+                    state, turntable_angle_deg=float(a))) for a in step_angles.ravel()]
+                scene = lights[0][0]
+                frame = expose_light(scene, lights[0][1], noise_rng=request.rng(),
+                                     steps=[light for _, light in lights])
         raw = frame.raw
         # Nothing about the reality goes into the frame: only what a camera would report.
         meta = {"source": "rendered", "frame_index": request.frame_index,

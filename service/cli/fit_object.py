@@ -96,7 +96,8 @@ def fit_object_command(
     with open_command_rig(settings, source) as (rig, world):
         rig_name = "lab" if world is None else "simulated"
         captures = acquire(rig, NO_MOUNTS, plan,
-                           lambda _done, _total, message: err_console.print(message))
+                           lambda _done, _total, message: err_console.print(message),
+                           settle_for=cal)
     try:
         err_console.print("fitting the object twin")
         fit = fit_object(source.spec, source.base_dir, cal, captures_in_order(plan, captures),

@@ -56,6 +56,10 @@ CAMERA_SEED = Range(0, 2**31 - 1)
 BENCH_POSES = Range(1, 720)
 BENCH_REPEATS = Range(1, 100)
 BENCH_SPP = Range(1, 256)
+#: service.lab.requests.TURNING_SPEED_RANGE_DEG_S (CampaignCreate.turning_deg_s)
+TURNING_SPEED = Range(0.1, 20.0, unit="deg/s")
+#: the angle between the poses of ``toftwin bench turning``
+TURNING_STEP = Range(0.5, 60.0, unit="deg")
 
 # -- the command line's own ------------------------------------------------------------------
 #: the effect planner's tolerance (sim_core.plan takes any positive value)

@@ -72,6 +72,10 @@ class SimulationJob:
     twin: dict[str, Any] | None = None
     #: contents of the goniometer tables of tabulated materials, keyed by ``params.table``
     tables: dict[str, bytes] = field(default_factory=dict)
+    #: the turntable's speed while the frame is taken [deg/s] (0: at rest): ``turntable_deg``
+    #: is then its angle at the frame's start and each phase step is rendered at its own
+    #: angle (:func:`sim_core.pipeline.simulate_in_motion`), as the camera took it
+    turntable_speed_deg_s: float = 0.0
 
 
 def _material_specs(spec: SceneSpec):
@@ -95,6 +99,7 @@ def make_job(
     scene_name: str = "",
     extra: dict[str, Any] | None = None,
     twin: dict[str, Any] | None = None,
+    turntable_speed_deg_s: float = 0.0,
 ) -> SimulationJob:
     """A job for ``spec`` posed at the given rig state, rendered as ``request`` asks, with its
     mesh and table files packed in."""
@@ -122,6 +127,7 @@ def make_job(
         scene_name=scene_name,
         extra=dict(extra or {}),
         twin=twin,
+        turntable_speed_deg_s=turntable_speed_deg_s,
     )
 
 
@@ -178,12 +184,34 @@ def _local_tables(obj: dict[str, Any], tables: dict[str, bytes], folder: Path) -
     return out
 
 
+def _step_scenes(job: SimulationJob, spec: Any, folder: str, built: Any, twin: Any):
+    """For a frame taken while the table turns: each phase step's angle (n_f, 4) and the scene
+    posed at each (keyed by the angle rounded to 1e-9 deg); None at rest or when the turn
+    during the frame is below the tolerance (one render)."""
+    from sim_core.scene import build_scene
+    from sim_core.subframes import moves_during_frame, phase_step_angles_deg
+
+    if job.turntable_speed_deg_s == 0.0:
+        return None
+    start_deg = (job.turntable_deg if job.turntable_deg is not None
+                 else (spec.turntable.angle_deg if spec.turntable else 0.0))
+    cam = built.camera
+    angles = phase_step_angles_deg(lambda dt: start_deg + job.turntable_speed_deg_s * dt,
+                                   len(cam.modulation_frequencies_hz), cam.exposure_s)
+    if not moves_during_frame(angles):
+        return None
+    scenes = {round(float(a), 9): build_scene(spec, folder, turntable_deg=float(a),
+                                              solar_suns=job.solar_suns, twin=twin)
+              for a in angles.ravel()}
+    return angles, scenes
+
+
 def run_job(job: SimulationJob) -> SimulationResult:
     """Simulate ``job`` on this worker."""
     import socket
     import time
 
-    from sim_core.pipeline import save_frame, simulate
+    from sim_core.pipeline import save_frame, simulate, simulate_in_motion
     from sim_core.scene import build_scene
     from sim_core.scene_spec import parse_scene_spec
     from sim_core.twin_file import parse_twin
@@ -210,8 +238,13 @@ def run_job(job: SimulationJob) -> SimulationResult:
         built = build_scene(
             spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin
         )
+        step_scenes = _step_scenes(job, spec, tmp, built, twin)
     with RENDER_LOCK:
-        frame = simulate(built, job.request)
+        if step_scenes is None:
+            frame = simulate(built, job.request)
+        else:
+            angles, scenes = step_scenes
+            frame = simulate_in_motion(lambda a: scenes[round(a, 9)], angles, job.request)
     worker = f"{socket.gethostname()}:{os.getpid()}"
     frame.extra.update({"kind": "simulated", **job.extra, "worker": worker})
     t0 = time.perf_counter()

@@ -33,6 +33,7 @@ from calibration.rig_sequence import (
 )
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
 from drivers.rig import Rig, RigState
+from service.lab.settling import settled_moves
 from sim_core.materials import Material
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import SceneSpec
@@ -46,8 +47,11 @@ def acquire(
     progress: Progress = no_progress,
     *,
     total: int | None = None,
+    settle_for: TwinParameters | None = None,
 ) -> dict[str, AveragedCapture]:
-    """Run ``plan`` on ``rig``: its mounts by ``operator``, its captures in order.
+    """Run ``plan`` on ``rig``: its mounts by ``operator``, its captures in order, every move
+    waited out for ``settle_for``'s turntable settling (:func:`service.lab.settling.
+    settled_moves`; None: the driver's own wait).
 
     Before each capture ``progress(done, total, step.message)`` is called (``done`` captures
     so far; ``total`` defaults to the plan's captures: a procedure whose fit reports further
@@ -70,12 +74,13 @@ def acquire(
     total = plan.n_captures if total is None else total
     captures: dict[str, AveragedCapture] = {}
     try:
-        for step in plan.steps:
-            if isinstance(step, CaptureStep):
-                progress(len(captures), total, step.message)
-                captures[step.name] = _capture(rig, step)
-            else:
-                operator.mount(step.objects, step.instruction)
+        with settled_moves(rig, settle_for):
+            for step in plan.steps:
+                if isinstance(step, CaptureStep):
+                    progress(len(captures), total, step.message)
+                    captures[step.name] = _capture(rig, step)
+                else:
+                    operator.mount(step.objects, step.instruction)
     finally:
         if plan.restore is not None:
             operator.mount(plan.restore.objects, plan.restore.instruction)
@@ -131,7 +136,8 @@ def run_material_calibration(
     plan = plan or MaterialSweepPlan()
     capture_plan = material_capture_plan(spec, plan, model, prior)
     t0 = time.perf_counter()
-    captures = acquire(rig, operator, capture_plan, progress, total=plan.n_steps)
+    captures = acquire(rig, operator, capture_plan, progress, total=plan.n_steps,
+                       settle_for=calibration)
     sweep_s = time.perf_counter() - t0
     result = fit_material_sweep(captures, spec, base_dir, calibration, plan,
                                 rig.camera.use_case, model, prior, progress, seed)
@@ -153,7 +159,7 @@ def run_twin_comparison(
     acquired on ``rig`` (with what is mounted: no operator needed), compared by
     :func:`calibration.verification.compare_twins`."""
     plan = comparison_capture_plan(angles_deg, solar_suns)
-    captures = acquire(rig, NO_MOUNTS, plan, progress)
+    captures = acquire(rig, NO_MOUNTS, plan, progress, settle_for=calibration)
     return compare_twins(captures, spec, base_dir, calibration, angles_deg, settings, progress)
 
 

@@ -81,6 +81,7 @@ def create_campaign(
             calibration_json=None if pinned is None else json.dumps(pinned, sort_keys=True),
             calibration_hash=twin.hash,
             object_fit=None if fit is None else fit.model_dump(mode="json"),
+            turning_deg_s=req.turning_deg_s,
         )
     return campaign_id
 

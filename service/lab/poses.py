@@ -40,12 +40,14 @@ from service.lab.scenes import (
     require_mounted,
     scene_from_request,
 )
+from service.lab.settling import settled_moves
 from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import require_free, writing
 from service.store.frame_files import FrameStore, new_frame_id
 from service.store.tables import FrameRow, PoseResultRow
 from sim_core.camera import z_over_range as camera_z_over_range
+from sim_core.edges import edge_depth_error
 from sim_core.errors import InvalidInputError
 from sim_core.raw import reconstruct_raw
 from sim_core.render_request import AccuracyTarget, RenderRequest, request_from_spec
@@ -115,6 +117,10 @@ class Measurement:
     grey_full_scale: float = 0.0
     #: a second capture of the same state (the noise ceiling; plans with a fitted twin)
     second: ToFImage | None = None
+    #: the table's speed during the exposure [deg/s] (0: at rest; a capture while turning):
+    #: ``rig`` holds its angle at the frame's start; the simulations render each sub-frame at
+    #: its angle
+    turning_deg_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -165,7 +171,7 @@ def measure(
     before anything is stored.
     """
     t0 = time.perf_counter()
-    with rig.hold():
+    with rig.hold(), settled_moves(rig, plan.twin.calibration):
         wait = stable_timeout_s if plan.solar_suns > 0 else None
         state = rig.apply(plan.target, wait_stable_s=wait)
         t1 = time.perf_counter()
@@ -173,6 +179,15 @@ def measure(
         # is stored (a lamp that went out, a shutter that closed, a stage that crept away)
         raws = rig.capture(1 if plan.fitted is None else 2, target=plan.target)
         use_case = rig.camera.use_case
+    return store_measurement(store, plan, state, raws, use_case, t0, t1)
+
+
+def store_measurement(
+    store: FrameStore, plan: PosePlan, state: RigState, raws: list[Any], use_case: Any,
+    t0: float, t1: float, turning_deg_s: float = 0.0,
+) -> Measurement:
+    """Stage 1's second half: store the captured frame(s) of ``plan`` taken at ``state`` (moves
+    from ``t0`` to ``t1``, the capture until now, :func:`time.perf_counter`)."""
     raw = raws[0]
     t2 = time.perf_counter()
     sim_spec = for_use_case(plan.scene.spec, use_case)
@@ -195,7 +210,7 @@ def measure(
     )
     return Measurement(row, image, state, sim_spec,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
-                       grey_full_scale, second)
+                       grey_full_scale, second, turning_deg_s)
 
 
 def submit(
@@ -228,6 +243,7 @@ def _submit_one(
             "measured_frame_id": m.row.id, "twin": label,
         },
         twin=twin.to_json(),
+        turntable_speed_deg_s=m.turning_deg_s,
     )
     return frame_id, executor.submit(job)
 
@@ -269,6 +285,9 @@ def _finish(
                          (m.grey_full_scale, result.grey_full_scale))
         metrics: dict[str, Any] = report.to_dict()
         metrics["table"] = [list(r) for r in report.table_rows()]
+        if m.turning_deg_s:  # captured while turning: how much of the error sits at edges
+            metrics["edges"] = edge_depth_error(m.image.range_m, result.image.range_m, mask,
+                                                result.image.valid).to_dict()
     except InvalidInputError as exc:  # e.g. no pixel valid in both frames: recorded, not fatal
         report, metrics = None, {"error": str(exc), "table": []}
     if fitted is not None:

@@ -229,6 +229,10 @@ class ObjectFitIn(RequestBody):
     ] | None = 0.35
 
 
+#: speeds a campaign may capture while turning at [deg/s]: the SMC100 stage's top speed at most
+TURNING_SPEED_RANGE_DEG_S = (0.1, 20.0)
+
+
 class CampaignCreate(RequestBody):
     """A campaign: a scene and the poses to measure and simulate."""
 
@@ -242,6 +246,17 @@ class CampaignCreate(RequestBody):
         None, description="true (the defaults) or the fit's settings: fit the object twin "
         "from the first poses, then compare every pose with the nominal twin, the fitted twin "
         "and the noise ceiling (docs/calibration.md, the object twin); false or absent: no fit.")
+    turning_deg_s: Annotated[
+        float, Strict(),
+        Field(description="Capture while turning (issue 27): the table turns through the "
+              "poses' angles without stopping at this speed [deg/s], "
+              f"{TURNING_SPEED_RANGE_DEG_S[0]:g} to {TURNING_SPEED_RANGE_DEG_S[1]:g}; a frame "
+              "is taken as it passes each pose and simulated with its sub-frames at their "
+              "times. Absent: stop and go, waiting for the calibrated settling.",
+              json_schema_extra={"minimum": TURNING_SPEED_RANGE_DEG_S[0],
+                                 "maximum": TURNING_SPEED_RANGE_DEG_S[1]}),
+        AfterValidator(_in_range(*TURNING_SPEED_RANGE_DEG_S, "deg/s")),
+    ] | None = None
 
     @field_validator("object_fit", mode="before")
     @classmethod

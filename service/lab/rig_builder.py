@@ -98,5 +98,6 @@ def _open_simulated(settings: Settings, scene: SceneSource) -> tuple[Rig, Simula
                         turntable_instant=settings.sim_motion == "instant",
                         turntable_faults=armed["turntable"],
                         solar_faults=armed["solar-simulator"],
-                        camera_faults=armed["camera"])
+                        camera_faults=armed["camera"],
+                        turntable_settling=world.reality.turntable.settling)
     return rig, world

@@ -48,6 +48,7 @@ from service.lab.object_fit import fit_poses, fitted_twin, run_fit
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec, ObjectFitIn
 from service.lab.scenes import SceneSource, require_mounted
+from service.lab.turning import capture_turning
 from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
@@ -214,6 +215,11 @@ class CampaignRunner:
         todo = [(p, r) for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done]
         in_flight: collections.deque[tuple[PosePlan, Measurement, Any]] = collections.deque()
         to, error = "completed", None
+        if camp.turning_deg_s is not None:
+            plans = [PosePlan(scene, p.turntable_deg, p.solar_suns, mask, camp.seed, camp.spp,
+                              run.id, p.pose_index, r, twin, fitted, effects, noise_fraction)
+                     for p, r in todo]
+            return self._turning_units(run, plans, camp.turning_deg_s)
         try:
             for pose, repeat in todo:
                 if run.stop.is_set():
@@ -252,6 +258,33 @@ class CampaignRunner:
             raise
         return to, error
 
+    def _turning_units(self, run: _Run, plans: list[PosePlan], speed_deg_s: float) -> Ending:
+        """A campaign that captures while turning (:mod:`service.lab.turning`): one sweep per
+        repeat through its poses, then each frame simulated with its sub-frames and compared."""
+        settings = self.settings
+
+        def current(plan: PosePlan) -> None:
+            run.progress.current = {"pose_index": plan.pose_index, "repeat": plan.repeat,
+                                    "turntable_deg": plan.turntable_deg,
+                                    "solar_suns": plan.solar_suns, "turning_deg_s": speed_deg_s}
+
+        for repeat in sorted({p.repeat for p in plans}):
+            sweep = [p for p in plans if p.repeat == repeat]
+            try:
+                measured = capture_turning(self.lease.require(), self.store, sweep, speed_deg_s,
+                                           run.stop.is_set, current)
+            except DeviceError as exc:
+                _log.warning("campaign %s paused: device fault: %s", run.id, exc)
+                if run.stop.is_set():
+                    return run.stopping
+                return "paused", f"device fault ({type(exc).__name__}): {exc}"
+            for plan, m in measured:
+                self._finish(run, plan, m, submit(self.executor, plan, m,
+                                                  settings.threads_per_job))
+            if run.stop.is_set():
+                return run.stopping
+        return "completed", None
+
     def _object_fit(self, run: _Run, camp: Any, scene: SceneSource, twin: Twin,
                     poses: list[Any]) -> tuple[str | None, tuple[str, str | None]]:
         """The campaign's object fit stage (:mod:`service.lab.object_fit`).
@@ -272,7 +305,8 @@ class CampaignRunner:
 
         rig = self.lease.require()
         try:
-            captures = captures_in_order(plan, acquire(rig, NO_MOUNTS, plan, progress))
+            captures = captures_in_order(plan, acquire(rig, NO_MOUNTS, plan, progress,
+                                                       settle_for=twin.calibration))
         except Stopped:
             return None, run.stopping
         except DeviceError as exc:

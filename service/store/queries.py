@@ -98,6 +98,7 @@ def create_campaign(
     calibration_json: str | None = None,
     calibration_hash: str | None = None,
     object_fit: dict | None = None,
+    turning_deg_s: float | None = None,
 ) -> CampaignRow:
     """Store a new campaign (state ``created``) with its poses; one transaction.
 
@@ -112,6 +113,7 @@ def create_campaign(
         created_at=t, started_at=None, updated_at=t, finished_at=None,
         calibration_json=calibration_json, calibration_hash=calibration_hash,
         object_fit_json=None if object_fit is None else dumps(object_fit),
+        turning_deg_s=turning_deg_s,
     )
     session.add(row)
     session.flush()

@@ -62,6 +62,8 @@ class CampaignRow(Base):
     object_twin_hash: Mapped[str | None] = mapped_column(String(64), nullable=True)
     #: the fit's report (residuals, uncertainties, what was not determined)
     object_fit_report_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    #: capture while turning at this speed [deg/s] (None: stop and go)
+    turning_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 
 class PlannedPoseRow(Base):

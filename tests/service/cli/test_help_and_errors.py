@@ -112,6 +112,8 @@ ERROR_CALLS = {
     "bench accuracy": (lambda t: ["bench", "accuracy", "--scene", "nope"], 2, "'nope'"),
     "bench mitsuba": (lambda t: ["bench", "mitsuba", "--spp", "16,x"], 2, "--spp"),
     "bench render": (lambda t: ["bench", "render", str(t / "none.yaml")], 2, "does not exist"),
+    "bench turning": (lambda t: ["bench", "turning", "--speed-deg-s", "25"], 2,
+                      "--speed-deg-s"),
     "schema": (lambda t: ["schema", "table"], 2, "No such command"),
 }
 

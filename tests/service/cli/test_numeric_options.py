@@ -158,6 +158,8 @@ def _copies():
         "TURNTABLE_DEG": (lambda v: requests.SimulationCreate(turntable_deg=v), float),
         "MASK_DISTANCE": (lambda v: requests.MaskSpec(near_m=v), float),
         "FIT_FRAMES": (lambda v: requests.ObjectFitIn(frames=v), int),
+        "TURNING_SPEED": (lambda v: requests.CampaignCreate(
+            name="t", poses=[{"turntable_deg": 0.0}], turning_deg_s=v), float),
         "TARGET_RANGE_ERROR": (lambda v: adaptive("target_range_error_m")(v * 1e-3), float),
         "TIME_BUDGET": (adaptive("time_budget_s"), float),
         "NOISE_FRACTION": (adaptive("target_noise_fraction"), float),

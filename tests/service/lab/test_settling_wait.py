@@ -1,0 +1,67 @@
+"""The service waits for the calibrated ringing to decay before it captures, unless a campaign
+asks for motion; the simulated lab's frames then see a table at rest."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from drivers.rig import RigState
+from drivers.sim.rig import simulated_rig
+from drivers.sim.usb_camera import CameraRequest
+from service.lab.settling import SETTLE_TOLERANCE_DEG, settle_wait_s, settled_moves
+from sim_core.settling import envelope_deg
+from sim_core.twin_file import (
+    CalibrationFile,
+    RealityFile,
+    TurntableParameters,
+    TurntableSettling,
+)
+from tests.drivers.test_world import _world
+
+pytestmark = pytest.mark.timeout(60)
+
+SETTLING = TurntableSettling(amplitude_deg=1.0, frequency_hz=5.0, damping_ratio=0.3)
+CALIBRATION = CalibrationFile(turntable=TurntableParameters(settling=SETTLING))
+
+
+def test_the_wait_is_until_the_envelope_is_below_the_tolerance():
+    wait = settle_wait_s(CALIBRATION)
+    assert float(envelope_deg(SETTLING, wait)) == pytest.approx(SETTLE_TOLERANCE_DEG)
+    assert settle_wait_s(None) == 0.0
+    assert settle_wait_s(CalibrationFile()) == 0.0
+
+
+def test_moves_wait_for_the_settling_only_inside_and_not_when_motion_is_asked_for():
+    with simulated_rig(seed=1) as rig:
+        base = rig.turntable.settle_s
+        with settled_moves(rig, CALIBRATION) as wait:
+            assert wait == rig.turntable.settle_s == pytest.approx(settle_wait_s(CALIBRATION))
+            t0 = time.perf_counter()
+            rig.apply(RigState(10.0, 0.0, False))
+            assert time.perf_counter() - t0 >= wait
+        assert rig.turntable.settle_s == base  # restored
+        with settled_moves(rig, CALIBRATION, motion=True) as wait:
+            assert wait == base == rig.turntable.settle_s
+        with settled_moves(rig, None):
+            assert rig.turntable.settle_s == base  # never lowered, never raised for nothing
+
+
+def test_a_capture_after_a_settled_move_sees_the_table_at_rest():
+    world = _world(RealityFile(turntable=TurntableParameters(settling=SETTLING)))
+    at_rest: list[bool] = []
+
+    def source(request: CameraRequest):
+        frame = world(request)
+        at_rest.append(not world.last_rendered_per_step)
+        return frame
+
+    with simulated_rig(frame_source=source, seed=3, turntable_instant=False,
+                       time_scale=4.0, turntable_settling=SETTLING) as rig:
+        rig.apply(RigState(2.0, 0.0, False))
+        rig.capture(1)  # no wait: the table still rings
+        with settled_moves(rig, CALIBRATION):
+            rig.apply(RigState(4.0, 0.0, False))
+            rig.capture(1)
+    assert at_rest == [False, True]
