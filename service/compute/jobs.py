@@ -72,6 +72,9 @@ class SimulationJob:
     twin: dict[str, Any] | None = None
     #: contents of the goniometer tables of tabulated materials, keyed by ``params.table``
     tables: dict[str, bytes] = field(default_factory=dict)
+    #: the measured frame's reported illumination temperature [degC]: a twin with
+    #: ``camera.temperature`` applies its drift at it (None: not reported, no drift)
+    illumination_temperature_c: float | None = None
 
 
 def _material_specs(spec: SceneSpec):
@@ -95,6 +98,7 @@ def make_job(
     scene_name: str = "",
     extra: dict[str, Any] | None = None,
     twin: dict[str, Any] | None = None,
+    illumination_temperature_c: float | None = None,
 ) -> SimulationJob:
     """A job for ``spec`` posed at the given rig state, rendered as ``request`` asks, with its
     mesh and table files packed in."""
@@ -122,6 +126,7 @@ def make_job(
         scene_name=scene_name,
         extra=dict(extra or {}),
         twin=twin,
+        illumination_temperature_c=illumination_temperature_c,
     )
 
 
@@ -208,7 +213,8 @@ def run_job(job: SimulationJob) -> SimulationResult:
                                 for obj in scene.get("objects", [])]
         spec = parse_scene_spec(scene)
         built = build_scene(
-            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin
+            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin,
+            illumination_temperature_c=job.illumination_temperature_c,
         )
     with RENDER_LOCK:
         frame = simulate(built, job.request)

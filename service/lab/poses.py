@@ -115,6 +115,9 @@ class Measurement:
     grey_full_scale: float = 0.0
     #: a second capture of the same state (the noise ceiling; plans with a fitted twin)
     second: ToFImage | None = None
+    #: the illumination temperature the camera reported with the frame [degC], if any: the
+    #: simulations apply a calibrated warm-up drift at it
+    illumination_temperature_c: float | None = None
 
 
 @dataclass(frozen=True)
@@ -195,7 +198,7 @@ def measure(
     )
     return Measurement(row, image, state, sim_spec,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
-                       grey_full_scale, second)
+                       grey_full_scale, second, raw.illumination_temperature_c)
 
 
 def submit(
@@ -226,8 +229,10 @@ def _submit_one(
             "object_names": [o.name for o in plan.scene.spec.objects],
             "turntable_object_ids": plan.scene.turntable_object_ids,
             "measured_frame_id": m.row.id, "twin": label,
+            "illumination_temperature_c": m.illumination_temperature_c,
         },
         twin=twin.to_json(),
+        illumination_temperature_c=m.illumination_temperature_c,
     )
     return frame_id, executor.submit(job)
 
