@@ -59,6 +59,14 @@ class LabClock:
         """Simulated seconds since the service's start."""
         return self._now_s
 
+    def wait(self, seconds: float) -> None:
+        """Let ``seconds`` pass with nothing captured (an operator waiting, a warm-up sequence's
+        pause between captures)."""
+        if not (math.isfinite(seconds) and seconds >= 0.0):
+            raise ValueError(f"seconds = {seconds!r} must be finite and >= 0")
+        with self._lock:
+            self._now_s += float(seconds)
+
     def move_duration_s(self, from_deg: float, to_deg: float) -> float:
         """The stage's time for a rest-to-rest move [s] (0 for no move)."""
         if from_deg == to_deg:
