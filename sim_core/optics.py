@@ -240,13 +240,22 @@ class StrayLight:
         with np.errstate(over="ignore"):
             return np.exp(-0.5 * (d / self.radius_px) ** 2)
 
-    def apply(self, image: np.ndarray) -> np.ndarray:
-        """``image`` (..., H, W), real or complex, with the stray light added (see above)."""
+    def apply(self, image: np.ndarray, to_irradiance: np.ndarray | None = None) -> np.ndarray:
+        """``image`` (..., H, W), real or complex, with the stray light added (see above).
+
+        ``to_irradiance`` (H, W), > 0: the per-pixel factor from the image's quantity to the
+        irradiance on the sensor (``cos^4`` of the field angle, seed eq. 32, for radiance): the
+        light is scattered where it falls, on the sensor, so it is spread as irradiance and
+        converted back (``sum(out * to_irradiance) == sum(image * to_irradiance)``).
+        """
         if self.fraction == 0.0:
             return image
         h, w = image.shape[-2:]
+        weight = np.ones((h, w)) if to_irradiance is None else np.asarray(to_irradiance)
+        if weight.shape != (h, w) or not np.all(weight > 0.0):
+            raise ValueError(f"to_irradiance must be a positive ({h}, {w}) array")
         gy, gx = self.kernel_1d(h), self.kernel_1d(w)
         # N_j = (column sums of gy) x (column sums of gx), each >= g(0) = 1.
         norm = gy.sum(axis=0)[:, None] * gx.sum(axis=0)[None, :]
-        spread = gy @ (image / norm) @ gx
+        spread = gy @ (image * (weight / norm)) @ gx / weight  # weight > 0: checked above
         return (1.0 - self.fraction) * image + self.fraction * spread

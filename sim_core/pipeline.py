@@ -163,8 +163,10 @@ def expose_light(
     dc_ambient = np.maximum(apply_mtf(lf.dc_ambient, comps), 0.0)
     phasor = apply_mtf(lf.phasor, comps)
     if scene.stray_light is not None and plan.enabled("stray_light"):
-        # Scattered light spreads DC and phasors alike (linear in the light, like the MTF).
-        dc_active, dc_ambient, phasor = (scene.stray_light.apply(a)
+        # Scattered light spreads DC and phasors alike (linear in the light, like the MTF), as
+        # irradiance on the sensor: radiance times cos^4 of the field angle (seed eq. 32).
+        cos4 = z_over_range(scene) ** 4
+        dc_active, dc_ambient, phasor = (scene.stray_light.apply(a, cos4)
                                          for a in (dc_active, dc_ambient, phasor))
     if not ideal and scene.depth_errors is not None:
         # The camera's own phase errors act on each pixel's correlation, after the optics.

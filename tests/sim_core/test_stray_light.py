@@ -87,3 +87,17 @@ def test_stray_light_pulls_a_dark_pixels_range_towards_a_bright_one():
     assert wall.sum() > 50
     pulled = clean.image.range_m[wall] - stray.image.range_m[wall]
     assert np.median(pulled) > 0.02  # tens of mm nearer: towards the panel at ~0.8 m
+
+
+@settings(max_examples=40, deadline=None)
+@given(image=images, fraction=st.floats(0.0, 1.0), radius=radii,
+       low=st.floats(1e-3, 1.0))
+def test_stray_light_keeps_the_irradiance_when_spread_as_irradiance(image, fraction, radius,
+                                                                    low):
+    h, w = image.shape
+    weight = np.linspace(low, 1.0, h * w).reshape(h, w)  # cos^4 of the field angle, say
+    out = StrayLight(fraction, radius).apply(image, weight)
+    assert np.all(np.isfinite(out)) and np.all(out >= -1e-9 * max(1.0, image.max()))
+    assert (out * weight).sum() == pytest.approx((image * weight).sum(), rel=1e-9, abs=1e-9)
+    with pytest.raises(ValueError, match="to_irradiance"):
+        StrayLight(max(fraction, 0.1), radius).apply(image, np.zeros((h, w)))
