@@ -321,8 +321,8 @@ def _temperature_drift(mode, scene, ideal: bool) -> Effect:
     if not np.any(d.drift_mm_per_c != 0.0):
         return Effect("temperature_drift", False, "depth_drift_mm_per_c is 0", 0.0, nums)
     if t is None:
-        return Effect("temperature_drift", True, "applied at each frame's illumination "
-                      "temperature", 0.0, nums)
+        return Effect("temperature_drift", True, "applied at each frame's reported "
+                      "illumination temperature (none reported: no drift)", 0.0, nums)
     if t == d.start_c:
         return Effect("temperature_drift", False, f"the illumination is at its start, "
                       f"{t:g} degC", 0.0, nums)

@@ -101,3 +101,26 @@ def test_stray_light_keeps_the_irradiance_when_spread_as_irradiance(image, fract
     assert (out * weight).sum() == pytest.approx((image * weight).sum(), rel=1e-9, abs=1e-9)
     with pytest.raises(ValueError, match="to_irradiance"):
         StrayLight(max(fraction, 0.1), radius).apply(image, np.zeros((h, w)))
+
+
+def test_the_planner_turns_stray_light_on_only_when_the_twin_has_it():
+    from sim_core.plan import plan_effects
+
+    spec = parse_scene_spec({
+        "camera": {"pose": {"position_m": [0, 0, 0], "look_at_m": [0, 1, 0], "up": [0, 0, 1]},
+                   "width_px": 32, "height_px": 24, "fx_px": 30.0, "fy_px": 30.0},
+        "objects": [{"name": "wall", "mesh": {"kind": "rectangle", "size_m": [5.0, 5.0]},
+                     "material": {"kind": "lambertian", "params": {"albedo": 0.5}},
+                     "pose": {"position_m": [0.0, 1.0, 0.0], "rotation_deg": [90, 0, 0]}}]})
+    settings = RenderSettings(integrator="direct", spp=1, seed=0)
+
+    def stray(twin, mode="auto"):
+        plan = plan_effects(build_scene(spec, twin=twin), settings, mode)
+        return next(e for e in plan.effects if e.name == "stray_light")
+
+    assert not stray(None).enabled and "no camera.stray_light" in stray(None).reason
+    off = parse_reality({"camera": {"stray_light": {"fraction": 0.0, "kernel_radius_px": 30}}})
+    assert not stray(off).enabled and "no light leaves" in stray(off).reason
+    assert stray(off, "all").enabled  # --effects all: everything the twin has
+    on = parse_reality({"camera": {"stray_light": {"fraction": 0.02, "kernel_radius_px": 30}}})
+    assert stray(on).enabled and stray(on).numbers == {"fraction": 0.02, "radius_px": 30.0}
