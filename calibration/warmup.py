@@ -9,13 +9,14 @@ temperature linearly (TI's calibration model, :mod:`sim_core.warmup`):
     r_k(T) = r_k(T_0) + k_f (T - T_0)
 
 per modulation frequency. Each frame's patch range is measured as the change of every pixel's
-phase against the first frame's, ``arg(z_frame conj(z_first))`` (no wrap for drifts below a
-quarter of the ambiguity range), turned into a range (seed eq. 7) and averaged over the patch;
-its standard error comes from the frames' own temporal noise (each pixel's scatter about its
-mean over the sequence, after the patch's common change is removed). A weighted straight-line
-fit of those ranges against the temperatures gives ``k_f`` with its standard error, and the fit's
-reduced chi-square says whether a straight line explains them; the verdict comes from
-:func:`calibration.verdicts.judge` (the standard error made honest by the residual).
+phase against its mean phasor over the sequence, ``arg(z_frame conj(mean z))`` (no wrap for
+drifts below a quarter of the ambiguity range), turned into a range (seed eq. 7) and averaged
+over the patch; its standard error comes from the frames' own temporal noise (each pixel's
+scatter about its mean over the sequence, after the patch's common change is removed). A
+weighted straight-line fit of those ranges against the temperatures gives ``k_f`` with its
+standard error, and the fit's reduced chi-square says whether a straight line explains them;
+the verdict comes from :func:`calibration.verdicts.judge` (the standard error made honest by
+the residual).
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ class WarmupFit:
     temperatures_c : (n,) float
         The frames' reported temperatures.
     patch_range_mm : (n_f, n) float
-        Each frame's patch range change against the first frame [mm].
+        Each frame's patch range against the sequence's mean phasor [mm].
     patch_range_std_mm : (n_f, n) float
     verdict : Verdict
         Of :data:`DRIFT_KEY` (the worst frequency decides).
@@ -131,8 +132,10 @@ def fit_warmup(frames: Sequence[RawFrame], patch: np.ndarray) -> WarmupFit:
                                 f"the frames are {frames[0].shape}: it needs at least one pixel")
     freqs = np.asarray(frames[0].frequencies_hz, dtype=np.float64)
     z = np.stack([f.phasor()[:, mask] for f in frames])  # (n, n_f, n_px)
-    # Phase change against the first frame: wrap-free for drifts below a quarter wavelength.
-    dphi = -np.angle(z * np.conj(z[0]))
+    # Phase change against each pixel's mean phasor over the sequence (its noise is common to
+    # every frame and averaged down; no frame is special): wrap-free for drifts below a quarter
+    # of the ambiguity range.
+    dphi = -np.angle(z * np.conj(z.mean(axis=0)))
     dr_mm = np.stack([range_from_phase(dphi[:, k], f) for k, f in enumerate(freqs)],
                      axis=1) * 1e3  # (n, n_f, n_px)
     patch_mm = dr_mm.mean(axis=2)  # (n, n_f)
@@ -140,8 +143,8 @@ def fit_warmup(frames: Sequence[RawFrame], patch: np.ndarray) -> WarmupFit:
     resid = dr_mm - patch_mm[:, :, None] - (dr_mm - patch_mm[:, :, None]).mean(axis=0)
     n, n_px = len(frames), int(mask.sum())
     pixel_std = np.sqrt((resid**2).sum(axis=(0, 2)) / max(1, (n - 1) * max(n_px - 1, 1)))
-    # The first frame is the reference of every phase change: its noise is common to all and
-    # does not bias the slope. The floor keeps the weights finite for noise-free frames.
+    # The reference's noise is common to all frames: it moves the line, not its slope. The
+    # floor keeps the weights finite for noise-free frames.
     frame_std = np.maximum(pixel_std / math.sqrt(n_px), FRAME_STD_FLOOR_MM)  # (n_f,)
     span = float(temps.max() - temps.min())
     drift, std, chi2 = [], [], []
