@@ -11,7 +11,8 @@ range, or a light trap); a few frames of that static view are averaged as comple
 puts ``f S_r(I)`` on the dark pixels, where the true light ``I`` is zero; on the bright ones
 ``I ~ Z / (1 - f)`` to first order in ``f``. So the dark pixels' phasors are predicted from the
 bright pixels' alone, and a least-squares fit of ``f`` and ``r`` to the dark pixels' phasors
-(real and imaginary parts, each weighted by the frames' own temporal noise) measures both. A
+(real and imaginary parts, weighted by the frames' own temporal noise, pooled over the dark
+pixels) measures both. A
 guard band of :data:`GUARD_PX` around the bright pixels is left out: there the optics' blur
 (diffraction, the pixel aperture) spreads the edge and is not stray light.
 
@@ -117,9 +118,10 @@ def fit_stray_light(frames: Sequence[RawFrame]) -> StrayLightFit:
         raise InvalidInputError("frames", f"{int(dark.sum())} dark pixels at least {GUARD_PX} "
                                 f"px from the bright patch; the fit needs {MIN_DARK_PX}")
     source = np.where(bright, z, 0.0)
-    # The noise of the mean, floored at a thousandth of a DN^2: finite weights for noise-free
-    # frames (the floor is far below any camera's noise).
-    sigma = np.sqrt(np.maximum(var[dark], 1e-6))
+    # The noise of the mean, pooled over the dark pixels (their noise is the same everywhere:
+    # read noise and the pedestal's shot noise; a per-pixel variance of a few frames would
+    # scatter the weights), floored at a thousandth of a DN^2: finite for noise-free frames.
+    sigma = math.sqrt(max(float(var[dark].mean()), 1e-6))
     z_dark = z[dark]
 
     def residual(p: np.ndarray) -> np.ndarray:

@@ -40,13 +40,13 @@ PANEL = {
 PEDESTAL = {"dark_current_e_s": 2e5}
 
 
-def panel_frames(seed: int, n: int = 6, pedestal: bool = True) -> tuple[list[RawFrame], object]:
+def panel_frames(seed: int, n: int = 4, pedestal: bool = True) -> tuple[list[RawFrame], object]:
     reality = with_camera_effects(random_reality(seed), seed)
     sensor = reality.camera.sensor.model_copy(update=PEDESTAL if pedestal else {})
     reality = reality.model_copy(update={"camera": reality.camera.model_copy(
         update={"temperature": None, "sensor": sensor})})  # a static view: the stray light
     world = SimulatedWorld(parse_scene_spec(PANEL), ".", RenderRequest(
-        RenderSettings(integrator="direct", spp=4), effects="auto"), reality=reality)
+        RenderSettings(integrator="direct", spp=2), effects="auto"), reality=reality)
     state = RigState(turntable_angle_deg=0.0, solar_suns=0.0, shutter_open=False)
     return [world(CameraRequest(UC, i, seed=5, rig_state=state)) for i in range(n)], reality
 
@@ -67,7 +67,7 @@ def test_the_stray_light_of_a_random_reality_is_measured(seed):
 
 
 def test_dark_pixels_without_a_pedestal_leave_the_stray_light_not_determined():
-    frames, _ = panel_frames(1, n=3, pedestal=False)
+    frames, _ = panel_frames(1, n=2, pedestal=False)
     fit = fit_stray_light(frames)
     for key in (FRACTION_KEY, RADIUS_KEY):
         assert fit.verdicts[key].verdict == "not determined"
