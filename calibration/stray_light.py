@@ -14,7 +14,11 @@ bright pixels' alone, and a least-squares fit of ``f`` and ``r`` to the dark pix
 (real and imaginary parts, weighted by the frames' own temporal noise, pooled over the dark
 pixels) measures both. A
 guard band of :data:`GUARD_PX` around the bright pixels is left out: there the optics' blur
-(diffraction, the pixel aperture) spreads the edge and is not stray light.
+(diffraction, the pixel aperture) spreads the edge and is not stray light. Beyond it the blur's
+far tails still carry light (a diffraction pattern's rings: about a thousandth of the light, a
+tenth of a 1 % stray light); the twin models that blur itself (the nominal optics' MTF chain,
+:mod:`sim_core.optics`), so when the caller gives those components their tails are predicted
+from the bright pixels and subtracted, and only what they do not explain is read as stray light.
 
 The dark pixels' taps must sit on a pedestal well above their noise (a camera's black level;
 in the simulated lab, dark current): a sensor clips a tap at zero, and clipped noise carries only
@@ -38,7 +42,7 @@ from scipy.optimize import least_squares
 
 from calibration.verdicts import Verdict, Verdicts, honest_std, judge
 from sim_core.errors import InvalidInputError
-from sim_core.optics import StrayLight
+from sim_core.optics import MTFComponent, StrayLight, apply_mtf
 from sim_core.raw import RawFrame
 
 FRACTION_KEY = "camera.stray_light.fraction"
@@ -104,8 +108,13 @@ def _mean_phasor(frames: Sequence[RawFrame]) -> tuple[np.ndarray, np.ndarray]:
     return z.mean(axis=0), var
 
 
-def fit_stray_light(frames: Sequence[RawFrame]) -> StrayLightFit:
-    """The stray light from frames of a bright patch beside a dark view (module docstring)."""
+def fit_stray_light(frames: Sequence[RawFrame],
+                    optics: Sequence[MTFComponent] = ()) -> StrayLightFit:
+    """The stray light from frames of a bright patch beside a dark view (module docstring).
+
+    ``optics``: the nominal optics' MTF components (the scene's, as the twin applies them),
+    whose far tails are subtracted from the dark pixels; none: every light on them is stray.
+    """
     z, var = _mean_phasor(frames)
     amp = np.abs(z)
     peak = float(amp.max())
@@ -122,7 +131,8 @@ def fit_stray_light(frames: Sequence[RawFrame]) -> StrayLightFit:
     # read noise and the pedestal's shot noise; a per-pixel variance of a few frames would
     # scatter the weights), floored at a thousandth of a DN^2: finite for noise-free frames.
     sigma = math.sqrt(max(float(var[dark].mean()), 1e-6))
-    z_dark = z[dark]
+    # The optics' own blur of the bright patch, as far as it reaches the dark pixels.
+    z_dark = z[dark] - apply_mtf(source, list(optics))[dark] if optics else z[dark]
 
     def residual(p: np.ndarray) -> np.ndarray:
         f, log_r = p
