@@ -10,10 +10,10 @@ range, or a light trap); a few frames of that static view are averaged as comple
 
 puts ``f S_r(I)`` on the dark pixels, where the true light ``I`` is zero; on the bright ones
 ``I ~ Z / (1 - f)`` to first order in ``f``. So the dark pixels' phasors are predicted from the
-bright pixels' alone, and a least-squares fit of ``f`` and ``r`` to the dark pixels' phasors
-(real and imaginary parts, weighted by the frames' own temporal noise, pooled over the dark
-pixels) measures both. A
-guard band of :data:`GUARD_PX` around the bright pixels is left out: there the optics' blur
+bright pixels' alone (their own share of the stray light removed by one fixed-point step), and
+a least-squares fit of ``f`` and ``r`` to the dark pixels' phasors (real and imaginary parts,
+weighted by the frames' own temporal noise, pooled over the dark pixels) measures both. A guard
+band of :data:`GUARD_PX` around the bright pixels is left out: there the optics' blur
 (diffraction, the pixel aperture) spreads the edge and is not stray light. Beyond it the blur's
 far tails still carry light (a diffraction pattern's rings: about a thousandth of the light, a
 tenth of a 1 % stray light); the twin models that blur itself (the nominal optics' MTF chain,
@@ -136,8 +136,12 @@ def fit_stray_light(frames: Sequence[RawFrame],
 
     def residual(p: np.ndarray) -> np.ndarray:
         f, log_r = p
-        spread = StrayLight(1.0, math.exp(log_r)).apply(source / (1.0 - f))[dark]
-        d = (z_dark - f * spread) / sigma
+        spread = StrayLight(1.0, math.exp(log_r)).apply
+        # The bright pixels' true light: Z_b = (1 - f) I_b + f S(I)_b, solved by one step of
+        # the fixed point from I_b ~ Z_b / (1 - f) (f <= 0.5: the step contracts by f / (1-f)).
+        light = source / (1.0 - f)
+        light = np.where(bright, (source - f * spread(light)) / (1.0 - f), 0.0)
+        d = (z_dark - f * spread(light)[dark]) / sigma
         return np.concatenate([d.real, d.imag])
 
     starts = []
