@@ -238,7 +238,8 @@ def write_raw(path: str | Path, raw: RawFrame) -> None:
         "saturated": raw.saturated,
         "sbi_limit": raw.sbi_limit,
         "meta_json": np.array(json.dumps(json_safe(
-            {"exposure_s": raw.exposure_s, "timestamp_s": raw.timestamp_s, **raw.meta}
+            {"exposure_s": raw.exposure_s, "timestamp_s": raw.timestamp_s, **raw.meta,
+             **_temperature_meta(raw)}
         ), allow_nan=False)),
     }
     if raw.taps is not None:
@@ -252,12 +253,24 @@ def read_raw(path: str | Path) -> RawFrame:
         meta = json.loads(str(z["meta_json"]))
         exposure = float(meta.pop("exposure_s"))
         stamp = float(meta.pop("timestamp_s"))
+        temperature = meta.pop(TEMPERATURE_KEY, None)
         return RawFrame(
             phase_images=z["phase_images"], intensity=z["intensity"],
             frequencies_hz=z["frequencies_hz"], saturated=z["saturated"],
             sbi_limit=z["sbi_limit"], exposure_s=exposure, timestamp_s=stamp,
             taps=z["taps"] if "taps" in z.files else None, meta=meta,
+            illumination_temperature_c=None if temperature is None else float(temperature),
         )
+
+
+#: the metadata key of a frame's reported illumination temperature [degC] (raw.npz, frame.json)
+TEMPERATURE_KEY = "illumination_temperature_c"
+
+
+def _temperature_meta(raw: RawFrame) -> dict[str, float]:
+    """``{TEMPERATURE_KEY: T}`` when the frame reports its illumination temperature, else {}."""
+    t = raw.illumination_temperature_c
+    return {} if t is None else {TEMPERATURE_KEY: float(t)}
 
 
 # -- writing frame folders -------------------------------------------------------------------
@@ -370,6 +383,7 @@ def write_measured(
         "intrinsics": intrinsics_dict(camera.intrinsics),
         "validity": ValidityThresholds().to_dict(),
         "camera_meta": raw.meta,
+        **_temperature_meta(raw),
         "arrays": {k: ARRAY_UNITS[k] for k in arrays},
         **extra,
     }

@@ -195,3 +195,67 @@ def apply_mtf(image: np.ndarray, components: list[MTFComponent]) -> np.ndarray:
     out = np.fft.ifft2(np.fft.fft2(padded) * transfer)
     out = out[..., pad : pad + h, pad : pad + w]
     return out if np.iscomplexobj(image) else out.real
+
+
+@dataclass(frozen=True)
+class StrayLight:
+    """Stray light of lens and cover glass: ``fraction`` of each pixel's light spread over the
+    image with a normalised Gaussian kernel of standard deviation ``radius_px`` (issue 27; the
+    file's ``camera.stray_light``).
+
+        out = (1 - fraction) I + fraction S(I),   S(I)_i = sum_j K(i - j) I_j / N_j
+
+    ``K(dx, dy) = exp(-(dx^2 + dy^2) / (2 r^2))`` and ``N_j = sum_i K(i - j)`` over the image's
+    pixels: every pixel's scattered light is renormalised over the sensor, so the image's total
+    light is kept exactly (``sum out = sum I``), at the border too. Like the MTF chain it acts on
+    the linear light quantities (DC images and each complex phasor image): a dark pixel beside a
+    bright one receives the bright one's phasor and its range is pulled towards it.
+
+    Why a Gaussian: it is positive (no ringing: DC stays non-negative, no phasor is amplified),
+    separable (two small matrix products, exact at the border without padding or wrap-around,
+    any radius from 0 to far beyond the image) and has one parameter; the scattering measured in
+    ToF cameras is modelled as a broad point-spread function of this kind (a sum of Gaussians;
+    a single one is its first term). The separable form ``K = g(dy) g(dx)`` with ``g(0) = 1``
+    keeps ``N_j >= 1``: the normalisation never divides by less than one.
+    """
+
+    fraction: float
+    radius_px: float
+
+    name = "stray_light"
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.fraction <= 1.0:
+            raise ValueError(f"stray light fraction = {self.fraction} is outside [0, 1]")
+        if not (self.radius_px >= 0.0 and math.isfinite(self.radius_px)):
+            raise ValueError(f"stray light radius_px = {self.radius_px} is not finite and >= 0")
+
+    def kernel_1d(self, n: int) -> np.ndarray:
+        """``G[i, j] = g(i - j)`` for ``n`` pixels, with ``g(0) = 1`` (symmetric, (n, n))."""
+        d = np.arange(n, dtype=np.float64)
+        d = d[:, None] - d[None, :]
+        if self.radius_px == 0.0:
+            return np.eye(n)  # no spread: every pixel keeps its light
+        # A radius far below a pixel gives (d / r)^2 = inf off the diagonal: exp(-inf) = 0.
+        with np.errstate(over="ignore"):
+            return np.exp(-0.5 * (d / self.radius_px) ** 2)
+
+    def apply(self, image: np.ndarray, to_irradiance: np.ndarray | None = None) -> np.ndarray:
+        """``image`` (..., H, W), real or complex, with the stray light added (see above).
+
+        ``to_irradiance`` (H, W), > 0: the per-pixel factor from the image's quantity to the
+        irradiance on the sensor (``cos^4`` of the field angle, seed eq. 32, for radiance): the
+        light is scattered where it falls, on the sensor, so it is spread as irradiance and
+        converted back (``sum(out * to_irradiance) == sum(image * to_irradiance)``).
+        """
+        if self.fraction == 0.0:
+            return image
+        h, w = image.shape[-2:]
+        weight = np.ones((h, w)) if to_irradiance is None else np.asarray(to_irradiance)
+        if weight.shape != (h, w) or not np.all(weight > 0.0):
+            raise ValueError(f"to_irradiance must be a positive ({h}, {w}) array")
+        gy, gx = self.kernel_1d(h), self.kernel_1d(w)
+        # N_j = (column sums of gy) x (column sums of gx), each >= g(0) = 1.
+        norm = gy.sum(axis=0)[:, None] * gx.sum(axis=0)[None, :]
+        spread = gy @ (image * (weight / norm)) @ gx / weight  # weight > 0: checked above
+        return (1.0 - self.fraction) * image + self.fraction * spread

@@ -6,7 +6,9 @@
 With ``ideal=True`` the sensor is ideal: no noise, SBI, ADC or depth errors (a calibration's
 ``camera.depth``); depth comes from the phase of the (filtered) rendered phasor and grey from its
 magnitude. Otherwise the scene's depth errors (:mod:`sim_core.depth_errors`) enter the phasors
-after the optics, before the sensor.
+after the optics, before the sensor, and so does the warm-up drift at the scene's illumination
+temperature (:mod:`sim_core.warmup`); stray light (:class:`sim_core.optics.StrayLight`) spreads
+the light after the MTF chain, ideal sensor or not.
 
 A scene that moves during the frame (the turntable turning) is rendered once per phase step at
 its pose at that step's time (:mod:`sim_core.subframes`) and each step exposes its own light
@@ -154,9 +156,21 @@ def _optics(scene: Scene, plan: EffectPlan, lf: LightField,
     dc_active = np.maximum(apply_mtf(lf.dc_active, comps), 0.0)
     dc_ambient = np.maximum(apply_mtf(lf.dc_ambient, comps), 0.0)
     phasor = apply_mtf(lf.phasor, comps)
+    if scene.stray_light is not None and plan.enabled("stray_light"):
+        # Scattered light spreads DC and phasors alike (linear in the light, like the MTF), as
+        # irradiance on the sensor: radiance times cos^4 of the field angle (seed eq. 32).
+        cos4 = z_over_range(scene) ** 4
+        dc_active, dc_ambient, phasor = (scene.stray_light.apply(a, cos4)
+                                         for a in (dc_active, dc_ambient, phasor))
     if not ideal and scene.depth_errors is not None:
         # The camera's own phase errors act on each pixel's correlation, after the optics.
         phasor = scene.depth_errors.apply_to_phasor(phasor)
+    if (not ideal and scene.temperature_drift is not None
+            and scene.illumination_temperature_c is not None
+            and plan.enabled("temperature_drift")):
+        # The warm-up drift: a phase offset per frequency at the frame's temperature.
+        phasor = scene.temperature_drift.apply_to_phasor(phasor,
+                                                         scene.illumination_temperature_c)
     return dc_active, dc_ambient, phasor
 
 

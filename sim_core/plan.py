@@ -12,7 +12,11 @@ whether it changes the frame by more than a tolerance:
   or when its electrons are negligible against the active signal's;
 - SBI: only when the predicted charge of some tap can pass n_SBI,start;
 - each MTF component: off when it is the identity within ``mtf_tolerance`` up to Nyquist;
-- motion: only when the scene asks for it; noise: off for an ideal sensor.
+- motion: only when the scene asks for it; noise: off for an ideal sensor;
+- stray light: only when the twin has ``camera.stray_light`` with a fraction and radius above 0;
+- temperature drift: only when the twin has ``camera.temperature`` with a drift and the frame's
+  illumination temperature differs from the start (or is not known yet: the simulated lab
+  renders once and applies each frame's temperature as it exposes); off for an ideal sensor.
 
 The default tolerance is a quarter of the median predicted range noise of the object pixels
 (at least 0.1 mm); ``effect_tolerance_mm`` sets it.
@@ -190,6 +194,8 @@ def plan_effects(
         _sbi(mode, scene, e) if not ideal else Effect("sbi", False, "--ideal: ideal sensor"),
         _pixel_aperture(scene),
         *_mtf(mode, scene),
+        _stray_light(mode, scene),
+        _temperature_drift(mode, scene, ideal),
         _noise(ideal, noise_mm),
     ]
     return EffectPlan(mode=mode, effects=tuple(effects), tolerance_mm=tol, probe_seconds=probe_s)
@@ -285,6 +291,45 @@ def _mtf(mode, scene) -> list[Effect]:
             out.append(Effect(c.name, False, f"identity within {dev:.2g} <= {MTF_TOLERANCE} up "
                               "to Nyquist", 0.0, nums))
     return out
+
+
+def _stray_light(mode, scene) -> Effect:
+    s = scene.stray_light
+    if s is None:
+        return Effect("stray_light", False, "the twin has no camera.stray_light")
+    nums = {"fraction": s.fraction, "radius_px": s.radius_px}
+    if mode == "all":
+        return Effect("stray_light", True, "--effects all", 0.005, nums)
+    if s.fraction == 0.0 or s.radius_px == 0.0:
+        return Effect("stray_light", False, f"fraction {s.fraction:g}, radius {s.radius_px:g} "
+                      "px: no light leaves its pixel", 0.0, nums)
+    return Effect("stray_light", True, f"{100 * s.fraction:.3g} % of each pixel's light spread "
+                  f"with a Gaussian of {s.radius_px:g} px", 0.005, nums)
+
+
+def _temperature_drift(mode, scene, ideal: bool) -> Effect:
+    d = scene.temperature_drift
+    if d is None:
+        return Effect("temperature_drift", False, "the twin has no camera.temperature")
+    if ideal:
+        return Effect("temperature_drift", False, "--ideal: no depth errors")
+    t = scene.illumination_temperature_c
+    nums = {"start_c": d.start_c, "illumination_temperature_c": t,
+            "drift_mm_per_c": d.drift_mm_per_c.tolist()}
+    if mode == "all":
+        return Effect("temperature_drift", True, "--effects all", 0.0, nums)
+    if not np.any(d.drift_mm_per_c != 0.0):
+        return Effect("temperature_drift", False, "depth_drift_mm_per_c is 0", 0.0, nums)
+    if t is None:
+        return Effect("temperature_drift", True, "applied at each frame's reported "
+                      "illumination temperature (none reported: no drift)", 0.0, nums)
+    if t == d.start_c:
+        return Effect("temperature_drift", False, f"the illumination is at its start, "
+                      f"{t:g} degC", 0.0, nums)
+    drift_mm = (d.drift_mm_per_c * (t - d.start_c)).tolist()
+    return Effect("temperature_drift", True, f"{t:g} degC, {t - d.start_c:+.3g} degC from the "
+                  f"start: range drift {', '.join(f'{v:+.3g}' for v in drift_mm)} mm", 0.0,
+                  {**nums, "range_drift_mm": drift_mm})
 
 
 def _noise(ideal: bool, noise_mm: float) -> Effect:

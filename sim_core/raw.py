@@ -43,6 +43,10 @@ class RawFrame:
         Tap charges A and B in DN where the source exposes them (the simulator does).
     meta : dict
         The settings that produced the frame (sensor parameters, seed, device, use case).
+    illumination_temperature_c : float or None
+        The illumination's temperature the camera reported with the frame [degC] (royale's
+        ``RawData.illuminationTemperature``; the simulated lab's warm-up, :mod:`sim_core.
+        warmup`); None when the source reports none.
     """
 
     phase_images: np.ndarray
@@ -54,6 +58,7 @@ class RawFrame:
     timestamp_s: float = 0.0
     taps: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    illumination_temperature_c: float | None = None
 
     @property
     def shape(self) -> tuple[int, int]:

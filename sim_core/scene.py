@@ -7,6 +7,7 @@ simulate exactly the pose the lab has just measured.
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from sim_core.errors import InvalidInputError, SceneError
 from sim_core.lights import CollimatedLight, PointLight, beam_cross_section_basis
 from sim_core.materials import PRESETS, Material, make_material
 from sim_core.materials.material_file import read_material_file
+from sim_core.optics import StrayLight
 from sim_core.radiometry import (
     earth_albedo_irradiance_w_m2,
     moon_albedo_irradiance_w_m2,
@@ -30,6 +32,7 @@ from sim_core.scene_spec import BOARD_KINDS, MaterialSpec, ObjectSpec, OpticsSpe
 from sim_core.sensor import SensorParams
 from sim_core.twin_apply import apply_to_spec, scale_reflectance, true_suns, true_turntable_deg
 from sim_core.twin_file import (
+    TEMPERATURE_RANGE_C,
     ObjectTwinFile,
     TwinParameters,
     has_object_keys,
@@ -38,6 +41,7 @@ from sim_core.twin_file import (
     twin_hash,
     with_object_twin,
 )
+from sim_core.warmup import TemperatureDrift
 
 #: largest solar level a rig state may report; beyond it the lamp supply is out of its range
 MAX_MEASURED_SUNS = 2.0
@@ -67,6 +71,10 @@ class Scene:
         SHA-256 over the spec, the mesh files' bytes, the rig state and the twin parameters.
     depth_errors : DepthErrorModel or None
     twin_hash : str or None
+    temperature_drift : TemperatureDrift or None
+    illumination_temperature_c : float or None
+        The frame's reported illumination temperature; the drift applies at it.
+    stray_light : StrayLight or None
     """
 
     camera: Camera
@@ -85,6 +93,12 @@ class Scene:
     depth_errors: DepthErrorModel | None = field(default=None, repr=False)
     #: :func:`sim_core.twin_file.twin_hash` of the calibration (or reality) applied, if any
     twin_hash: str | None = None
+    #: the camera's warm-up drift (the twin's ``camera.temperature``), if any
+    temperature_drift: TemperatureDrift | None = field(default=None, repr=False)
+    #: the illumination's temperature of the frame to simulate [degC], if known
+    illumination_temperature_c: float | None = None
+    #: the optics' stray light (the twin's ``camera.stray_light``), if any
+    stray_light: StrayLight | None = None
 
     @property
     def n_triangles(self) -> int:
@@ -394,6 +408,7 @@ def build_scene(
     turntable_deg: float | None = None,
     solar_suns: float | None = None,
     twin: TwinParameters | None = None,
+    illumination_temperature_c: float | None = None,
 ) -> Scene:
     """Pose a scene: load meshes, apply object poses and the turntable, build lights.
 
@@ -414,6 +429,9 @@ def build_scene(
         Overrides the solar simulator level [sun]; 0 closes its shutter.
     twin : TwinParameters, optional
         The calibration or reality to apply.
+    illumination_temperature_c : float, optional
+        The illumination's temperature of the frame (a measured frame's report, the simulated
+        lab's clock): the twin's ``camera.temperature`` drift applies at it [degC].
 
     Raises
     ------
@@ -480,8 +498,13 @@ def build_scene(
         tris = np.zeros((0, 3, 3))
         mat_idx = obj_idx = np.zeros(0, dtype=np.int32)
     rig = {"turntable_deg": angle, "solar_suns": solar_suns}
+    temperature_c = _checked_temperature(illumination_temperature_c)
+    if temperature_c is not None:  # absent: the hash of a scene without one is unchanged
+        rig["illumination_temperature_c"] = temperature_c
     t_hash = twin_hash(twin) if twin is not None else None
     depth = twin.camera.depth if twin is not None else None
+    warm = twin.camera.temperature if twin is not None else None
+    stray = twin.camera.stray_light if twin is not None else None
     return Scene(
         camera=camera,
         light=light,
@@ -498,4 +521,20 @@ def build_scene(
         depth_errors=None if depth is None else DepthErrorModel.from_spec(
             depth, camera.modulation_frequencies_hz, camera.intrinsics.shape),
         twin_hash=t_hash,
+        temperature_drift=None if warm is None else TemperatureDrift.from_spec(
+            warm, camera.modulation_frequencies_hz),
+        illumination_temperature_c=temperature_c,
+        stray_light=None if stray is None else StrayLight(stray.fraction,
+                                                          stray.kernel_radius_px),
     )
+
+
+def _checked_temperature(value: float | None) -> float | None:
+    """A frame's illumination temperature, checked against the files' range [degC]."""
+    if value is None:
+        return None
+    lo, hi = TEMPERATURE_RANGE_C
+    if not (math.isfinite(float(value)) and lo <= float(value) <= hi):
+        raise InvalidInputError("illumination_temperature_c",
+                                f"{value!r} is outside [{lo:g}, {hi:g}] degC")
+    return float(value)

@@ -184,6 +184,57 @@ class DepthErrors(_Strict):
         return v
 
 
+#: illumination temperatures a file may give [degC]: the pico flexx's operating range and more
+TEMPERATURE_RANGE_C = (-40.0, 125.0)
+#: largest depth drift a file may give [mm/degC] (datasheets: a few tenths of a mm per degC)
+MAX_DEPTH_DRIFT_MM_PER_C = 20.0
+#: largest stray-light fraction a file may give: beyond it the lens is no imaging system
+MAX_STRAY_LIGHT_FRACTION = 0.5
+#: largest stray-light kernel radius a file may give [px] (beyond the image: uniform spread)
+MAX_STRAY_LIGHT_RADIUS_PX = 10000.0
+
+TemperatureC = Annotated[float, Field(ge=TEMPERATURE_RANGE_C[0], le=TEMPERATURE_RANGE_C[1],
+                                      allow_inf_nan=False)]
+DriftMmPerC = Annotated[float, Field(ge=-MAX_DEPTH_DRIFT_MM_PER_C, le=MAX_DEPTH_DRIFT_MM_PER_C,
+                                     allow_inf_nan=False)]
+
+
+class CameraTemperature(_Strict):
+    """The illumination's warm-up and the depth drift it causes (issue 27; TI's calibration model).
+
+    The illumination warms from ``illumination_start_c`` towards ``illumination_end_c`` along
+    ``T(t) = T_end + (T_start - T_end) exp(-t / time_constant_s)`` from the service's start
+    (the simulated lab's clock); every frame's range grows by ``depth_drift_mm_per_c`` per
+    degree above the start: one number for all modulation frequencies, or one per frequency in
+    the use case's order (:mod:`sim_core.warmup`). A calibration uses only the start and the
+    drift (it applies each measured frame's reported temperature).
+    """
+
+    illumination_start_c: TemperatureC
+    illumination_end_c: TemperatureC
+    time_constant_s: Annotated[float, Field(gt=0.0, le=1e6, allow_inf_nan=False)]
+    #: one entry applies to every frequency (a single number is read as that)
+    depth_drift_mm_per_c: list[DriftMmPerC] = Field(min_length=1, max_length=4)
+
+    @field_validator("depth_drift_mm_per_c", mode="before")
+    @classmethod
+    def _one_number_for_all(cls, v: Any):
+        return [v] if isinstance(v, int | float) and not isinstance(v, bool) else v
+
+
+class StrayLight(_Strict):
+    """Light the lens and cover glass spread over the whole image (issue 27).
+
+    ``fraction`` of each pixel's light (DC and phasors alike) leaves it and is spread over the
+    image with a normalised Gaussian kernel of standard deviation ``kernel_radius_px``
+    (:class:`sim_core.optics.StrayLight`).
+    """
+
+    fraction: Annotated[float, Field(ge=0.0, le=MAX_STRAY_LIGHT_FRACTION, allow_inf_nan=False)]
+    kernel_radius_px: Annotated[float, Field(ge=0.0, le=MAX_STRAY_LIGHT_RADIUS_PX,
+                                             allow_inf_nan=False)]
+
+
 class CameraParameters(_Strict):
     """What the camera really is: intrinsics, distortion, depth errors, sensor."""
 
@@ -194,6 +245,10 @@ class CameraParameters(_Strict):
     distortion: Distortion | None = None
     depth: DepthErrors | None = None
     sensor: SensorOverrides = SensorOverrides()
+    #: the illumination's warm-up drift (absent: none)
+    temperature: CameraTemperature | None = None
+    #: the optics' stray light (absent: none)
+    stray_light: StrayLight | None = None
 
     @field_validator("fx_px", "fy_px", "cx_px", "cy_px", "distortion")
     @classmethod

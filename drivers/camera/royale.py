@@ -357,6 +357,7 @@ def royale_to_raw_frame(
         exposure_s=exposure_us * 1e-6,
         timestamp_s=stamp,
         meta=info,
+        illumination_temperature_c=data.illumination_temperature_c,
     )
 
 

@@ -53,8 +53,8 @@ from drivers.camera.protocol import (
     CameraNotFoundError,
 )
 from drivers.camera.wire import (
+    READABLE_VERSIONS,
     STATUS_SIZE,
-    WIRE_VERSION,
     CorruptFrameError,
     DeviceStatus,
     FrameError,
@@ -353,11 +353,11 @@ class UsbCamera:
                     "(drivers.camera.royale.RoyaleCamera)"
                 ) from exc
             raise CameraError(f"{self.name}: GET_STATUS failed: {exc}") from exc
-        if status.wire_version != WIRE_VERSION:
+        if status.wire_version not in READABLE_VERSIONS:
             self._release()
             raise CameraError(
                 f"{self.name}: device speaks wire version {status.wire_version}; this driver "
-                f"speaks {WIRE_VERSION}"
+                f"speaks {', '.join(map(str, READABLE_VERSIONS))}"
             )
         self._identity = CameraIdentity(
             model=KNOWN_PRODUCTS.get(pid, f"PMD device {pid:04x}"),

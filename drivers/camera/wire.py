@@ -43,6 +43,7 @@ __all__ = [
     "MAX_RAW",
     "N_PHASES",
     "RAW_OFFSET",
+    "READABLE_VERSIONS",
     "STATUS",
     "STATUS_ERRORS",
     "STATUS_SIZE",
@@ -70,7 +71,9 @@ __all__ = [
 ]
 
 MAGIC = b"TOFW"
-WIRE_VERSION = 1
+WIRE_VERSION = 2
+#: versions this decoder reads: 1 (no temperature: its reserved bytes are zero) and 2
+READABLE_VERSIONS = (1, 2)
 HEADER_SIZE = 64
 N_PHASES = 4
 BITS_PER_VALUE = 12
@@ -84,8 +87,9 @@ FLAG_GREY = 0x0001
 #: magic, version, header size, flags, sequence, use case code, n frequencies, n phases,
 #: bits per value, width, height, exposure [us], timestamp [us since the epoch],
 #: frequency 0 [Hz], frequency 1 [Hz], payload length [bytes], payload CRC32,
-#: 12 reserved bytes, header CRC32 (over bytes 0..59).
-HEADER = struct.Struct("<4sBBHIBBBBHHIQIIII12xI")
+#: illumination temperature [degC] as float32 (version 2; NaN: not reported; version 1 has
+#: reserved zero bytes there), 8 reserved bytes, header CRC32 (over bytes 0..59).
+HEADER = struct.Struct("<4sBBHIBBBBHHIQIIIIf8xI")
 assert HEADER.size == HEADER_SIZE
 
 # -- control requests ----------------------------------------------------------------------
@@ -254,6 +258,8 @@ class FrameHeader:
     flags: int = FLAG_GREY
     n_phases: int = N_PHASES
     bits_per_value: int = BITS_PER_VALUE
+    #: the illumination's temperature the camera reports with the frame [degC] (version 2)
+    illumination_temperature_c: float | None = None
 
     @property
     def n_images(self) -> int:
@@ -289,9 +295,19 @@ def _pack_header(h: FrameHeader) -> bytes:
         freqs[1],
         h.payload_length,
         h.payload_crc32,
+        _temperature_field(h),
         0,
     )
     return body[:-4] + struct.pack("<I", zlib.crc32(body[:-4]))
+
+
+def _temperature_field(h: FrameHeader) -> float:
+    """The header's temperature field: the reported temperature, NaN when there is none (a
+    version-1 header keeps its reserved zero bytes)."""
+    if h.version < 2:
+        return 0.0
+    t = h.illumination_temperature_c
+    return math.nan if t is None else float(t)
 
 
 def decode_header(data: bytes) -> FrameHeader:
@@ -330,14 +346,15 @@ def decode_header(data: bytes) -> FrameHeader:
         f1,
         length,
         payload_crc,
+        temperature_c,
         header_crc,
     ) = HEADER.unpack(raw)
     if magic != MAGIC:
         raise FrameError("magic", f"frame starts with {magic!r}, expected {MAGIC!r}")
-    if version != WIRE_VERSION:
+    if version not in READABLE_VERSIONS:
         raise FrameError(
             "version",
-            f"frame has wire version {version}; this decoder reads {WIRE_VERSION}",
+            f"frame has wire version {version}; this decoder reads {list(READABLE_VERSIONS)}",
             seq,
         )
     if header_size != HEADER_SIZE:
@@ -387,6 +404,8 @@ def decode_header(data: bytes) -> FrameHeader:
         flags=flags,
         n_phases=n_ph,
         bits_per_value=bits,
+        illumination_temperature_c=(
+            float(temperature_c) if version >= 2 and math.isfinite(temperature_c) else None),
     )
     if length != header.expected_payload_length:
         raise FrameError(
@@ -423,6 +442,7 @@ def encode_frame(
     sequence: int,
     timestamp_us: int,
     exposure_us: int | None = None,
+    illumination_temperature_c: float | None = None,
 ) -> bytes:
     """Header plus payload of one frame from raw 12-bit images.
 
@@ -438,6 +458,8 @@ def encode_frame(
         Capture time in microseconds since the Unix epoch.
     exposure_us : int or None
         Exposure per phase step; the use case's when None.
+    illumination_temperature_c : float or None
+        The illumination's temperature to report [degC]; None: not reported.
     """
     uc = get_use_case(use_case)
     grey = np.asarray(grey)
@@ -472,6 +494,7 @@ def encode_frame(
         frequencies_hz=tuple(round(f) for f in uc.frequencies_hz),
         payload_length=len(payload),
         payload_crc32=zlib.crc32(payload),
+        illumination_temperature_c=illumination_temperature_c,
     )
     return _pack_header(header) + payload
 
@@ -553,6 +576,7 @@ def wire_to_raw_frame(frame: WireFrame, meta: dict[str, Any] | None = None) -> R
         exposure_s=h.exposure_us * 1e-6,
         timestamp_s=h.timestamp_us * 1e-6,
         meta=info,
+        illumination_temperature_c=h.illumination_temperature_c,
     )
 
 
@@ -596,6 +620,7 @@ def encode_raw_frame(
         sequence=sequence,
         timestamp_us=timestamp_us,
         exposure_us=exposure_us,
+        illumination_temperature_c=raw.illumination_temperature_c,
     )
 
 
@@ -621,7 +646,14 @@ def quantize_frame(raw: RawFrame, use_case: str | int | UseCase) -> RawFrame:
         payload_crc32=0,
     )
     out = wire_to_raw_frame(WireFrame(header, grey, phases))
-    return dataclasses.replace(out, timestamp_s=raw.timestamp_s, meta=dict(raw.meta))
+    return dataclasses.replace(out, timestamp_s=raw.timestamp_s, meta=dict(raw.meta),
+                               illumination_temperature_c=_as_float32(
+                                   raw.illumination_temperature_c))
+
+
+def _as_float32(value: float | None) -> float | None:
+    """A temperature as the header's float32 carries it."""
+    return None if value is None else float(np.float32(value))
 
 
 # -- status --------------------------------------------------------------------------------

@@ -662,6 +662,7 @@ class SimulatedUsbCamera:
                 f"{raw.shape} for {request!r}; expected ({uc.n_frequencies}, 4, {uc.height}, "
                 f"{uc.width}) and {uc.shape}",
             )
+        # the frame's reported illumination temperature travels in the header (wire version 2)
         data = encode_raw_frame(raw, use_case=uc, sequence=seq, timestamp_us=int(now_s * 1e6))
         if self.faults.fire("corrupt") is not None:
             buf = bytearray(data)

@@ -13,6 +13,13 @@ Repeated frames of one rig state are exposures of the *same* rendered light fiel
 sensor noise (the render is cached), as repeated frames of a static scene are: their
 differences are the camera's noise alone, which the noise calibration relies on.
 
+The reality's camera effects of issue 27 act on every frame: its stray light
+(``camera.stray_light``) spreads the rendered light, and its warm-up (``camera.temperature``)
+drifts each frame's depth at the illumination's temperature on the lab's clock
+(:class:`drivers.sim.lab_clock.LabClock`: frames and moves since the service's start), which the
+frame reports (``RawFrame.illumination_temperature_c``, as royale's
+``RawData.illuminationTemperature``).
+
 The operator's swap of what stands on the turntable is :meth:`SimulatedWorld.mount`: the
 scene's own mounted objects, or other objects (a calibration board in its fixture).
 
@@ -32,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drivers.sim.lab_clock import LabClock
 from drivers.sim.usb_camera import CameraRequest
 from sim_core.pipeline import RenderedLight, expose_light, render_light
 from sim_core.raw import RawFrame
@@ -41,6 +49,7 @@ from sim_core.scene import Scene, build_scene
 from sim_core.scene_spec import ObjectPose, ObjectSpec, SceneSpec
 from sim_core.subframes import moves_during_frame, phase_step_angles_deg
 from sim_core.twin_file import MountParameters, ObjectParameters, RealityFile, TurntableParameters
+from sim_core.warmup import illumination_temperature_c
 
 #: rendered light fields kept per world (one per rig state and use case, most recent first)
 CACHE_STATES = 4
@@ -118,6 +127,8 @@ class SimulatedWorld:
         #: whether the last frame was rendered per phase step (the table moved during it);
         #: for tests and diagnostics: a frame's own metadata says only what a camera reports
         self.last_rendered_per_step = False
+        #: the simulated lab's time since the service's start (the illumination's warm-up)
+        self.clock = LabClock()
         # Fail now, not at the first frame, if the reality does not fit the scene.
         build_scene(spec, self.base_dir, twin=self.reality)
 
@@ -205,17 +216,28 @@ class SimulatedWorld:
         step_angles = self._step_angles_deg(request, state)
         with self._lock:  # one render at a time; the camera thread and tests may both ask
             self.last_rendered_per_step = step_angles is not None
+            temperature_c = self._illumination_temperature_c(request, state)
             if step_angles is None:
                 scene, rendered = self._rendered(request, state)
-                frame = expose_light(scene, rendered, noise_rng=request.rng())
+                steps = None
             else:
                 lights = [self._rendered(request, dataclasses.replace(
                     state, turntable_angle_deg=float(a))) for a in step_angles.ravel()]
-                scene = lights[0][0]
-                frame = expose_light(scene, lights[0][1], noise_rng=request.rng(),
-                                     steps=[light for _, light in lights])
+                scene, rendered = lights[0]
+                steps = [light for _, light in lights]
+            scene = dataclasses.replace(scene, illumination_temperature_c=temperature_c)
+            frame = expose_light(scene, rendered, noise_rng=request.rng(), steps=steps)
         raw = frame.raw
         # Nothing about the reality goes into the frame: only what a camera would report.
         meta = {"source": "rendered", "frame_index": request.frame_index,
                 "rig": dataclasses.asdict(state)}
-        return dataclasses.replace(raw, timestamp_s=request.timestamp_s, meta=meta)
+        return dataclasses.replace(raw, timestamp_s=request.timestamp_s, meta=meta,
+                                   illumination_temperature_c=temperature_c)
+
+    def _illumination_temperature_c(self, request: CameraRequest,
+                                    state: WorldState) -> float | None:
+        """The illumination's temperature at this frame on the lab's clock (the reality's
+        warm-up), as the camera reports it; None without a ``camera.temperature``."""
+        t_s = self.clock.frame_time_s(state.turntable_angle_deg, request.use_case.frame_rate_hz)
+        warm = self.reality.camera.temperature
+        return None if warm is None else illumination_temperature_c(t_s, warm)

@@ -76,6 +76,9 @@ class SimulationJob:
     #: is then its angle at the frame's start and each phase step is rendered at its own
     #: angle (:func:`sim_core.pipeline.simulate_in_motion`), as the camera took it
     turntable_speed_deg_s: float = 0.0
+    #: the measured frame's reported illumination temperature [degC]: a twin with
+    #: ``camera.temperature`` applies its drift at it (None: not reported, no drift)
+    illumination_temperature_c: float | None = None
 
 
 def _material_specs(spec: SceneSpec):
@@ -100,6 +103,7 @@ def make_job(
     extra: dict[str, Any] | None = None,
     twin: dict[str, Any] | None = None,
     turntable_speed_deg_s: float = 0.0,
+    illumination_temperature_c: float | None = None,
 ) -> SimulationJob:
     """A job for ``spec`` posed at the given rig state, rendered as ``request`` asks, with its
     mesh and table files packed in."""
@@ -128,6 +132,7 @@ def make_job(
         extra=dict(extra or {}),
         twin=twin,
         turntable_speed_deg_s=turntable_speed_deg_s,
+        illumination_temperature_c=illumination_temperature_c,
     )
 
 
@@ -200,8 +205,9 @@ def _step_scenes(job: SimulationJob, spec: Any, folder: str, built: Any, twin: A
                                    len(cam.modulation_frequencies_hz), cam.exposure_s)
     if not moves_during_frame(angles):
         return None
-    scenes = {round(float(a), 9): build_scene(spec, folder, turntable_deg=float(a),
-                                              solar_suns=job.solar_suns, twin=twin)
+    scenes = {round(float(a), 9): build_scene(
+                  spec, folder, turntable_deg=float(a), solar_suns=job.solar_suns, twin=twin,
+                  illumination_temperature_c=job.illumination_temperature_c)
               for a in angles.ravel()}
     return angles, scenes
 
@@ -236,7 +242,8 @@ def run_job(job: SimulationJob) -> SimulationResult:
                                 for obj in scene.get("objects", [])]
         spec = parse_scene_spec(scene)
         built = build_scene(
-            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin
+            spec, tmp, turntable_deg=job.turntable_deg, solar_suns=job.solar_suns, twin=twin,
+            illumination_temperature_c=job.illumination_temperature_c,
         )
         step_scenes = _step_scenes(job, spec, tmp, built, twin)
     with RENDER_LOCK:

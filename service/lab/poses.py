@@ -121,6 +121,9 @@ class Measurement:
     #: ``rig`` holds its angle at the frame's start; the simulations render each sub-frame at
     #: its angle
     turning_deg_s: float = 0.0
+    #: the illumination temperature the camera reported with the frame [degC], if any: the
+    #: simulations apply a calibrated warm-up drift at it
+    illumination_temperature_c: float | None = None
 
 
 @dataclass(frozen=True)
@@ -210,7 +213,7 @@ def store_measurement(
     )
     return Measurement(row, image, state, sim_spec,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
-                       grey_full_scale, second, turning_deg_s)
+                       grey_full_scale, second, turning_deg_s, raw.illumination_temperature_c)
 
 
 def submit(
@@ -241,9 +244,11 @@ def _submit_one(
             "object_names": [o.name for o in plan.scene.spec.objects],
             "turntable_object_ids": plan.scene.turntable_object_ids,
             "measured_frame_id": m.row.id, "twin": label,
+            "illumination_temperature_c": m.illumination_temperature_c,
         },
         twin=twin.to_json(),
         turntable_speed_deg_s=m.turning_deg_s,
+        illumination_temperature_c=m.illumination_temperature_c,
     )
     return frame_id, executor.submit(job)
 

@@ -128,3 +128,40 @@ def pose_errors(fitted: ObjectPose, truth: ObjectPose) -> tuple[float, float]:
         truth.rotation_deg).T
     angle = np.degrees(np.arccos(np.clip((np.trace(dr) - 1.0) / 2.0, -1.0, 1.0)))
     return float(dp), float(angle)
+
+
+#: issue 27's camera effects: plausible ranges of the warm-up drift and the stray light
+DRIFT_MM_PER_C = (0.1, 1.0)
+ILLUMINATION_START_C = 25.0
+ILLUMINATION_END_C = 45.0
+WARMUP_TIME_CONSTANT_S = (300.0, 1200.0)
+STRAY_LIGHT_FRACTION = (0.005, 0.03)
+STRAY_LIGHT_RADIUS_PX = (20.0, 80.0)
+
+
+def random_camera_effects(seed: int) -> dict:
+    """Issue 27's camera keys drawn at random: ``{"temperature": ..., "stray_light": ...}``.
+
+    The illumination warms from 25 to 45 degC with a time constant in
+    :data:`WARMUP_TIME_CONSTANT_S`, the range drifts by :data:`DRIFT_MM_PER_C` per degree (of
+    either sign: a real camera's drift may shorten or lengthen), one number for every frequency;
+    the stray light takes a fraction in :data:`STRAY_LIGHT_FRACTION` with a kernel radius in
+    :data:`STRAY_LIGHT_RADIUS_PX`. Drawn from a stream of its own (``[seed, 27]``).
+    """
+    v = np.random.default_rng([seed, 27]).uniform
+    drift = float(v(*DRIFT_MM_PER_C)) * (1.0 if v() < 0.5 else -1.0)
+    return {
+        "temperature": {"illumination_start_c": ILLUMINATION_START_C,
+                        "illumination_end_c": ILLUMINATION_END_C,
+                        "time_constant_s": float(v(*WARMUP_TIME_CONSTANT_S)),
+                        "depth_drift_mm_per_c": drift},
+        "stray_light": {"fraction": float(v(*STRAY_LIGHT_FRACTION)),
+                        "kernel_radius_px": float(v(*STRAY_LIGHT_RADIUS_PX))},
+    }
+
+
+def with_camera_effects(reality: RealityFile, seed: int) -> RealityFile:
+    """``reality`` with issue 27's camera effects of ``seed`` (:func:`random_camera_effects`)."""
+    data = reality.model_dump(mode="json", exclude_defaults=True)
+    data.setdefault("camera", {}).update(random_camera_effects(seed))
+    return parse_reality(data)

@@ -93,7 +93,7 @@ def test_other_vendors_are_not_found_by_pmd_vendor_id(sim):
 # -- vendor requests -------------------------------------------------------------------------
 def test_get_status_after_power_on(dev):
     status = _status(dev)
-    assert (status.wire_version, status.use_case_code, status.streaming) == (1, 0, False)
+    assert (status.wire_version, status.use_case_code, status.streaming) == (2, 0, False)
     assert (status.next_sequence, status.firmware) == (0, "1.00")
 
 

@@ -48,7 +48,7 @@ def test_check_of_a_healthy_simulated_rig(serial_sims):
     camera = report.check("camera")
     assert camera.status == "ok"
     assert "pico flexx serial 0005-4804-0050-1827" in camera.detail
-    assert "wire protocol v1, one MODE_5_45FPS_500 frame (1, 4, 171, 224) read" in camera.detail
+    assert "wire protocol v2, one MODE_5_45FPS_500 frame (1, 4, 171, 224) read" in camera.detail
     assert report.check("royale").status in ("ok", "warning")
     assert report.check("turntable").status == "warning"  # not referenced after power-on
     assert "NOT REFERENCED" in report.check("turntable").detail

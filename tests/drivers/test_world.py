@@ -124,3 +124,76 @@ def test_mounting_other_objects_swaps_what_is_on_the_turntable():
     # the same scene again: only sensor noise differs, well under 50 e- per pixel on average
     gain = SensorParams().adc_gain_e_per_dn
     assert np.abs(again.intensity.astype(float) - before.intensity).mean() * gain < 50.0
+
+
+# --- issue 27: the warm-up on the lab's clock, stray light ----------------------------------
+WARM_UP = {"illumination_start_c": 25.0, "illumination_end_c": 45.0, "time_constant_s": 5.0,
+           "depth_drift_mm_per_c": 1.0}
+
+
+def test_the_lab_clock_counts_frames_and_moves():
+    from drivers.sim.lab_clock import LabClock
+
+    clock = LabClock()
+    assert clock.frame_time_s(30.0, 45.0) == 0.0
+    assert clock.frame_time_s(30.0, 45.0) == pytest.approx(1 / 45)
+    # 30 -> 150 deg at 20 deg/s and 80 deg/s^2: 0.25 s up, 5.75 s flat, 0.25 s down
+    assert clock.frame_time_s(150.0, 45.0) == pytest.approx(2 / 45 + 6.25)
+    assert clock.move_duration_s(0.0, 1.0) == pytest.approx(2 * (1.0 / 80) ** 0.5)  # triangle
+    with pytest.raises(ValueError, match="frame_rate_hz"):
+        clock.frame_time_s(0.0, 0.0)
+
+
+def test_frames_report_the_warming_illumination_and_read_its_drift():
+    from sim_core.warmup import illumination_temperature_c
+
+    reality = parse_reality({"camera": {"temperature": WARM_UP}})
+    world = _world(reality)
+    dark = {"solar_suns": 0.0, "shutter_open": False}  # the camera's own light: less noise
+
+    def frames(first_index, angle, n=6):
+        return [world(CameraRequest(UC, first_index + i, seed=3, rig_state=RigState(
+            turntable_angle_deg=angle, **dark))) for i in range(n)]
+
+    def mean_range_m(batch):
+        images = [reconstruct_raw(f, _nominal_z_over_range(f)) for f in batch]
+        bright = np.all([im.valid for im in images], axis=0)
+        return np.mean([im.range_m for im in images], axis=0), bright
+
+    cold = frames(0, 30.0)
+    frames(6, 150.0, n=1)  # a 6.25 s move there, another back: the lamp warms
+    warm = frames(7, 30.0)
+    t_warm = 7 / 45 + 6.25 + 6.25
+    assert cold[0].illumination_temperature_c == 25.0
+    assert warm[0].illumination_temperature_c == pytest.approx(
+        illumination_temperature_c(t_warm, reality.camera.temperature))
+    temps = [f.illumination_temperature_c for f in cold + warm]
+    assert temps == sorted(temps)  # warming all along
+    (a, va), (b, vb) = mean_range_m(cold), mean_range_m(warm)
+    both = va & vb
+    assert both.sum() > 1000
+    drift_mm = np.median(b[both] - a[both]) * 1e3
+    expect_mm = 1.0 * (np.mean(temps[6:]) - np.mean(temps[:6]))  # 1 mm/degC
+    assert expect_mm > 15.0
+    assert drift_mm == pytest.approx(expect_mm, abs=1.5)
+
+
+def test_the_temperature_reaches_the_host_through_the_usb_wire():
+    reality = parse_reality({"camera": {"temperature": WARM_UP}})
+    with simulated_rig(frame_source=_world(reality), seed=3) as r:
+        r.apply(RigState(turntable_angle_deg=30.0, solar_suns=1.0, shutter_open=True))
+        frames = r.capture(2)
+    temps = [f.illumination_temperature_c for f in frames]
+    assert all(t is not None and 25.0 <= t < 45.0 for t in temps)
+    assert temps[1] > temps[0]  # one frame period later, warmer
+
+
+def test_stray_light_in_the_world_lights_the_dark_background():
+    nominal = _world(parse_reality({}))(_request())
+    stray = _world(parse_reality({"camera": {"stray_light": {"fraction": 0.03,
+                                                              "kernel_radius_px": 60.0}}}))(
+        _request())
+    corner = np.s_[0:20, 0:30]  # background, far from the satellite
+    gain = np.abs(stray.phase_images[0, 0][corner] - nominal.phase_images[0, 0][corner])
+    assert np.mean(gain) > 2.0 * np.std(nominal.phase_images[0, 0][corner]) / np.sqrt(600)
+    assert nominal.illumination_temperature_c is None  # no warm-up in this reality

@@ -123,3 +123,18 @@ def test_reconstruction_of_the_written_raw_frame_is_the_stored_one(tmp_path, sim
     raw = frame_io.read_raw(tmp_path / "raw.npz")
     img = reconstruct_raw(raw, z_over_range(scene.camera.intrinsics))
     np.testing.assert_array_equal(img.range_m, frame.image.range_m)
+
+
+def test_a_measured_frames_illumination_temperature_is_stored_and_read_back(tmp_path, sim_frame):
+    import dataclasses
+
+    scene, frame = sim_frame
+    warm = dataclasses.replace(frame.raw, illumination_temperature_c=36.75)
+    frame_io.write_measured(tmp_path / "m", warm, scene.camera, {})
+    back = frame_io.read_frame(tmp_path / "m")
+    assert back.meta[frame_io.TEMPERATURE_KEY] == 36.75
+    assert back.raw.illumination_temperature_c == 36.75
+    frame_io.write_measured(tmp_path / "n", frame.raw, scene.camera, {})  # reports none
+    none = frame_io.read_frame(tmp_path / "n")
+    assert frame_io.TEMPERATURE_KEY not in none.meta
+    assert none.raw.illumination_temperature_c is None

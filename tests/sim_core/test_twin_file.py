@@ -116,3 +116,51 @@ def test_a_scene_applies_the_calibration_it_references(tmp_path):
     missing = spec.model_copy(update={"calibration": "nope.yaml"})
     with pytest.raises(InvalidInputError, match="does not exist"):
         build_scene(missing, tmp_path)
+
+
+# --- issue 27: the camera's warm-up drift and stray light ------------------------------------
+WARMUP = {"illumination_start_c": 25.0, "illumination_end_c": 45.0, "time_constant_s": 600.0,
+          "depth_drift_mm_per_c": 0.4}
+
+
+def test_warmup_and_stray_light_keys_are_read_by_realities_and_calibrations():
+    data = {"camera": {"temperature": WARMUP,
+                       "stray_light": {"fraction": 0.02, "kernel_radius_px": 40.0}}}
+    cal, reality = parse_calibration(data), parse_reality(data)
+    assert cal.camera.temperature == reality.camera.temperature
+    assert cal.camera.temperature.depth_drift_mm_per_c == [0.4]  # one number: all frequencies
+    assert reality.camera.stray_light.kernel_radius_px == 40.0
+    per_f = parse_calibration({"camera": {"temperature": {**WARMUP,
+                                                          "depth_drift_mm_per_c": [0.3, 0.5]}}})
+    assert per_f.camera.temperature.depth_drift_mm_per_c == [0.3, 0.5]
+    assert twin_hash(cal) != twin_hash(per_f)
+    assert parse_calibration({}).camera.temperature is None  # absent: the effect is off
+    assert parse_calibration({}).camera.stray_light is None
+
+
+@pytest.mark.parametrize(
+    ("camera", "field", "allowed"),
+    [
+        ({"temperature": {**WARMUP, "time_constant_s": 0}}, "temperature.time_constant_s",
+         "greater than 0"),
+        ({"temperature": {**WARMUP, "illumination_end_c": 300}},
+         "temperature.illumination_end_c", "125"),
+        ({"temperature": {**WARMUP, "depth_drift_mm_per_c": [0.1, 30.0]}},
+         "temperature.depth_drift_mm_per_c[1]", "20"),
+        ({"temperature": {**WARMUP, "depth_drift_mm_per_c": [0.1] * 5}},
+         "temperature.depth_drift_mm_per_c", "at most 4"),
+        ({"temperature": {k: v for k, v in WARMUP.items() if k != "time_constant_s"}},
+         "temperature.time_constant_s", "required"),
+        ({"stray_light": {"fraction": 0.6, "kernel_radius_px": 30}}, "stray_light.fraction",
+         "0.5"),
+        ({"stray_light": {"fraction": 0.01, "kernel_radius_px": -1}},
+         "stray_light.kernel_radius_px", "greater than or equal to 0"),
+        ({"stray_light": {"fraction": float("nan"), "kernel_radius_px": 1}},
+         "stray_light.fraction", "finite"),
+    ],
+)
+def test_bad_warmup_and_stray_light_values_name_the_field_and_range(camera, field, allowed):
+    with pytest.raises(InvalidInputError) as err:
+        parse_reality({"camera": camera})
+    assert err.value.field == f"reality.camera.{field}"
+    assert allowed in str(err.value)

@@ -352,3 +352,11 @@ def test_royale_camera_glue_errors(monkeypatch):
     monkeypatch.setattr(royale_backend, "roypy", _stand_in_roypy(cam, ids=()))
     with pytest.raises(CameraNotFoundError, match="royale sees no camera"):
         RoyaleCamera().connect()
+
+
+def test_the_illumination_temperature_is_copied_from_raw_data_when_present():
+    data = _royale_layout(MODE5)
+    warm = RoyaleRawData(**{**data.__dict__, "illumination_temperature_c": 38.5})
+    assert royale_to_raw_frame(warm, use_case=MODE5).illumination_temperature_c == 38.5
+    cold = RoyaleRawData(**{**data.__dict__, "illumination_temperature_c": None})
+    assert royale_to_raw_frame(cold, use_case=MODE5).illumination_temperature_c is None

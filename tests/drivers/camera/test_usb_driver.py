@@ -162,7 +162,7 @@ def test_identity_comes_from_the_usb_descriptors(camera):
     )
     assert (ident.vendor_id, ident.product_id) == (0x1C28, 0xC012)
     assert ident.usb_speed == "high (480 Mbit/s)" and ident.firmware == "1.00"
-    assert ident.backend == "pyusb" and ident.extra["wire_version"] == "1"
+    assert ident.backend == "pyusb" and ident.extra["wire_version"] == "2"
 
 
 def test_unknown_use_case_is_refused_before_anything_is_sent(sim, camera):
@@ -222,8 +222,8 @@ def test_device_without_our_wire_protocol_is_recognised():
 
 def test_device_of_another_wire_version_is_refused(sim):
     real_status = sim.device.status
-    sim.device.status = lambda: dataclasses.replace(real_status(), wire_version=2)
-    with pytest.raises(CameraError, match="speaks wire version 2; this driver speaks 1"):
+    sim.device.status = lambda: dataclasses.replace(real_status(), wire_version=3)
+    with pytest.raises(CameraError, match="speaks wire version 3; this driver speaks 1, 2"):
         UsbCamera(backend=sim, settings=FAST).connect()
 
 

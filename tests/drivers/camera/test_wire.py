@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import zlib
 
@@ -67,7 +68,7 @@ def test_header_layout_matches_the_documented_table():
     payload = data[HEADER_SIZE:]
     expected = (
         b"TOFW"  # magic
-        + bytes([1, 64])  # version, header size
+        + bytes([2, 64])  # version, header size
         + b"\x01\x00"  # flags: grey image present
         + b"\x04\x03\x02\x01"  # sequence, little-endian
         + bytes([1, 1, 4, 12])  # use case code, n frequencies, n phases, bits per value
@@ -79,7 +80,8 @@ def test_header_layout_matches_the_documented_table():
         + (0).to_bytes(4, "little")  # no second frequency
         + (5 * 171 * 224 * 2).to_bytes(4, "little")  # payload length
         + zlib.crc32(payload).to_bytes(4, "little")
-        + bytes(12)  # reserved
+        + struct.pack("<f", float("nan"))  # illumination temperature: not reported
+        + bytes(8)  # reserved
     )
     assert data[:60] == expected
     assert data[60:64] == zlib.crc32(expected).to_bytes(4, "little")
@@ -142,7 +144,8 @@ def test_raw_values_map_to_signed_correlation_c_equals_raw_minus_2048():
     assert raw.frequencies_hz.tolist() == [60.24e6]
     assert raw.exposure_s == pytest.approx(500e-6)
     assert raw.timestamp_s == pytest.approx(2.5)
-    assert raw.meta == {"use_case": "MODE_5_45FPS_500", "sequence": 3, "wire_version": 1}
+    assert raw.meta == {"use_case": "MODE_5_45FPS_500", "sequence": 3, "wire_version": 2}
+    assert raw.illumination_temperature_c is None
 
 
 def _raw(uc, phase_value, intensity_value):
@@ -240,8 +243,8 @@ def test_wrong_magic():
 
 
 def test_newer_version_is_named():
-    with pytest.raises(FrameError, match="wire version 2; this decoder reads 1") as info:
-        decode_frame(_edit(_frame(), 4, b"\x02"))
+    with pytest.raises(FrameError, match=r"wire version 3; this decoder reads \[1, 2\]") as info:
+        decode_frame(_edit(_frame(), 4, b"\x03"))
     assert info.value.reason == "version"
 
 
@@ -348,3 +351,35 @@ def test_status_of_wrong_length_or_form_is_a_protocol_error():
         decode_status(bytes(15))
     with pytest.raises(ProtocolError, match="streaming byte is 2"):
         decode_status(bytes([1, 0, 2]) + bytes(13))
+
+
+# -- the illumination temperature (wire version 2) ----------------------------------------
+def test_a_frames_illumination_temperature_travels_in_the_header():
+    grey, phases = _images(MODE5, seed=1)
+    data = encode_frame(grey, phases, use_case=MODE5, sequence=2, timestamp_us=9,
+                        illumination_temperature_c=37.25)
+    assert data[48:52] == struct.pack("<f", 37.25)
+    raw = wire_to_raw_frame(decode_frame(data))
+    assert raw.illumination_temperature_c == 37.25
+    assert raw.meta["wire_version"] == 2
+
+
+def test_a_version_1_frame_still_decodes_without_a_temperature():
+    """Frames recorded before version 2: version byte 1, reserved zeros where the
+    temperature now is; they decode, and report no temperature (not 0 degC)."""
+    data = _edit(_frame(MODE5), 4, bytes([1]))
+    data = _edit(data, 48, bytes(4))
+    raw = wire_to_raw_frame(decode_frame(data))
+    assert raw.meta["wire_version"] == 1 and raw.illumination_temperature_c is None
+
+
+@settings(max_examples=40, deadline=None)
+@given(t=st.one_of(st.none(), st.floats(-40.0, 125.0)))
+def test_quantize_frame_reports_the_temperature_the_wire_delivers(t):
+    raw = dataclasses.replace(_raw(MODE5, 10.0, 500.0), illumination_temperature_c=t)
+    data = encode_raw_frame(raw, use_case=MODE5, sequence=0, timestamp_us=0)
+    wired = wire_to_raw_frame(decode_frame(data))
+    assert quantize_frame(raw, MODE5).illumination_temperature_c == (
+        wired.illumination_temperature_c)
+    if t is not None:
+        assert wired.illumination_temperature_c == pytest.approx(t, rel=1e-6, abs=1e-5)
