@@ -170,5 +170,19 @@ def read_verdicts(path: str | Path) -> Verdicts:
     return Verdicts.from_json(json.loads(Path(path).read_text(encoding="utf-8")))
 
 
+def chi2_limit_for(dof: int, limit: float = CHI2_UNEXPLAINED, tail: float = 1e-3) -> float:
+    """The reduced chi-square above which a fit with ``dof`` degrees of freedom does not
+    explain its data: :data:`CHI2_UNEXPLAINED`, or, when few residuals make the chi-square
+    itself noisy (its standard deviation is ``sqrt(2 / dof)``), the value noise exceeds with
+    probability ``tail`` only (the chi-square distribution's quantile over ``dof``): 3.5 at 7
+    degrees of freedom, :data:`CHI2_UNEXPLAINED` from about 60 on. No degree of freedom: inf
+    (nothing to judge by; the caller says so)."""
+    from scipy.stats import chi2
+
+    if dof < 1:
+        return math.inf
+    return max(limit, float(chi2.isf(tail, dof)) / dof)
+
+
 __all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
-           "honest_std", "judge", "read_verdicts", "write_verdicts"]
+           "chi2_limit_for", "honest_std", "judge", "read_verdicts", "write_verdicts"]

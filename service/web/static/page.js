@@ -490,7 +490,41 @@ function renderJob(job) {
   $("#cj-links").innerHTML = job.state === "done"
     ? `<a href="${API}/calibrations/${job.id}/files/report.html" target="_blank">report</a>`
       + ` &middot; <a href="${API}/calibrations/${job.id}/files/calibration.yaml">calibration.yaml</a>`
+      + ` &middot; <a href="${API}/calibrations/${job.id}/files/verdicts.json">verdicts.json</a>`
     : "";
+  renderVerdicts(job.verdicts);
+}
+
+// A standard deviation as the report shows it: four significant digits, a list per component.
+function stdText(std) {
+  if (std === null || std === undefined) return "-";
+  const one = (x) => (x === null ? "-" : Number(x).toPrecision(4));
+  return Array.isArray(std) ? std.map(one).join(", ") : one(std);
+}
+
+// The done job's verdicts (key, verdict, std, reason), built with textContent: a reason is
+// text, never markup.
+function renderVerdicts(verdicts) {
+  const box = $("#cj-verdicts");
+  const keys = verdicts ? Object.keys(verdicts) : [];
+  box.hidden = keys.length === 0;
+  const body = $("#cj-verdicts tbody");
+  body.replaceChildren();
+  const counts = {"determined": 0, "not determined": 0, "unexplained": 0};
+  for (const key of keys) {
+    const v = verdicts[key];
+    counts[v.verdict] += 1;
+    const tr = document.createElement("tr");
+    tr.dataset.verdict = v.verdict;
+    for (const text of [key, v.verdict, stdText(v.std), v.reason || ""]) {
+      const td = document.createElement("td");
+      td.textContent = text;
+      tr.append(td);
+    }
+    body.append(tr);
+  }
+  $("#cj-verdict-counts").textContent = `${keys.length} keys: ${counts["determined"]} determined, `
+    + `${counts["not determined"]} not determined, ${counts["unexplained"]} unexplained`;
 }
 
 function followJob(id) {
