@@ -247,7 +247,8 @@ def saddle_std_px(image: np.ndarray, points: np.ndarray, pixel_std: np.ndarray,
         Each pixel's noise in ``image`` (the amplitude's over the flat field's span).
     """
     img = np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
-    sd = np.nan_to_num(np.asarray(pixel_std, dtype=np.float64), nan=np.inf).astype(np.float32)
+    sd = np.asarray(pixel_std, dtype=np.float64)
+    sd = np.where(np.isfinite(sd), sd, np.inf).astype(np.float32)  # NaN: noise unknown, unbounded
     yy, xx, pinv = _saddle_design(half)
     grad = pinv[3:5]  # rows giving (d, e)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)

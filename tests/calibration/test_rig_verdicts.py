@@ -56,7 +56,7 @@ def test_a_key_the_sequence_writes_but_does_not_judge_is_an_error_not_a_gap():
     ev = CameraTurntableEvidence(StageEvidence(1.0, "stage"), std={}, fx_px=200, fy_px=200)
     depth = DepthEvidence(StageEvidence(1.0, "depth"), [1e-3], 1e-4, [60.24e6], (1, 2), (0.5, 1),
                           1.0)
-    with pytest.raises(ValueError, match="no verdict for illumination.power_w"):
+    with pytest.raises(ValueError, match=r"no verdict for illumination\.power_w"):
         rig_verdicts(["camera.fx_px", "illumination.power_w"], ev, depth, {})
 
 
@@ -251,7 +251,7 @@ def test_a_depth_fit_without_the_noise_reports_no_chi_square():
 def _squares(offsets, noise=0.01, seed=0):
     rng = np.random.default_rng(seed)
     pred = np.zeros((60, 80))
-    for i, off in enumerate(offsets):
+    for i in range(len(offsets)):
         r, c = divmod(i, 4)
         pred[5 + 15 * r: 15 + 15 * r, 5 + 18 * c: 17 + 18 * c] = 100.0
     meas = pred * (1 + rng.normal(0, noise, pred.shape))
