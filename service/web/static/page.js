@@ -559,12 +559,12 @@ async function startCalibration(event) {
   if (res.ok) { renderJob(res.data); followJob(res.data.id); }
 }
 
+// The latest job: followed while it runs; once ended, shown as it ended (its verdicts too).
 async function followRunningJob() {
   const res = await call("GET", `${API}/calibrations?limit=1`);
-  if (res.ok && res.data.length && !CALIBRATION_TERMINAL.includes(res.data[0].state)) {
-    renderJob(res.data[0]);
-    followJob(res.data[0].id);
-  }
+  if (!res.ok || !res.data.length) return;
+  renderJob(res.data[0]);
+  if (!CALIBRATION_TERMINAL.includes(res.data[0].state)) followJob(res.data[0].id);
 }
 
 // -- wiring ------------------------------------------------------------------------------------
