@@ -359,6 +359,7 @@ def fit_rig_calibration(
         views = [t for t in views if t[0].name not in set(bad)]
         free, intr, axis = _camera_and_turntable(views, plan, spec, camera)
         stage = reprojection_stage(axis, corner_std)
+        results["views"]["used"] = len(views)
     results["intrinsics"] = intr
     results["views"]["corner_bias_rms_px"] = corner_bias_px
     results["turntable"] = axis
@@ -367,8 +368,7 @@ def fit_rig_calibration(
     results["reprojection"] = {
         "free_pose_reduced_chi2": free_stage_chi2(free, corner_std),
         "joint_reduced_chi2": stage["chi2"],
-        "corner_std_median_px": float(np.median(np.concatenate(
-            [s[np.isfinite(s)] for s in corner_std.values()]))),
+        "corner_std_median_px": _finite_median(corner_std.values()),
         "per_view_reduced_chi2": stage["per_view"], "fixture_spread": spread}
     # 4. depth errors ----------------------------------------------------------------------
     progress(done, total, "depth errors")
@@ -429,6 +429,13 @@ def fit_rig_calibration(
                             depth_evidence(depth, use_case.frequencies_hz),
                             other_verdicts(noise, power, solar))
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
+
+def _finite_median(arrays) -> float | None:
+    """The median of the arrays' finite values; None when there is none."""
+    values = np.concatenate([np.ravel(a) for a in arrays]) if arrays else np.zeros(0)
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else None
+
 
 def _version() -> str:
     try:
