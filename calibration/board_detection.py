@@ -155,13 +155,30 @@ def flat_field(image: np.ndarray, size_px: int = FLAT_FIELD_PX) -> np.ndarray:
     side. The white and black levels are the local maximum and minimum over ``size_px`` (more
     than a square), smoothed; the ratio leaves the pattern with uniform contrast.
     """
+    a = np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0)
+    black, span = flat_field_levels(a, size_px)
+    return np.where(span > 0, (a - black) / np.where(span > 0, span, 1.0), 0.0)
+
+
+def flat_field_levels(image: np.ndarray, size_px: int = FLAT_FIELD_PX
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The black level and the white-minus-black span :func:`flat_field` divides by, (H, W)
+    each: a pixel's noise in the flat-fielded image is its noise over the span."""
     from scipy import ndimage
 
     a = np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0)
     white = ndimage.gaussian_filter(ndimage.maximum_filter(a, size=size_px), size_px / 4.0)
     black = ndimage.gaussian_filter(ndimage.minimum_filter(a, size=size_px), size_px / 4.0)
-    span = white - black
-    return np.where(span > 0, (a - black) / np.where(span > 0, span, 1.0), 0.0)
+    return black, white - black
+
+
+def _saddle_design(half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The offsets (yy, xx) of a (2 half + 1)^2 patch and the pseudo-inverse of the quadratic's
+    design matrix (columns x^2, xy, y^2, x, y, 1)."""
+    yy, xx = np.mgrid[-half : half + 1, -half : half + 1].astype(np.float64)
+    a = np.stack([xx.ravel() ** 2, xx.ravel() * yy.ravel(), yy.ravel() ** 2, xx.ravel(),
+                  yy.ravel(), np.ones(xx.size)], axis=1)
+    return yy, xx, np.linalg.pinv(a)
 
 
 def refine_saddle(image: np.ndarray, points: np.ndarray, half: int = SADDLE_HALF_PX,
@@ -177,10 +194,7 @@ def refine_saddle(image: np.ndarray, points: np.ndarray, half: int = SADDLE_HALF
     flagged False.
     """
     img = np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
-    yy, xx = np.mgrid[-half : half + 1, -half : half + 1].astype(np.float64)
-    a = np.stack([xx.ravel() ** 2, xx.ravel() * yy.ravel(), yy.ravel() ** 2, xx.ravel(),
-                  yy.ravel(), np.ones(xx.size)], axis=1)
-    pinv = np.linalg.pinv(a)
+    yy, xx, pinv = _saddle_design(half)
     out = np.asarray(points, dtype=np.float64).copy()
     ok = np.ones(len(out), dtype=bool)
     h, w = img.shape
@@ -209,3 +223,52 @@ def refine_saddle(image: np.ndarray, points: np.ndarray, half: int = SADDLE_HALF
             ok[i] = False
         out[i] = (x, y)
     return out, ok
+
+
+def saddle_std_px(image: np.ndarray, points: np.ndarray, pixel_std: np.ndarray,
+                  half: int = SADDLE_HALF_PX) -> np.ndarray:
+    """The standard deviation of :func:`refine_saddle`'s corners from the image's noise [px].
+
+    At the saddle the gradient ``(d, e)`` of the fitted quadratic vanishes: a perturbation of
+    the patch moves the corner by ``-H^-1 (dd, de)`` with ``H = [[2a, b], [b, 2c]]``, and the
+    least-squares coefficients carry ``pixel_std^2 pinv pinv^T`` of independent pixel noise
+    (bilinear resampling averages neighbours, so this is an upper bound). Returns (n, 2): the
+    standard deviation of x and y for each point; inf where the patch is no saddle
+    (``det H >= 0``), where the standard deviation reaches beyond the patch (the corner is not
+    defined by the image), or where the patch leaves the image.
+
+    Parameters
+    ----------
+    image : (H, W) float
+        The image the corners were refined on (:func:`flat_field` of the amplitude).
+    points : (n, 2) float
+        The corners [px].
+    pixel_std : (H, W) float
+        Each pixel's noise in ``image`` (the amplitude's over the flat field's span).
+    """
+    img = np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+    sd = np.asarray(pixel_std, dtype=np.float64)
+    sd = np.where(np.isfinite(sd), sd, np.inf).astype(np.float32)  # NaN: noise unknown, unbounded
+    yy, xx, pinv = _saddle_design(half)
+    grad = pinv[3:5]  # rows giving (d, e)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    out = np.full(pts.shape, np.inf)
+    h, w = img.shape
+    for i, (x, y) in enumerate(pts):
+        if not (half + 1 <= x < w - half - 1 and half + 1 <= y < h - half - 1):
+            continue
+        mx, my = (x + xx).astype(np.float32), (y + yy).astype(np.float32)
+        patch = cv2.remap(img, mx, my, cv2.INTER_LINEAR).ravel().astype(np.float64)
+        sigma = float(np.max(cv2.remap(sd, mx, my, cv2.INTER_LINEAR)))
+        qa, qb, qc = (pinv[:3] @ patch)
+        det = 4.0 * qa * qc - qb * qb
+        if not (det < 0.0 and np.isfinite(sigma)):  # no saddle: the corner is not defined
+            continue
+        h_inv = np.array([[2.0 * qc, -qb], [-qb, 2.0 * qa]]) / det
+        cov = sigma**2 * (h_inv @ grad @ grad.T @ h_inv.T)
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        # beyond the patch the image does not place the corner at all (a flat patch's
+        # vanishing curvature): unbounded, not a number of pixels
+        if np.all(std <= half + 1):
+            out[i] = std
+    return out

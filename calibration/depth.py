@@ -50,6 +50,8 @@ class DepthView:
     amplitude: np.ndarray  #: (H, W) [DN]
     true_range_m: np.ndarray  #: (H, W)
     mask: np.ndarray  #: (H, W) bool
+    #: (n_f, H, W) the measured phases' standard deviation from the noise model, if known
+    phase_std_rad: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -69,6 +71,16 @@ class DepthCalibration:
     residual_before_mm: np.ndarray = field(repr=False, default=None)
     #: (H, W) pixels that saw the board in some view (where the fixed pattern is measured)
     pixels_seen: np.ndarray = field(repr=False, default=None)
+    #: the residual after against the views' phase noise (:attr:`DepthView.phase_std_rad`):
+    #: chi-square per degree of freedom, overall and per view (NaN without the noise)
+    reduced_chi2: float = float("nan")
+    per_view_reduced_chi2: dict[str, float] = field(default_factory=dict)
+    #: per frequency, the largest standard deviation of the global model (offset and wiggling
+    #: together) over the phases seen [rad], from the noise (NaN without it)
+    model_std_rad: tuple[float, ...] = ()
+    #: the RMS over the grid cells seen of a cell's offset's standard deviation [m] (the
+    #: target is an RMS over the pixels seen)
+    pixel_offset_std_m: float = float("nan")
 
     def summary(self) -> dict:
         return {"rms_before_mm": self.rms_before_mm, "rms_after_mm": self.rms_after_mm,
@@ -76,7 +88,9 @@ class DepthCalibration:
                 "phase_span_rad": list(self.phase_span_rad),
                 "range_span_m": list(self.range_span_m),
                 "determined_terms": self.determined_terms, "total_terms": self.total_terms,
-                "pixel_coverage": self.coverage,
+                "pixel_coverage": self.coverage, "reduced_chi2": self.reduced_chi2,
+                "model_std_rad": list(self.model_std_rad),
+                "pixel_offset_std_m": self.pixel_offset_std_m,
                 "note": "wiggling determined only over range_span_m"}
 
     def plot(self, ax) -> str:
@@ -101,7 +115,8 @@ def fit_depth_errors(views: list[DepthView], frequencies_hz) -> DepthCalibration
     shape = views[0].amplitude.shape
     k_rad = 4 * np.pi * freqs / SPEED_OF_LIGHT_M_S  # phase per metre of range
     # Gather samples: pixel index, frequency, true phase, measured residual, weight, view.
-    pix, fk, phi, e, w, vid = [], [], [], [], [], []
+    pix, fk, phi, e, w, vid, sd = [], [], [], [], [], [], []
+    with_noise = all(v.phase_std_rad is not None for v in views)
     for i, v in enumerate(views):
         amp = np.asarray(v.amplitude, dtype=np.float64)
         ok = v.mask & np.isfinite(v.true_range_m) & np.isfinite(amp)
@@ -117,7 +132,9 @@ def fit_depth_errors(views: list[DepthView], frequencies_hz) -> DepthCalibration
             e.append(_wrap(m - t))
             w.append(amp.ravel()[idx] ** 2)
             vid.append(np.full(idx.size, i))
-    pix, fk, phi, e, w, vid = (np.concatenate(a) for a in (pix, fk, phi, e, w, vid))
+            sd.append(np.asarray(v.phase_std_rad[k], dtype=np.float64).ravel()[idx]
+                      if with_noise else np.full(idx.size, np.nan))
+    pix, fk, phi, e, w, vid, sd = (np.concatenate(a) for a in (pix, fk, phi, e, w, vid, sd))
     if pix.size < 1000:
         raise InvalidInputError("depth.views", f"only {pix.size} board pixels are usable; at "
                                 "least 1000 are needed (is the board detected and lit?)")
@@ -178,7 +195,9 @@ def fit_depth_errors(views: list[DepthView], frequencies_hz) -> DepthCalibration
     per_view = {views[i].name: float(np.sqrt(np.mean(after[(vid == i) & keep] ** 2))) * 1e3
                 for i in range(len(views)) if np.any((vid == i) & keep)}
     rng_all = phi / k_rad[fk]
-    return DepthCalibration(
+    noise = _noise_evidence(views, design, keep, seen, pix, fk, phi, vid, sd, k_rad,
+                            after, int(rank)) if with_noise else {}
+    return DepthCalibration(**noise,
         depth_errors=spec,
         rms_before_mm=float(np.sqrt(np.mean(before[keep] ** 2))) * 1e3,
         rms_after_mm=float(np.sqrt(np.mean(after[keep] ** 2))) * 1e3,
@@ -191,8 +210,52 @@ def fit_depth_errors(views: list[DepthView], frequencies_hz) -> DepthCalibration
     )
 
 
-def depth_views_from_captures(intr_result, views_caps, board) -> list[DepthView]:
-    """DepthViews of the board views that have a pose: true range from the pose, its mask."""
+def _noise_evidence(views, design, keep, seen, pix, fk, phi, vid, sd, k_rad, after,
+                    rank: int) -> dict:
+    """The fit against the phase noise (:class:`DepthCalibration`'s ``reduced_chi2``,
+    ``per_view_reduced_chi2``, ``model_std_rad``, ``pixel_offset_std_m``)."""
+    # A pixel whose noise is not finite or not positive carries no information (weight 0).
+    ok = keep & np.isfinite(sd) & (sd > 0)
+    z2 = np.where(ok, (after * k_rad[fk] / np.where(ok, sd, 1.0)) ** 2, 0.0)
+    # The file keeps the offsets on a grid (GRID_STEP_PX): each grid cell seen is one
+    # parameter (the residual is taken with the grid's offsets), the global model `rank`.
+    width = views[0].amplitude.shape[1]
+    cell = (pix // width) // GRID_STEP_PX * (width // GRID_STEP_PX + 1) + (pix % width) \
+        // GRID_STEP_PX
+    dof = int(ok.sum()) - np.unique(cell[ok]).size - rank
+    chi2 = float(z2.sum() / dof) if dof > 0 else float("inf")
+    per_view = {}
+    for i, v in enumerate(views):
+        sel = ok & (vid == i)
+        if sel.any():
+            per_view[v.name] = float(z2[sel].mean())
+    # The global model's covariance: whitened design, the same truncation as the fit.
+    a = design(ok) / sd[ok][:, None]
+    scale = np.linalg.norm(a, axis=0)
+    scale[scale == 0] = 1.0  # a column without data: its direction is truncated below
+    _, sv, vt = np.linalg.svd(a / scale, full_matrices=False)
+    det = sv > RCOND * sv[0] if sv.size and sv[0] > 0 else np.zeros(sv.shape, dtype=bool)
+    cov = ((vt[det].T / sv[det] ** 2) @ vt[det]) / np.outer(scale, scale)
+    grid = np.linspace(float(phi[ok].min()), float(phi[ok].max()), 64)
+    harmonics = [f(h * grid) for h in HARMONICS for f in (np.sin, np.cos)]
+    model_std = []
+    for k in range(k_rad.size):
+        offset = np.zeros((grid.size, k_rad.size))
+        offset[:, k] = 1.0
+        g = np.column_stack([offset, *harmonics])
+        model_std.append(float(np.sqrt(np.max(np.einsum("ij,jk,ik->i", g, cov, g)))))
+    # A grid cell's offset is its samples' weighted mean range residual.
+    info = np.bincount(cell[ok], weights=(k_rad[fk[ok]] / sd[ok]) ** 2)
+    pix_var = 1.0 / info[info > 0] if np.any(info > 0) else np.array([np.inf])
+    return {"reduced_chi2": chi2, "per_view_reduced_chi2": per_view,
+            "model_std_rad": tuple(model_std),
+            "pixel_offset_std_m": float(np.sqrt(np.mean(pix_var)))}
+
+
+def depth_views_from_captures(intr_result, views_caps, board, noise=None) -> list[DepthView]:
+    """DepthViews of the board views that have a pose: true range from the pose, its mask;
+    with ``noise`` (a :class:`calibration.noise_gain.NoiseCalibration`) each phase's standard
+    deviation from the noise model over the frames averaged."""
     from sim_core.boards import board_size_m
 
     out = []
@@ -203,5 +266,22 @@ def depth_views_from_captures(intr_result, views_caps, board) -> list[DepthView]
         rng, inside = board_range_m(intr_result.intrinsics, pose[0], pose[1],
                                     board_size_m(board))
         out.append(DepthView(view.name, cap.phase_rad, cap.amplitude, rng,
-                             inside & cap.valid))
+                             inside & cap.valid, phase_std_rad(cap, noise)))
     return out
+
+
+def phase_std_rad(cap, noise) -> np.ndarray | None:
+    """(n_f, H, W) standard deviation of an averaged capture's phases from the noise model
+    (:func:`calibration.noise_gain.tap_difference_variance_dn2`: var(phi) = var(C) / (2 a^2)
+    per frame, over the frames averaged); inf where the amplitude is 0 (no phase); None
+    without ``noise``."""
+    if noise is None:
+        return None
+    from calibration.noise_gain import tap_difference_variance_dn2
+
+    var_c = tap_difference_variance_dn2(cap.intensity, noise.adc_gain_e_per_dn,
+                                        noise.read_noise_e) / max(cap.n_frames, 1)
+    c = np.asarray(cap.phase_images, dtype=np.float64)  # (n_f, 4, H, W)
+    amp = 0.5 * np.abs((c[:, 0] - c[:, 2]) - 1j * (c[:, 3] - c[:, 1]))  # seed eq. 5, per f
+    # a zero amplitude has no phase: its standard deviation is unbounded, not a division error
+    return np.where(amp > 0, np.sqrt(var_c / 2.0) / np.where(amp > 0, amp, 1.0), np.inf)

@@ -53,6 +53,9 @@ class NoiseCalibration:
     frames: int
     method: str
     curve: tuple[np.ndarray, np.ndarray]
+    #: chi-square of the bins about the line, per degree of freedom (each bin's variance
+    #: against its standard error; 1 when the line explains the curve to the noise)
+    reduced_chi2: float = float("nan")
 
     def to_sensor_overrides(self) -> dict:
         return {"adc_gain_e_per_dn": self.adc_gain_e_per_dn, "read_noise_e": self.read_noise_e}
@@ -64,7 +67,7 @@ class NoiseCalibration:
                 "dark_signal_dn": self.dark_signal_dn,
                 "intensity_range_dn": list(self.intensity_range_dn),
                 "nonlinearity_rms_rel": self.nonlinearity, "frames": self.frames,
-                "method": self.method}
+                "method": self.method, "reduced_chi2": self.reduced_chi2}
 
     def plot(self, ax) -> str:
         mean, var = self.curve
@@ -150,8 +153,33 @@ def calibrate_noise(stacks: list[list[RawFrame]]) -> NoiseCalibration:
     pred = slope * bm + icpt
     nonlin = float(np.sqrt(np.mean(((bv - pred) / pred) ** 2)))
     dark = float(np.percentile(m, 0.5))
+    # two parameters: fewer than three bins leave no degree of freedom to judge the fit by
+    dof = bm.size - 2
+    chi2 = float(np.sum(resid(fit.x) ** 2) / dof) if dof > 0 else float("inf")
     return NoiseCalibration(
         adc_gain_e_per_dn=float(g), read_noise_e=read, gain_std_error=g_se,
         read_noise_std_error=float(d_read), dark_signal_dn=dark,
         intensity_range_dn=(float(edges[0]), float(edges[-1])), nonlinearity=nonlin,
-        frames=n_frames, method="differences", curve=(bm, bv))
+        frames=n_frames, method="differences", curve=(bm, bv), reduced_chi2=chi2)
+
+
+def tap_difference_variance_dn2(intensity_dn: np.ndarray, adc_gain_e_per_dn: float,
+                                read_noise_e: float) -> np.ndarray:
+    """One frame's temporal variance of each tap difference C_i [DN^2] at mean intensity
+    ``intensity_dn`` (the module docstring's photon transfer line:
+    ``I / g + 2 sigma_r^2 / g^2 + 1/6``); a negative or non-finite intensity counts as 0 (no
+    shot noise), so the variance is never below the read and quantisation noise.
+
+    The phasor ``(C0 - C2) - 1j (C3 - C1)`` then has ``2 var(C)`` per component, the amplitude
+    (half its magnitude) ``var(C) / 2``, and the phase ``var(C) / (2 a^2)`` at amplitude ``a``
+    (seed eqs. 4-5): divide by the frames averaged.
+    """
+    if not (np.isfinite(adc_gain_e_per_dn) and adc_gain_e_per_dn > 0):
+        raise InvalidInputError("adc_gain_e_per_dn", f"got {adc_gain_e_per_dn!r}; allowed: a "
+                                "finite gain above 0 e-/DN")
+    if not (np.isfinite(read_noise_e) and read_noise_e >= 0):
+        raise InvalidInputError("read_noise_e", f"got {read_noise_e!r}; allowed: a finite "
+                                "read noise of 0 e- or more")
+    i = np.asarray(intensity_dn, dtype=np.float64)
+    shot = np.where(np.isfinite(i), np.maximum(i, 0.0), 0.0) / adc_gain_e_per_dn
+    return shot + 2.0 * read_noise_e**2 / adc_gain_e_per_dn**2 + QUANTISATION_DN2

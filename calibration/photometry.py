@@ -25,6 +25,8 @@ WHITE_SHARE = 0.6
 MAX_LOCAL_VARIATION = 0.05
 #: fewest pixels the ratio is taken over
 MIN_PIXELS = 50
+#: fewest pixels of a region (white square) judged on its own
+MIN_REGION_PIXELS = 8
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,16 @@ class SourcePowerResult:
     residual_rel_rms : float
         RMS of the pixels' relative deviation from ``ratio`` (noise plus model error).
     n_pixels : int
+    n_regions : int
+        The connected areas (white squares) the pixels form, with at least
+        :data:`MIN_REGION_PIXELS` each.
+    regions_reduced_chi2 : float
+        The regions' own ratios about ``ratio``, each against its standard error, per degree of
+        freedom (1 when they agree as their pixels' spread allows; far above when the twin's
+        shading of the image differs from the camera's); NaN with fewer than two regions.
+    regions_std_error : float
+        Standard error of ``ratio`` from the regions' spread (their standard deviation over
+        sqrt(regions)); NaN with fewer than two regions.
     """
 
     power_w: float
@@ -49,11 +61,16 @@ class SourcePowerResult:
     ratio_std_error: float
     residual_rel_rms: float
     n_pixels: int
+    n_regions: int = 0
+    regions_reduced_chi2: float = float("nan")
+    regions_std_error: float = float("nan")
 
     def to_dict(self) -> dict:
         return {"power_w": self.power_w, "ratio": self.ratio,
                 "ratio_std_error": self.ratio_std_error,
-                "residual_rel_rms": self.residual_rel_rms, "n_pixels": self.n_pixels}
+                "residual_rel_rms": self.residual_rel_rms, "n_pixels": self.n_pixels,
+                "n_regions": self.n_regions, "regions_reduced_chi2": self.regions_reduced_chi2,
+                "regions_std_error": self.regions_std_error}
 
 
 def white_square_mask(predicted_amplitude: np.ndarray) -> np.ndarray:
@@ -119,10 +136,37 @@ def fit_source_power(
     if not ratio > 0.0:
         raise InvalidInputError("photometry", "the measured amplitude on the white squares is 0")
     mad = float(np.median(np.abs(r - ratio)))
+    n_regions, chi2, regions_se = region_agreement(m / np.where(use, p, 1.0), use, ratio)
     return SourcePowerResult(
         power_w=nominal_power_w * ratio,
         ratio=ratio,
         ratio_std_error=1.4826 * mad / np.sqrt(n),
         residual_rel_rms=float(np.sqrt(np.mean((r / ratio - 1.0) ** 2))),
-        n_pixels=n,
+        n_pixels=n, n_regions=n_regions, regions_reduced_chi2=chi2,
+        regions_std_error=regions_se,
     )
+
+
+def region_agreement(ratio_image: np.ndarray, use: np.ndarray, ratio: float
+                     ) -> tuple[int, float, float]:
+    """How the connected regions of ``use`` agree on ``ratio``: their count, the reduced
+    chi-square of their medians about it (each median's standard error 1.4826 MAD / sqrt(n),
+    1.2533 sigma / sqrt(n) for a median of Gaussian values) and the standard error of the ratio
+    from their spread. Regions under :data:`MIN_REGION_PIXELS` pixels are left out; with fewer
+    than two regions the last two are NaN."""
+    labels, n_labels = ndimage.label(use)
+    meds, ses = [], []
+    for k in range(1, n_labels + 1):
+        r = ratio_image[labels == k]
+        if r.size < MIN_REGION_PIXELS:
+            continue
+        med = float(np.median(r))
+        mad = float(np.median(np.abs(r - med)))
+        meds.append(med)
+        # a region of identical values has MAD 0: its error is that of the ratio's last digit
+        ses.append(max(1.2533 * 1.4826 * mad / np.sqrt(r.size), 1e-12 * max(abs(med), 1.0)))
+    if len(meds) < 2:
+        return len(meds), float("nan"), float("nan")
+    med_a, se_a = np.asarray(meds), np.asarray(ses)
+    chi2 = float(np.sum(((med_a - ratio) / se_a) ** 2) / (med_a.size - 1))
+    return med_a.size, chi2, float(np.std(med_a, ddof=1) / np.sqrt(med_a.size))

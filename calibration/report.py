@@ -1,9 +1,12 @@
-"""The calibration's outputs: ``calibration.yaml``, ``report.json`` and ``report.html``.
+"""The calibration's outputs: ``calibration.yaml``, ``verdicts.json``, ``report.json`` and
+``report.html``.
 
 The HTML page (a Jinja2 template, ``calibration/templates/report.html.j2``, in the project's one
-environment: :func:`sim_core.html.jinja_environment`) lists each procedure's result and residual
-next to its typical value (docs/calibration.md), the views that were not used and why, and the
-residual plots (matplotlib, written as PNG files beside it).
+environment: :func:`sim_core.html.jinja_environment`) lists every key's verdict
+(:mod:`calibration.verdicts`: determined, not determined, unexplained, with its standard
+deviation and reason), each procedure's result and residual next to its typical value
+(docs/calibration.md), the views that were not used and why, and the residual plots
+(matplotlib, written as PNG files beside it).
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from calibration.verdicts import VERDICTS_FILE, Verdicts, count_line, write_verdicts
 from sim_core.html import jinja_environment, number
 from sim_core.twin_file import dump_yaml, twin_hash, write_calibration
 
@@ -49,6 +53,21 @@ def summary_rows(procedures: dict[str, dict]) -> list[dict[str, str]]:
     return rows
 
 
+def verdict_rows(verdicts: Verdicts) -> list[dict[str, str]]:
+    """One row per key: its verdict, its standard deviation (four digits; a list per
+    component; a dash when there is none) and its reason."""
+    rows = []
+    for key, v in verdicts.items():
+        if v.std is None:
+            std = "-"
+        elif isinstance(v.std, list):
+            std = ", ".join(number(x, "{:.4g}") for x in v.std)
+        else:
+            std = number(v.std, "{:.4g}")
+        rows.append({"key": key, "verdict": v.verdict, "std": std, "reason": v.reason or ""})
+    return rows
+
+
 def _figures(out: Path, results: dict[str, Any]) -> list[dict[str, str]]:
     """Residual plots that the results carry (``plot(ax)`` methods), one PNG each."""
     import matplotlib
@@ -79,7 +98,8 @@ def write_report(out_dir: str | Path, result) -> dict[str, Path]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=False)
     cal = result.calibration
-    paths = {"calibration": write_calibration(out / "calibration.yaml", cal)}
+    paths = {"calibration": write_calibration(out / "calibration.yaml", cal),
+             "verdicts": write_verdicts(out / VERDICTS_FILE, result.verdicts)}
     prov = cal.provenance
     data = {
         "calibration_hash": twin_hash(cal),
@@ -91,10 +111,12 @@ def write_report(out_dir: str | Path, result) -> dict[str, Path]:
     rejected = list(prov.procedures.get("views", {}).get("not_detected", []))
     intr = prov.procedures.get("intrinsics", {})
     rejected += [r for r in intr.get("rejected", []) if isinstance(r, dict)]
+    rejected += list(prov.procedures.get("views", {}).get("unexplained", []))
     html = jinja_environment("calibration").get_template("report.html.j2").render(
         rig=prov.rig, created_utc=prov.created_utc, software=prov.software,
         frames_used=prov.frames_used, calibration_hash=data["calibration_hash"],
         summary=summary_rows(prov.procedures), rejected=rejected,
+        verdicts=verdict_rows(result.verdicts), verdict_counts=count_line(result.verdicts),
         figures=_figures(out, result.results), calibration_yaml=dump_yaml(cal),
     )
     paths["html"] = out / "report.html"

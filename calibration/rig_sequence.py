@@ -25,7 +25,11 @@ steps 1-7 from the averaged captures it is handed (:mod:`calibration.capture_pla
    prediction (:mod:`calibration.solar`), or a reference-cell reading.
 
 Each step uses only what the frames (and the previous steps) say; the result is a
-:class:`sim_core.twin_file.CalibrationFile` with each procedure's residuals in its provenance.
+:class:`sim_core.twin_file.CalibrationFile` with each procedure's residuals in its provenance,
+and every key of it judged (:mod:`calibration.rig_verdicts`): the noise model of step 5 is fitted
+first, so that every other step's residual is judged against the noise (the corners', the
+phases'); a board view the camera and turntable model cannot explain is dropped with its reason
+(``results["views"]["unexplained"]``).
 """
 
 from __future__ import annotations
@@ -57,8 +61,25 @@ from calibration.capture_plan import (
 from calibration.captures import AveragedCapture, Progress, no_progress
 from calibration.fixtures import BoardFixture, board_object, world_from_board
 from calibration.photometry import fit_source_power
+from calibration.rig_evidence import (
+    corner_radius,
+    corner_std_px,
+    depth_evidence,
+    free_stage_chi2,
+    other_verdicts,
+    reprojection_stage,
+)
+from calibration.rig_verdicts import (
+    CameraTurntableEvidence,
+    StageEvidence,
+    calibration_keys,
+    jackknife_std,
+    rig_verdicts,
+    unexplained_views,
+)
 from calibration.solar import check_reference_suns, fit_solar_scale
 from calibration.twin_prediction import CameraUseCase, mounted_spec, predict_view
+from calibration.verdicts import Verdicts
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 from sim_core.scene import build_camera
@@ -210,12 +231,14 @@ def _count(field_name: str, n: int, lo: int, hi: int, what: str) -> None:
 
 @dataclass
 class RigCalibration:
-    """The sequence's outcome: the calibration file, every procedure's result, the captures."""
+    """The sequence's outcome: the calibration file, every procedure's result, the captures,
+    and the verdict of every key the file holds (:mod:`calibration.rig_verdicts`)."""
 
     calibration: CalibrationFile
     results: dict[str, Any]
     views: list[Any]
     frames_used: int
+    verdicts: Verdicts = field(default_factory=Verdicts)
 
 
 def _board_step(fixture: BoardFixture, index: int) -> str:
@@ -305,23 +328,7 @@ def fit_rig_calibration(
                           cap, fixture))
     results: dict[str, Any] = {"views": {"used": len(views), "not_detected": missed}}
 
-    # 2. intrinsics, 3. turntable axis (camera and turntable adjusted together) -------------
-    progress(done, total, "intrinsics and turntable")
-    intr, axis = _camera_and_turntable(views, plan, spec, camera)
-    # The detector's own bias, measured on the twin's renders of the same views, removed.
-    measured_views = views
-    for round_ in range(DEBIAS_ROUNDS):
-        progress(done, total, f"corner bias by synthesis, round {round_ + 1}")
-        views, corner_bias_px = _debias(measured_views, intr, spec, base, plan, camera)
-        intr, axis = _camera_and_turntable(views, plan, spec, camera)
-    results["intrinsics"] = intr
-    results["views"]["corner_bias_rms_px"] = corner_bias_px
-    results["turntable"] = axis
-    # 4. depth errors ----------------------------------------------------------------------
-    progress(done, total, "depth errors")
-    depth = _depth(views, intr, plan, use_case.frequencies_hz)
-    results["depth"] = depth
-    # 5. noise and gain --------------------------------------------------------------------
+    # 5 first: the noise model every other step's residual is judged against ---------------
     progress(done, total, "noise and gain")
     stacks = [captures[n] for n in NOISE_STEPS if n in captures]
     stack = stacks[0]
@@ -329,6 +336,44 @@ def fit_rig_calibration(
     results["noise"] = noise
     # The peer paper's mean-variance fit on the same stacks, reported as a cross-check.
     results["noise_mean_variance"] = _noise_mean_variance(stacks)
+
+    # 2. intrinsics, 3. turntable axis (camera and turntable adjusted together) -------------
+    progress(done, total, "intrinsics and turntable")
+    free, intr, axis = _camera_and_turntable(views, plan, spec, camera)
+    # The detector's own bias, measured on the twin's renders of the same views, removed.
+    measured_views = views
+    for round_ in range(DEBIAS_ROUNDS):
+        progress(done, total, f"corner bias by synthesis, round {round_ + 1}")
+        views, corner_bias_px = _debias(measured_views, intr, spec, base, plan, camera)
+        free, intr, axis = _camera_and_turntable(views, plan, spec, camera)
+    # Views the model cannot explain against the corners' noise: dropped when they are few.
+    corner_std = {v.name: corner_std_px(v, cap, noise) for v, cap, _ in views}
+    stage = reprojection_stage(axis, corner_std)
+    bad, droppable = unexplained_views(stage["per_view"])
+    results["views"]["unexplained"] = [
+        {"name": n, "reason": f"reprojection reduced chi-square {stage['per_view'][n]:.3g} "
+                              "against the corners' noise: the model does not explain it"}
+        for n in bad]
+    if bad and droppable:
+        progress(done, total, "intrinsics and turntable without the views not explained")
+        views = [t for t in views if t[0].name not in set(bad)]
+        free, intr, axis = _camera_and_turntable(views, plan, spec, camera)
+        stage = reprojection_stage(axis, corner_std)
+        results["views"]["used"] = len(views)
+    results["intrinsics"] = intr
+    results["views"]["corner_bias_rms_px"] = corner_bias_px
+    results["turntable"] = axis
+    progress(done, total, "spread over the fixtures")
+    spread = _fixture_jackknife(views, plan, spec, camera, intr, axis)
+    results["reprojection"] = {
+        "free_pose_reduced_chi2": free_stage_chi2(free, corner_std),
+        "joint_reduced_chi2": stage["chi2"],
+        "corner_std_median_px": _finite_median(corner_std.values()),
+        "per_view_reduced_chi2": stage["per_view"], "fixture_spread": spread}
+    # 4. depth errors ----------------------------------------------------------------------
+    progress(done, total, "depth errors")
+    depth = _depth(views, intr, plan, use_case.frequencies_hz, noise)
+    results["depth"] = depth
 
     partial = TwinParameters(
         camera=CameraParameters(**_camera_keys(intr), sensor=noise.to_sensor_overrides()),
@@ -374,7 +419,23 @@ def fit_rig_calibration(
             procedures=procedure_summaries(results),
         ),
     )
-    return RigCalibration(cal, results, [v for v, _, _ in views], frames_used)
+    evidence = CameraTurntableEvidence(
+        stage=StageEvidence(stage["chi2"], "the joint adjustment of camera and turntable "
+                            "(corner reprojection)",
+                            tuple(bad) if bad and not droppable else ()),
+        std=stage["std"], spread=spread, basis=axis.basis, fx_px=intr.intrinsics.fx_px,
+        fy_px=intr.intrinsics.fy_px, corner_radius=corner_radius(views, intr))
+    verdicts = rig_verdicts(calibration_keys(cal), evidence,
+                            depth_evidence(depth, use_case.frequencies_hz),
+                            other_verdicts(noise, power, solar))
+    return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
+
+def _finite_median(arrays) -> float | None:
+    """The median of the arrays' finite values; None when there is none."""
+    values = np.concatenate([np.ravel(a) for a in arrays]) if arrays else np.zeros(0)
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else None
+
 
 def _version() -> str:
     try:
@@ -406,21 +467,55 @@ def _camera_keys(intr) -> dict[str, Any]:
 def _camera_and_turntable(views, plan, spec, camera):
     """OpenCV's free-pose calibration as the start, then one bundle adjustment of the camera
     and the turntable model together (:func:`calibration.turntable_axis.fit_turntable_axis`):
-    the intrinsics result carries the adjusted intrinsics and the model's poses."""
+    the free-pose result, and the intrinsics result carrying the adjusted intrinsics and the
+    model's poses, and the adjustment's."""
     import dataclasses
 
-    from calibration.turntable_axis import fit_turntable_axis
-
     free = _intrinsics(views, camera)
-    known = {f.name: world_from_board(plan.board, f, spec) for f in plan.fixtures}
-    tt = spec.turntable
-    axis = fit_turntable_axis([v for v, _, _ in views], free.poses, camera.world_from_camera,
-                              known, tt.axis_point_m if tt else (0.0, 0.0, 0.0),
-                              tt.axis_direction if tt else (0.0, 0.0, 1.0),
-                              intrinsics=free.intrinsics, refine_intrinsics=True)
+    axis = _joint_adjustment(views, plan, spec, camera, free.poses, free.intrinsics)
     intr = dataclasses.replace(free, intrinsics=axis.intrinsics, poses=axis.poses,
                                rms_px=axis.reprojection_rms_px, refined_with_turntable=True)
-    return intr, axis
+    return free, intr, axis
+
+
+def _joint_adjustment(views, plan, spec, camera, poses, intrinsics):
+    from calibration.turntable_axis import fit_turntable_axis
+
+    known = {f.name: world_from_board(plan.board, f, spec) for f in plan.fixtures}
+    tt = spec.turntable
+    return fit_turntable_axis([v for v, _, _ in views], poses, camera.world_from_camera,
+                              known, tt.axis_point_m if tt else (0.0, 0.0, 0.0),
+                              tt.axis_direction if tt else (0.0, 0.0, 1.0),
+                              intrinsics=intrinsics, refine_intrinsics=True)
+
+
+def _fixture_jackknife(views, plan, spec, camera, intr, axis) -> dict[str, float]:
+    """The joint adjustment's parameters' spread over the fixtures: each fixture's views left
+    out in turn (started at the full solution), the delete-one-group jackknife's standard
+    deviation by parameter name (:func:`calibration.rig_verdicts.jackknife_std`); empty with a
+    single fixture (no spread to measure)."""
+    from calibration.turntable_axis import CAMERA_PARAMETERS
+
+    fixtures = sorted({f.name for _, _, f in views})
+    if len(fixtures) < 2:
+        return {}
+    basis = np.asarray(axis.basis)
+    rows = []
+    for name in fixtures:
+        rest = [t for t in views if t[2].name != name]
+        try:
+            ax = _joint_adjustment(rest, plan, spec, camera, intr.poses, intr.intrinsics)
+        except InvalidInputError:  # too few angles without it: no spread from this one
+            continue
+        k = ax.intrinsics
+        cam = [k.fx_px, k.fy_px, k.cx_px, k.cy_px, *k.distortion[:4]]
+        da = ax.axis_direction - axis.axis_direction
+        dc = ax.axis_point_m - axis.axis_point_m
+        rows.append([*(basis @ da), *(basis @ dc), ax.zero_offset_deg, *cam])
+    if len(rows) < 2:
+        return {}
+    names = ["axis_u", "axis_v", "point_u", "point_v", "zero_offset_deg", *CAMERA_PARAMETERS]
+    return {n: float(s) for n, s in zip(names, jackknife_std(rows), strict=True)}
 
 
 def _turntable_keys(axis) -> TurntableParameters:
@@ -428,11 +523,11 @@ def _turntable_keys(axis) -> TurntableParameters:
                                axis_direction=tuple(float(v) for v in axis.axis_direction),
                                zero_offset_deg=float(axis.zero_offset_deg))
 
-def _depth(views, intr, plan, frequencies_hz):
+def _depth(views, intr, plan, frequencies_hz, noise=None):
     from calibration.depth import depth_views_from_captures, fit_depth_errors
 
     board = ObjectSpec.model_validate({"name": "b", "mesh": plan.board}).mesh
-    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board)
+    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board, noise)
     return fit_depth_errors(dviews, frequencies_hz)
 
 

@@ -55,6 +55,10 @@ class SolarScaleResult:
         RMS of measured minus predicted intensity at the fitted scale [DN].
     reason : str
         Why the frames did or did not determine it.
+    reduced_chi2 : float
+        The normalised residuals' chi-square per degree of freedom at the fitted scale (each
+        pixel's temporal standard error and the twin's :data:`MODEL_ERROR_REL`); NaN for a
+        reference-cell reading.
     """
 
     irradiance_scale: float
@@ -63,11 +67,13 @@ class SolarScaleResult:
     n_pixels: int
     residual_rms_dn: float
     reason: str
+    reduced_chi2: float = float("nan")
 
     def to_dict(self) -> dict:
         return {"irradiance_scale": self.irradiance_scale, "std_error": self.std_error,
                 "method": self.method, "n_pixels": self.n_pixels,
-                "residual_rms_dn": self.residual_rms_dn, "reason": self.reason}
+                "residual_rms_dn": self.residual_rms_dn, "reason": self.reason,
+                "reduced_chi2": self.reduced_chi2}
 
 
 def check_reference_suns(value: float, field: str = "solar_reference_suns") -> float:
@@ -173,11 +179,14 @@ def fit_solar_scale(
         res = np.concatenate([m[use] - predict(s * scale)[use] for s, m in zip(levels, meas,
                                                                               strict=True)])
         rms = float(np.sqrt(np.mean(res**2)))
+        norm = np.concatenate([res_s / e[use] for res_s, e in zip(
+            np.split(res, len(levels)), std, strict=True)])
+        chi2 = float(np.sum(norm**2) / max(norm.size - 1, 1))  # one parameter: the scale
         at_bound = min(abs(scale - b) for b in SCALE_BOUNDS) < 1e-3
         if se / scale <= MAX_REL_UNCERTAINTY and not at_bound:
             return SolarScaleResult(scale, se, "frames", n, rms,
                                     f"{n} pixels respond to the level; standard error "
-                                    f"{100 * se / scale:.2f} %")
+                                    f"{100 * se / scale:.2f} %", chi2)
         reason = (f"the frames' response gives a standard error of {100 * se / scale:.1f} % "
                   f"(more than {100 * MAX_REL_UNCERTAINTY:g} %)" if not at_bound else
                   f"the fit ran to the bound {scale:.3g} of {SCALE_BOUNDS}")

@@ -61,6 +61,21 @@ class TurntableAxisResult:
     poses : dict
         View name -> (rvec, tvec): the board in the camera frame as the turntable model places
         it (the same form as :class:`calibration.intrinsics.IntrinsicsResult`'s poses).
+    parameter_names : tuple of str
+        The names of the last stage's parameters: ``axis_u``, ``axis_v`` (the direction's tilt
+        along two unit vectors normal to the nominal direction), ``point_u``, ``point_v`` [m]
+        (the point's shift along them), ``zero_offset_deg``, each fixture's position
+        (``<fixture>.x`` ...) and, with ``refine_intrinsics``, ``fx_px`` ... ``p2``.
+    unit_covariance : (p, p) float or None
+        ``(J^T J)^-1`` of the last stage's image residuals (with ``intrinsics``): the
+        parameters' covariance for corners with 1 px of independent noise per coordinate
+        (scale by the corners' variance); None without ``intrinsics``.
+    residuals_px : dict
+        View name -> (n, 2) reprojection residuals through the fitted model (with
+        ``intrinsics``; else empty).
+    basis : (2, 3) float
+        The unit vectors ``u``, ``v`` of ``axis_u``/``point_u`` and ``axis_v``/``point_v`` (world
+        frame).
     """
 
     axis_point_m: np.ndarray
@@ -72,6 +87,10 @@ class TurntableAxisResult:
     intrinsics: Intrinsics | None = None
     reprojection_rms_px: float | None = None
     poses: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
+    parameter_names: tuple[str, ...] = ()
+    unit_covariance: np.ndarray | None = field(default=None, repr=False)
+    residuals_px: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    basis: np.ndarray | None = field(default=None, repr=False)
 
     def summary(self) -> dict:
         return {"axis_point_m": self.axis_point_m.tolist(),
@@ -241,6 +260,8 @@ def fit_turntable_axis(
     sol = least_squares(pose_residuals, np.asarray(x0), method="lm", x_scale="jac")
     refined = None
     reprojection_rms = None
+    unit_cov = None
+    residuals: dict[str, np.ndarray] = {}
     if intrinsics is not None:
         sol = least_squares(image_residuals, sol.x, method="lm", x_scale="jac")
         if refine_intrinsics:
@@ -252,7 +273,13 @@ def fit_turntable_axis(
             refined = Intrinsics(intrinsics.width_px, intrinsics.height_px, float(kk[0, 0]),
                                  float(kk[1, 1]), float(kk[0, 2]), float(kk[1, 2]),
                                  tuple(float(v) for v in dd))
-        reprojection_rms = float(np.sqrt(np.mean(image_residuals(sol.x) ** 2) * 2.0))
+        final = image_residuals(sol.x)
+        reprojection_rms = float(np.sqrt(np.mean(final**2) * 2.0))
+        # The covariance of the last stage (the Jacobian at the solution, 1 px of noise).
+        unit_cov = np.linalg.pinv(sol.jac.T @ sol.jac)
+        split = np.cumsum([2 * len(v.object_points_m) for v in used])[:-1]
+        residuals = {v.name: r.reshape(-1, 2)
+                     for v, r in zip(used, np.split(final, split), strict=True)}
     a, c, _, zero = unpack(sol.x[:n_turntable])
     model_poses = {}
     for v in used:
@@ -278,4 +305,16 @@ def fit_turntable_axis(
         axis_point_m=point, axis_direction=a, zero_offset_deg=float(zero),
         rms_mm=float(np.sqrt(np.mean(np.sum(res**2, axis=2)))) * 1e3, per_view_mm=per_view,
         zero_spread_deg=float(np.ptp(zeros)) if len(zeros) > 1 else 0.0,
-        intrinsics=refined, reprojection_rms_px=reprojection_rms, poses=model_poses)
+        intrinsics=refined, reprojection_rms_px=reprojection_rms, poses=model_poses,
+        parameter_names=_parameter_names(mounts, refine_intrinsics and intrinsics is not None),
+        unit_covariance=unit_cov, residuals_px=residuals, basis=np.stack([u0, v0]))
+
+
+#: the camera's parameters of the joint adjustment, in its order
+CAMERA_PARAMETERS = ("fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2")
+
+
+def _parameter_names(mounts: list[str], with_camera: bool) -> tuple[str, ...]:
+    names = ["axis_u", "axis_v", "point_u", "point_v", "zero_offset_deg"]
+    names += [f"{m}.{c}" for m in mounts for c in "xyz"]
+    return tuple(names + list(CAMERA_PARAMETERS if with_camera else ()))

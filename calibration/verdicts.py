@@ -182,9 +182,18 @@ def read_verdicts(path: str | Path) -> Verdicts:
     return Verdicts.from_json(json.loads(Path(path).read_text(encoding="utf-8")))
 
 
-__all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
-           "honest_std", "judge", "read_verdicts", "verdict_lines", "verdicts_beside",
-           "write_verdicts"]
+def chi2_limit_for(dof: int, limit: float = CHI2_UNEXPLAINED, tail: float = 1e-3) -> float:
+    """The reduced chi-square above which a fit with ``dof`` degrees of freedom does not
+    explain its data: :data:`CHI2_UNEXPLAINED`, or, when few residuals make the chi-square
+    itself noisy (its standard deviation is ``sqrt(2 / dof)``), the value noise exceeds with
+    probability ``tail`` only (the chi-square distribution's quantile over ``dof``): 3.5 at 7
+    degrees of freedom, :data:`CHI2_UNEXPLAINED` from about 60 on. No degree of freedom: inf
+    (nothing to judge by; the caller says so)."""
+    from scipy.stats import chi2
+
+    if dof < 1:
+        return math.inf
+    return max(limit, float(chi2.isf(tail, dof)) / dof)
 
 
 def verdicts_beside(out: str | Path) -> Path:
@@ -198,11 +207,19 @@ def verdicts_beside(out: str | Path) -> Path:
     return path.with_name(path.stem + ".verdicts.json")
 
 
+def count_line(verdicts: Verdicts) -> str:
+    """The counts in one line: ``"25 keys: 22 determined, 1 not determined, 2 unexplained"``."""
+    c = verdicts.counts()
+    return f"{len(verdicts)} keys: " + ", ".join(f"{c[v]} {v}" for v in VERDICTS)
+
+
 def verdict_lines(verdicts: Verdicts) -> list[str]:
-    """What a command prints of its verdicts: the count of each, then every key that is not
-    determined or unexplained with its reason."""
-    counts = verdicts.counts()
-    lines = ["verdicts: " + ", ".join(f"{counts[v]} {v}" for v in VERDICTS)]
-    lines += [f"  {key}: {v.verdict.upper()}: {v.reason}" for key, v in verdicts.items()
-              if not v.determined]
-    return lines
+    """What a command prints of its verdicts: :func:`count_line`, then every key that is not
+    determined or unexplained with its verdict and reason."""
+    return [count_line(verdicts)] + [f"  {key}: {v.verdict}: {v.reason}"
+                                     for key, v in verdicts.items() if not v.determined]
+
+
+__all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
+           "chi2_limit_for", "count_line", "honest_std", "judge", "read_verdicts", "verdict_lines",
+           "verdicts_beside", "write_verdicts"]

@@ -282,6 +282,17 @@ class CalibrationPublic(BaseModel):
     activated_at: float
 
 
+class VerdictPublic(BaseModel):
+    """What the estimator may say of one key (calibration.verdicts)."""
+
+    verdict: Literal["determined", "not determined", "unexplained"]
+    std: float | list[float] | None = Field(
+        description="Standard deviation in the key's unit (one per component of a vector), "
+        "never smaller than the residual supports; null when the data give none.")
+    reason: str | None = Field(description="Why, for a key not determined or unexplained; a "
+                               "condition (the span it holds over) for some determined ones.")
+
+
 CalibrationJobState = Literal["queued", "running", "done", "failed", "cancelled"]
 
 
@@ -300,7 +311,12 @@ class CalibrationJobPublic(BaseModel):
     calibration_hash: str | None = Field(description="The result's hash, once done.")
     activated: bool = Field(description="Whether its result has been made the active calibration.")
     files: dict[str, str] = Field(description="Output files once done: calibration.yaml, "
-                                  "report.json, report.html (paths on the server).")
+                                  "verdicts.json, report.json, report.html (paths on the "
+                                  "server).")
+    verdicts: dict[str, VerdictPublic] | None = Field(
+        None, description="Once done: every key of calibration.yaml (camera.fx_px, "
+        "turntable.zero_offset_deg, ...) with its verdict (verdicts.json, "
+        "docs/calibration.md); null before.")
     operator_instruction: str | None = Field(
         None, description="Real rig: what the operator must mount now; confirm with "
         "POST /api/v1/calibrations/{id}/continue.")

@@ -4,7 +4,9 @@ Runs the calibration sequence (:func:`service.lab.acquisition.run_rig_calibratio
 acquired on the rig, then fitted) on the real rig (the operator swaps the board and the test
 object when asked) or on the simulated lab (``--simulated``, optionally
 ``--reality FILE``: the lab's hidden truth), and writes ``DIR/calibration.yaml``,
-``DIR/report.json`` and ``DIR/report.html`` with the residual plots.
+``DIR/verdicts.json`` (every key's verdict), ``DIR/report.json`` and ``DIR/report.html`` with the
+residual plots; it prints how many keys are determined, not determined and unexplained, and
+the reason of each key that is not determined.
 """
 
 from __future__ import annotations
@@ -122,7 +124,8 @@ def rig_command(
                            "as JSON and stop, the rig untouched.")
     ] = False,
 ) -> None:
-    """Run the whole calibration sequence and write DIR/calibration.yaml and its report."""
+    """Run the whole calibration sequence and write DIR/calibration.yaml, DIR/verdicts.json
+    (determined, not determined or unexplained, per key) and its report."""
     from calibration.report import write_report
     from calibration.rig_sequence import build_rig_plan, rig_capture_plan
     from service.lab.acquisition import run_rig_calibration
@@ -151,8 +154,9 @@ def rig_command(
         except InvalidInputError as exc:
             fail_invalid(exc)
     paths = write_report(out, result)
-    console.print(f"calibration written to {paths['calibration']} (report {paths['html']})")
-
+    console.print(f"calibration written to {paths['calibration']} (report {paths['html']}, "
+                  f"verdicts {paths['verdicts']})")
+    print_verdicts(result.verdicts)
 
 
 @calibrate_app.command("material")

@@ -62,7 +62,7 @@ _log = logging.getLogger(__name__)
 
 KIND = "calibration job"
 #: what a done job wrote, beside the report's plots (``GET /calibrations/{id}/files/{name}``)
-OUTPUT_FILES = ("calibration.yaml", "report.json", "report.html")
+OUTPUT_FILES = ("calibration.yaml", "verdicts.json", "report.json", "report.html")
 _PARTIAL = ".partial-"
 #: what a job interrupted by the service's end says
 INTERRUPTED = ("the service stopped while the calibration ran; a calibration cannot be resumed: "
@@ -333,10 +333,28 @@ def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
         "message": (live or {}).get("message") or row.message, "error": row.error,
         "calibration_hash": row.calibration_hash, "activated": bool(row.activated),
         "files": files,
+        "verdicts": job_verdicts(row),
         "operator_instruction": None if live is None else live.get("operator_instruction"),
         "created_at": row.created_at, "started_at": row.started_at,
         "updated_at": row.updated_at, "finished_at": row.finished_at, "links": links,
     }
+
+
+def job_verdicts(row: Any) -> dict[str, dict[str, Any]] | None:
+    """A done job's verdicts (its ``verdicts.json``: key -> verdict, std, reason), or None
+    before it is done or when the file is gone (its ``files`` link then answers 410)."""
+    from calibration.verdicts import VERDICTS_FILE, read_verdicts
+
+    if row.state != "done":
+        return None
+    path = Path(row.out_dir) / VERDICTS_FILE
+    if path.is_symlink() or not path.is_file():  # as _output_file: no link is followed
+        return None
+    try:
+        return read_verdicts(path).to_json()
+    except (OSError, ValueError, KeyError, TypeError):  # a damaged file is no verdicts
+        _log.warning("calibration job %s: verdicts.json could not be read", row.id)
+        return None
 
 
 def job_status(sessions: sessionmaker, jobs: CalibrationJobs, job_id: str) -> dict[str, Any]:

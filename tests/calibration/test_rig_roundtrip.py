@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from calibration.rig_sequence import RigCalibrationPlan
+from calibration.rig_verdicts import calibration_keys
 from drivers.sim.operator import SimulatedOperator
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
@@ -21,6 +22,7 @@ from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import random_reality, reality_seeds
+from tests.calibration.rig_truth import key_figures, table
 from tests.sim_core.scenes import EXAMPLES
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
@@ -130,6 +132,34 @@ def test_round_trip_recovers_a_random_reality(seed):
     if solar.method == "frames":
         assert result.calibration.solar_simulator.irradiance_scale == pytest.approx(
             reality.solar_simulator.irradiance_scale, rel=0.03)
+    _assert_verdicts(result, reality)
+
+
+#: the keys issue 13 asked for: determined on the default plan (k3 is held at 0 and, being 0,
+#: not written)
+ASKED_FOR = ("camera.fx_px", "camera.fy_px", "camera.cx_px", "camera.cy_px",
+             "camera.distortion.k1", "camera.distortion.k2", "camera.distortion.p1",
+             "camera.distortion.p2", "turntable.axis_point_m", "turntable.axis_direction",
+             "turntable.zero_offset_deg", "camera.depth.phase_offset_rad",
+             "camera.depth.wiggling", "camera.depth.pixel_offset_m",
+             "camera.sensor.adc_gain_e_per_dn", "camera.sensor.read_noise_e",
+             "illumination.power_w", "solar_simulator.irradiance_scale")
+
+
+def _assert_verdicts(result, reality):
+    """Issue 27: every key of the file judged; on the default plan every key issue 13 asked
+    for determined; a determined key's error within 3 of its standard deviations, or within
+    its target."""
+    verdicts = result.verdicts
+    assert list(verdicts) == calibration_keys(result.calibration)
+    figures = key_figures(result, reality, [F_60_24_MHZ])
+    print(table(figures))
+    print(verdicts.counts())
+    for key in ASKED_FOR:
+        assert verdicts[key].determined, (key, verdicts[key])
+    for f in figures:
+        if f.verdict == "determined":
+            assert f.z <= 3.0 or f.within_target, f
 
 
 @SHARED

@@ -10,6 +10,7 @@ import pytest
 
 from service.export.plots import CAMPAIGN_PLOTS
 from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
+from tests.service.api.finished_lab import VERDICTS, done_calibration_job
 from tests.web.conftest import DOC_SIZE, SIZES
 
 pytestmark = pytest.mark.timeout(300)
@@ -335,3 +336,22 @@ def test_a_calibration_job_started_from_the_page_is_followed_to_its_end(server, 
     assert "board was detected" in error and "start a new job" in error
     assert not page.find("#cj-cancel").is_enabled()
     page.shot("calibration-job", doc=True)
+
+
+def test_a_done_calibration_job_shows_every_key_s_verdict_as_text(server, page):
+    done_calibration_job(server.app, job_id="e" * 32)
+    page.load("calibration")
+    page.wait(lambda: page.find("#cj-verdicts").is_displayed(), "the job's verdicts")
+    assert page.text("#cj-state") == "done"
+    assert page.text("#cj-verdict-counts") == ("2 keys: 1 determined, 1 not determined, "
+                                               "0 unexplained")
+    rows = page.find_all("#cj-verdicts tbody tr")
+    cells = [[td.text for td in r.find_elements("css selector", "td")] for r in rows]
+    assert cells == [
+        ["camera.fx_px", "determined", "0.05000", ""],
+        ["turntable.axis_point_m", "not determined", "0.003000, 0.0001000, 0.000",
+         VERDICTS["turntable.axis_point_m"].reason],  # its markup shown as text
+    ]
+    assert not page.find_all("#cj-verdicts b")
+    assert "verdicts.json" in page.text("#cj-links")
+    page.assert_no_console_errors()

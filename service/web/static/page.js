@@ -490,7 +490,41 @@ function renderJob(job) {
   $("#cj-links").innerHTML = job.state === "done"
     ? `<a href="${API}/calibrations/${job.id}/files/report.html" target="_blank">report</a>`
       + ` &middot; <a href="${API}/calibrations/${job.id}/files/calibration.yaml">calibration.yaml</a>`
+      + ` &middot; <a href="${API}/calibrations/${job.id}/files/verdicts.json">verdicts.json</a>`
     : "";
+  renderVerdicts(job.verdicts);
+}
+
+// A standard deviation as the report shows it: four significant digits, a list per component.
+function stdText(std) {
+  if (std === null || std === undefined) return "-";
+  const one = (x) => (x === null ? "-" : Number(x).toPrecision(4));
+  return Array.isArray(std) ? std.map(one).join(", ") : one(std);
+}
+
+// The done job's verdicts (key, verdict, std, reason), built with textContent: a reason is
+// text, never markup.
+function renderVerdicts(verdicts) {
+  const box = $("#cj-verdicts");
+  const keys = verdicts ? Object.keys(verdicts) : [];
+  box.hidden = keys.length === 0;
+  const body = $("#cj-verdicts tbody");
+  body.replaceChildren();
+  const counts = {"determined": 0, "not determined": 0, "unexplained": 0};
+  for (const key of keys) {
+    const v = verdicts[key];
+    counts[v.verdict] += 1;
+    const tr = document.createElement("tr");
+    tr.dataset.verdict = v.verdict;
+    for (const text of [key, v.verdict, stdText(v.std), v.reason || ""]) {
+      const td = document.createElement("td");
+      td.textContent = text;
+      tr.append(td);
+    }
+    body.append(tr);
+  }
+  $("#cj-verdict-counts").textContent = `${keys.length} keys: ${counts["determined"]} determined, `
+    + `${counts["not determined"]} not determined, ${counts["unexplained"]} unexplained`;
 }
 
 function followJob(id) {
@@ -525,12 +559,12 @@ async function startCalibration(event) {
   if (res.ok) { renderJob(res.data); followJob(res.data.id); }
 }
 
+// The latest job: followed while it runs; once ended, shown as it ended (its verdicts too).
 async function followRunningJob() {
   const res = await call("GET", `${API}/calibrations?limit=1`);
-  if (res.ok && res.data.length && !CALIBRATION_TERMINAL.includes(res.data[0].state)) {
-    renderJob(res.data[0]);
-    followJob(res.data[0].id);
-  }
+  if (!res.ok || !res.data.length) return;
+  renderJob(res.data[0]);
+  if (!CALIBRATION_TERMINAL.includes(res.data[0].state)) followJob(res.data[0].id);
 }
 
 // -- wiring ------------------------------------------------------------------------------------

@@ -60,9 +60,9 @@ def test_fix_pins_a_parameter(tmp_path):
         assert verdicts[key]["verdict"] == "not determined" and "--fix" in verdicts[key]["reason"]
     counts = {v: sum(1 for x in verdicts.values() if x["verdict"] == v)
               for v in ("determined", "not determined", "unexplained")}
-    assert (f"verdicts: {counts['determined']} determined, 2 not determined, "
+    assert (f"4 keys: {counts['determined']} determined, 2 not determined, "
             f"{counts['unexplained']} unexplained") in res.stdout
-    assert "params.n2: NOT DETERMINED: held at 1.46 (--fix), not fitted" in res.stdout
+    assert "params.n2: not determined: held at 1.46 (--fix), not fitted" in res.stdout
 
 
 def test_bad_input_exits_2_with_the_field(tmp_path):

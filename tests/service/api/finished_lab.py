@@ -5,7 +5,8 @@ of one pose (completed), a manual pose, a captured frame and a ``done`` calibrat
 The campaign, the pose and the frame are made through the API on the simulated rig. The
 calibration job's row is stored with the store's own queries and its output folder written
 as a done job leaves it (``calibration.yaml`` by :func:`sim_core.twin_file.write_calibration`,
-a ``report.json`` and a ``report.html``): running the real sequence to ``done`` takes about
+``verdicts.json`` by :func:`calibration.verdicts.write_verdicts`, a ``report.json`` and a
+``report.html``): running the real sequence to ``done`` takes about
 half a minute (tests/service/api/test_calibration.py runs it, marked slow), and what these
 tests look at is how the service serves a done job, not how the job computes.
 """
@@ -19,6 +20,7 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from calibration.verdicts import VERDICTS_FILE, Verdict, Verdicts, write_verdicts
 from service.export.panels import PANEL_NAMES
 from service.export.plots import PLOTS
 from service.store import queries
@@ -27,7 +29,15 @@ from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
 
 JOB_ID = "d" * 32
 CALIBRATION = {"camera": {"fx_px": 236.0}, "provenance": {"rig": "test bench"}}
-JOB_FILES = ("calibration.yaml", "report.json", "report.html")
+JOB_FILES = ("calibration.yaml", "verdicts.json", "report.json", "report.html")
+#: the done job's verdicts: one determined, one not (its reason text with markup characters, as
+#: a reason may hold any text: the page must show it as text)
+VERDICTS = Verdicts({
+    "camera.fx_px": Verdict("determined", 0.05),
+    "turntable.axis_point_m": Verdict("not determined", [0.003, 0.0001, 0.0],
+                                      "standard deviation 0.003 m above the limit 0.002 m "
+                                      "<b>bold</b>"),
+})
 
 
 @dataclass(frozen=True)
@@ -44,12 +54,13 @@ class Finished:
 
 
 def done_calibration_job(app: Any, job_id: str = JOB_ID) -> Path:
-    """A ``done`` calibration job with its three files on ``app`` (started); returns its
+    """A ``done`` calibration job with its four files on ``app`` (started); returns its
     folder."""
     jobs = app.state.lab.calibrations
     out = jobs.out_dir(job_id)
     out.mkdir(parents=True)
     write_calibration(out / "calibration.yaml", parse_calibration(CALIBRATION))
+    write_verdicts(out / VERDICTS_FILE, VERDICTS)
     (out / "report.json").write_text(json.dumps({"calibration": CALIBRATION}))
     (out / "report.html").write_text("<!doctype html><title>report</title><style>p{}</style>"
                                      "<p>calibration report</p>")

@@ -20,6 +20,8 @@ import pytest
 import yaml
 from fastapi.testclient import TestClient
 
+from calibration.rig_verdicts import calibration_keys
+from calibration.verdicts import read_verdicts
 from service.api.app import create_app
 from service.lab.calibration_jobs import job_public
 from service.settings import EXAMPLES_DIR
@@ -330,8 +332,12 @@ def test_a_short_calibration_job_runs_to_done_with_progress_and_can_be_activated
     assert done["progress"] == 1.0 and done["error"] is None and done["activated"] is False
     assert done["files"]["calibration.yaml"] == f"/api/v1/calibrations/{jid}/files/calibration.yaml"
     out = tmp_path / "data" / "calibrations" / jid
-    assert {"calibration.yaml", "report.json", "report.html"} <= {p.name for p in out.iterdir()}
+    assert {"calibration.yaml", "verdicts.json", "report.json", "report.html"} <= {
+        p.name for p in out.iterdir()}
     cal = load_calibration(out / "calibration.yaml")
+    # the status gives every key's verdict, as verdicts.json holds them
+    assert list(done["verdicts"]) == calibration_keys(cal)
+    assert done["verdicts"] == read_verdicts(out / "verdicts.json").to_json()
     assert twin_hash(cal) == done["calibration_hash"]
     assert cal.camera.fx_px is not None and cal.provenance.rig == "simulated"
     report = client.get(f"/api/v1/calibrations/{jid}/files/report.html")

@@ -12,6 +12,7 @@ import jinja2
 
 from calibration.report import write_report
 from calibration.rig_sequence import RigCalibration
+from calibration.verdicts import Verdict, Verdicts, read_verdicts
 from service.api.routes import api_docs, page
 from service.web import STATIC_DIR, TEMPLATE_FOLDERS, environment
 from sim_core.html import jinja_environment, number
@@ -63,12 +64,20 @@ def test_a_calibration_s_provenance_is_text_on_the_page_and_in_its_report(client
     res = client.put("/api/v1/calibration", headers=AUTH, json=data)
     assert res.status_code == 200, res.text
     assert shown_as_text(client.get("/ui/calibration").text)
+    verdicts = Verdicts({"camera.fx_px": Verdict("unexplained", 0.4, SCRIPT),
+                         "turntable.axis_point_m": Verdict("determined", [1e-4, 2e-4, 0.0])})
     outcome = RigCalibration(calibration=parse_calibration(data), results={}, views=[],
-                             frames_used=12)
-    html = write_report(tmp_path / "out", outcome)["html"].read_text(encoding="utf-8")
+                             frames_used=12, verdicts=verdicts)
+    paths = write_report(tmp_path / "out", outcome)
+    html = paths["html"].read_text(encoding="utf-8")
     assert shown_as_text(html)
     assert f"<h1>Calibration of {ESCAPED}</h1>" in html
     assert f"<tr><td>{ESCAPED}</td><td>{ESCAPED}</td></tr>" in html  # a view not used, and why
+    # every key's verdict, its reason as text, beside the file in verdicts.json
+    assert "2 keys: 1 determined, 0 not determined, 1 unexplained" in html
+    assert f'<td class="fail">unexplained</td>\n<td class="num">0.4</td><td>{ESCAPED}</td>' in html
+    assert '<td class="num">0.0001, 0.0002, 0</td>' in html
+    assert read_verdicts(paths["verdicts"]) == verdicts
 
 
 def test_a_pose_s_figures_look_the_same_on_the_page_and_in_the_report(client):

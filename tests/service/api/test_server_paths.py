@@ -10,6 +10,7 @@ where the server keeps them.
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from service.api.app import create_app
 from tests.service.api.conftest import AUTH, make_settings, problem
 from tests.service.api.finished_lab import (
     JOB_FILES,
+    VERDICTS,
     done_calibration_job,
     finished_lab,
     get_urls,
@@ -69,6 +71,9 @@ def test_no_response_of_any_get_route_names_a_server_path(lab):
     status = client.get(f"/api/v1/calibrations/{finished.job_id}").json()
     assert status["files"] == {n: f"/api/v1/calibrations/{finished.job_id}/files/{n}"
                                for n in JOB_FILES}
+    # and gives its verdicts, as its verdicts.json holds them
+    assert status["verdicts"] == VERDICTS.to_json()
+    assert client.get(status["files"]["verdicts.json"]).json() == VERDICTS.to_json()
 
 
 def test_files_gone_from_the_data_directory_are_named_without_server_paths(lab):
@@ -106,6 +111,9 @@ def test_a_job_file_that_is_a_link_is_not_followed(tmp_path, name):
         body = problem(res, 404)
         assert "SECRET" not in res.text and name in body["detail"], body
         assert "link" in body["detail"], body
+        if name == "verdicts.json":  # the status reads it: not through a link either
+            status = client.get(f"/api/v1/calibrations/{'d' * 32}").json()
+            assert status["verdicts"] is None and "SECRET" not in json.dumps(status)
         if name == "calibration.yaml":  # activating would read it: refused the same way
             res = client.post(f"/api/v1/calibrations/{'d' * 32}/activate", headers=AUTH)
             assert "link" in problem(res, 404)["detail"]

@@ -7,7 +7,10 @@ import json
 import pytest
 from typer.testing import CliRunner
 
+from calibration.rig_verdicts import calibration_keys
+from calibration.verdicts import Verdict, Verdicts, count_line, read_verdicts
 from service.cli import app
+from service.cli.common import print_verdicts
 from sim_core.twin_file import load_calibration
 
 
@@ -53,3 +56,19 @@ def test_a_full_run_writes_the_calibration_and_its_report(tmp_path):
     html = (out / "report.html").read_text()
     assert "intrinsics.png" in html and "Reprojection RMS" in html
     assert (out / "intrinsics.png").stat().st_size > 1000
+    # every key of the file has its verdict, counted in one line
+    verdicts = read_verdicts(out / "verdicts.json")
+    assert list(verdicts) == calibration_keys(cal)
+    assert count_line(verdicts) in res.output and "Verdicts" in html
+
+
+def test_the_verdicts_are_counted_and_each_key_not_determined_is_listed_with_why(capsys):
+    print_verdicts(Verdicts({
+        "camera.fx_px": Verdict("determined", 0.05),
+        "camera.distortion.k3": Verdict("not determined", None, "held at 0"),
+        "turntable.zero_offset_deg": Verdict("unexplained", 0.2, "reduced chi-square 20.5"),
+    }))
+    out = capsys.readouterr().out.splitlines()
+    assert out == ["3 keys: 1 determined, 1 not determined, 1 unexplained",
+                   "  camera.distortion.k3: not determined: held at 0",
+                   "  turntable.zero_offset_deg: unexplained: reduced chi-square 20.5"]

@@ -1,0 +1,154 @@
+"""The rig procedures' results as evidence for their verdicts (:mod:`calibration.rig_verdicts`).
+
+The one place that reads each procedure's result for what its verdicts need: the corners'
+noise from the noise model, the reprojection's chi-square per view and per stage, the depth
+fit's, the sensor's, the source power's and the solar simulator's.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from calibration.board_detection import flat_field, flat_field_levels, saddle_std_px
+from calibration.noise_gain import tap_difference_variance_dn2
+from calibration.rig_verdicts import (
+    GAIN_REL,
+    POWER_REL,
+    READ_NOISE_REL,
+    SOLAR_REL,
+    DepthEvidence,
+    StageEvidence,
+    reduced_chi2,
+    relative_verdict,
+)
+from calibration.verdicts import Verdict
+
+#: the saddle-point detector's own error per coordinate [px], beyond the image noise it sees:
+#: what the bias synthesis leaves (the detector's response to what the twin's render and the
+#: camera's image do not share). Measured on reality 101 of the round trip (default plan, 4
+#: frames per view): 0.032 px per coordinate through the joint model after the synthesis, of
+#: which 0.006 px is the image's noise; 0.04 px keeps that calibration's worst view at a
+#: reduced chi-square of 1.5 and its stage at 0.65.
+CORNER_DETECTOR_FLOOR_PX = 0.04
+
+
+def amplitude_std_dn(cap, noise) -> np.ndarray:
+    """(H, W) standard deviation of an averaged capture's amplitude [DN]: ``var(C) / 2`` per
+    frame (:func:`calibration.noise_gain.tap_difference_variance_dn2`) over its frames."""
+    var_c = tap_difference_variance_dn2(cap.intensity, noise.adc_gain_e_per_dn,
+                                        noise.read_noise_e)
+    return np.sqrt(var_c / 2.0 / max(cap.n_frames, 1))
+
+
+def corner_std_px(view, cap, noise) -> np.ndarray:
+    """(n, 2) standard deviation of a view's corners: the amplitude's noise through the flat
+    field and the saddle-point fit the detector ends with, and the detector's own error
+    (:data:`CORNER_DETECTOR_FLOOR_PX`) in quadrature."""
+    amp = np.asarray(cap.amplitude, dtype=np.float64)
+    _, span = flat_field_levels(amp)
+    # no contrast (span 0) defines no corner: its noise in the flat field is unbounded
+    pixel_std = np.where(span > 0, amplitude_std_dn(cap, noise) / np.where(span > 0, span, 1.0),
+                         np.inf)
+    noise = saddle_std_px(flat_field(amp), view.image_points_px, pixel_std)
+    return np.hypot(noise, CORNER_DETECTOR_FLOOR_PX)
+
+
+def reprojection_stage(axis, corner_std: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The joint adjustment against the corners' noise: its reduced chi-square, each view's,
+    and the parameters' standard deviations from its Jacobian at the corners' RMS noise."""
+    names = [n for n in axis.residuals_px if n in corner_std]
+    r = np.concatenate([axis.residuals_px[n].ravel() for n in names]) if names else np.zeros(0)
+    s = np.concatenate([corner_std[n].ravel() for n in names]) if names else np.zeros(0)
+    n_params = len(axis.parameter_names)
+    per_view = {n: reduced_chi2(axis.residuals_px[n], corner_std[n]) for n in names}
+    finite = s[np.isfinite(s) & (s > 0)]
+    sigma = float(np.sqrt(np.mean(finite**2))) if finite.size else math.inf
+    cov = axis.unit_covariance
+    std: dict[str, float] = {}
+    if cov is not None and math.isfinite(sigma):
+        diag = np.sqrt(np.maximum(np.diag(cov), 0.0)) * sigma
+        std = {n: float(d) for n, d in zip(axis.parameter_names, diag, strict=True)}
+    return {"chi2": reduced_chi2(r, s, n_params), "per_view": per_view, "std": std}
+
+
+def free_stage_chi2(free, corner_std: dict[str, np.ndarray]) -> float:
+    """OpenCV's free-pose stage against the corners' noise: each view's RMS point distance
+    squared against twice its corners' mean variance, weighted by its corners, over the
+    degrees of freedom (8 camera parameters, 6 a view)."""
+    num = den = 0.0
+    n_corners = 0
+    for name, rms in free.per_view_rms_px.items():
+        s = corner_std.get(name)
+        if s is None:
+            continue
+        ok = np.all(np.isfinite(s), axis=1)
+        if not ok.any():
+            continue
+        num += s.shape[0] * rms**2
+        den += s.shape[0] * float(np.sum(s[ok] ** 2, axis=1).mean())
+        n_corners += s.shape[0]
+    dof = 2 * n_corners - 8 - 6 * len(free.per_view_rms_px)
+    if den <= 0 or dof <= 0:
+        return math.inf
+    return float(num / den * 2 * n_corners / dof)
+
+
+def corner_radius(views, intr) -> float:
+    """The largest normalised radius (pixel offset from the principal point over the focal
+    length) of the corners the views saw: how far out the distortion was measured."""
+    k = intr.intrinsics
+    pts = np.concatenate([v.image_points_px for v, _, _ in views])
+    x = (pts[:, 0] - k.cx_px) / k.fx_px
+    y = (pts[:, 1] - k.cy_px) / k.fy_px
+    return float(np.max(np.hypot(x, y)))
+
+
+def depth_evidence(depth, frequencies_hz) -> DepthEvidence:
+    """The depth fit's chi-square and standard deviations as the verdicts read them."""
+    bad = [n for n, c in depth.per_view_reduced_chi2.items() if not c <= 2.0]
+    where = "the depth model on the board (range residual against the phase noise)"
+    if bad:
+        where += f"; views above 2: {', '.join(bad[:6])}" + (" ..." if len(bad) > 6 else "")
+    return DepthEvidence(
+        stage=StageEvidence(depth.reduced_chi2, where),
+        model_std_rad=depth.model_std_rad, pixel_offset_std_m=depth.pixel_offset_std_m,
+        frequencies_hz=list(np.asarray(frequencies_hz, dtype=float).ravel()),
+        phase_span_rad=depth.phase_span_rad, range_span_m=depth.range_span_m,
+        coverage=depth.coverage)
+
+
+def other_verdicts(noise, power, solar) -> dict[str, Verdict]:
+    """The sensor's, the source power's and the solar simulator's keys."""
+    ptc = StageEvidence(noise.reduced_chi2, "the photon transfer line (bins' variance against "
+                        "their standard errors)")
+    out = {
+        "camera.sensor.adc_gain_e_per_dn": relative_verdict(
+            noise.adc_gain_e_per_dn, noise.gain_std_error, GAIN_REL, ptc, " e-/DN"),
+        "camera.sensor.read_noise_e": relative_verdict(
+            noise.read_noise_e, noise.read_noise_std_error, READ_NOISE_REL, ptc, " e-"),
+    }
+    # The twin predicts in DN through the calibrated gain: the power's and the solar scale's
+    # ratios carry the gain's relative error too (electrons = DN x gain).
+    gain_rel = noise.gain_std_error / noise.adc_gain_e_per_dn
+    chi2 = power.regions_reduced_chi2 if math.isfinite(power.regions_reduced_chi2) else 1.0
+    ratio_rel = max(power.ratio_std_error, power.regions_std_error
+                    if math.isfinite(power.regions_std_error) else 0.0) / power.ratio
+    out["illumination.power_w"] = relative_verdict(
+        power.power_w, power.power_w * math.hypot(ratio_rel, gain_rel), POWER_REL,
+        StageEvidence(chi2, f"the source power: {power.n_regions} white squares' ratios of "
+                            "measured to predicted amplitude against one another",
+                      dof=max(power.n_regions - 1, 1)), " W")
+    if solar is not None:
+        if solar.method == "frames":
+            scale = solar.irradiance_scale
+            out["solar_simulator.irradiance_scale"] = relative_verdict(
+                scale, scale * math.hypot(solar.std_error / scale, gain_rel), SOLAR_REL,
+                StageEvidence(solar.reduced_chi2, "the solar simulator's intensity response"))
+        else:
+            out["solar_simulator.irradiance_scale"] = Verdict(
+                "not determined", None, f"the frames do not determine it ({solar.reason}); the "
+                "value is the reference cell's reading, with the cell's own uncertainty")
+    return out

@@ -1,0 +1,158 @@
+"""A rig calibration's keys against the reality it was made in: error, standard deviation, target.
+
+Test code only (the calibration never sees the reality): for every key of verdicts.json the
+error of its estimate, in the unit of its ``std``, so that |error| / std can be tabulated and
+held against 3, and the key's target (issue 13's, :mod:`calibration.rig_verdicts`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration import rig_verdicts as targets
+from sim_core.depth_errors import DepthErrorModel, range_to_phase_rad
+
+SHAPE = (171, 224)
+
+
+@dataclass(frozen=True)
+class KeyFigure:
+    """One key: its verdict, |error| / std (the worst component), the error and its target
+    (both in the target's unit: relative for fx, gain ...; mm; deg; px)."""
+
+    key: str
+    verdict: str
+    z: float
+    error: float
+    target: float
+
+    @property
+    def within_target(self) -> bool:
+        return abs(self.error) <= self.target
+
+
+def _z(err, std) -> float:
+    """The worst component's |err| / std; a component with std 0 is one the key does not
+    estimate (the axis' along-axis parts: second order for a unit vector, a convention for
+    the point) and is left out."""
+    e = np.atleast_1d(np.asarray(err, dtype=float))
+    s = np.atleast_1d(np.asarray(std if std is not None else math.inf, dtype=float))
+    s = np.broadcast_to(s, e.shape)
+    est = s != 0
+    if not est.any():
+        return math.inf
+    return float(np.max(np.abs(e[est]) / s[est]))
+
+
+def key_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
+    """Every judged key's figure (see module docstring)."""
+    cal, rc = result.calibration, reality.camera
+    v = result.verdicts
+    out: list[KeyFigure] = []
+
+    def add(key, err_std_unit, std, err_target_unit, target):
+        if key in v:
+            out.append(KeyFigure(key, v[key].verdict, _z(err_std_unit, std),
+                                 float(np.max(np.abs(err_target_unit))), target))
+
+    c = cal.camera
+    for name in ("fx_px", "fy_px"):
+        e = getattr(c, name) - getattr(rc, name)
+        add(f"camera.{name}", e, v[f"camera.{name}"].std, e / getattr(rc, name),
+            targets.FOCAL_REL)
+    for name in ("cx_px", "cy_px"):
+        e = getattr(c, name) - getattr(rc, name)
+        add(f"camera.{name}", e, v[f"camera.{name}"].std, e, targets.PRINCIPAL_POINT_PX)
+    fitted_d, true_d = c.distortion, rc.distortion
+    for name in ("k1", "k2", "p1", "p2", "k3"):
+        key = f"camera.distortion.{name}"
+        if key in v:
+            e = getattr(fitted_d, name) - getattr(true_d, name)
+            lim = targets.distortion_limit(name, c.fx_px, 0.6)
+            add(key, e, v[key].std, e, lim)
+    axis = result.results["turntable"]
+    a_true = np.asarray(reality.turntable.axis_direction, dtype=float)
+    a_true /= np.linalg.norm(a_true)
+    e_dir = axis.axis_direction - a_true
+    add("turntable.axis_direction", e_dir, v["turntable.axis_direction"].std,
+        math.degrees(math.acos(float(np.clip(axis.axis_direction @ a_true, -1, 1)))),
+        targets.AXIS_DIRECTION_DEG)
+    off = axis.axis_point_m - np.asarray(reality.turntable.axis_point_m)
+    perp = off - (off @ a_true) * a_true
+    add("turntable.axis_point_m", perp, v["turntable.axis_point_m"].std,
+        np.linalg.norm(perp) * 1e3, targets.AXIS_POINT_M * 1e3)
+    e = axis.zero_offset_deg - reality.turntable.zero_offset_deg
+    add("turntable.zero_offset_deg", e, v["turntable.zero_offset_deg"].std, e,
+        targets.ZERO_OFFSET_DEG)
+    out += _depth_figures(result, reality, frequencies_hz)
+    s = c.sensor
+    for name, target in (("adc_gain_e_per_dn", targets.GAIN_REL),
+                         ("read_noise_e", targets.READ_NOISE_REL)):
+        e = getattr(s, name) - getattr(rc.sensor, name)
+        add(f"camera.sensor.{name}", e, v[f"camera.sensor.{name}"].std,
+            e / getattr(rc.sensor, name), target)
+    e = cal.illumination.power_w - reality.illumination.power_w
+    add("illumination.power_w", e, v["illumination.power_w"].std,
+        e / reality.illumination.power_w, targets.POWER_REL)
+    if "solar_simulator.irradiance_scale" in v:
+        t = reality.solar_simulator.irradiance_scale
+        e = cal.solar_simulator.irradiance_scale - t
+        add("solar_simulator.irradiance_scale", e, v["solar_simulator.irradiance_scale"].std,
+            e / t, targets.SOLAR_REL)
+    return out
+
+
+def _depth_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
+    """The global model (offset and wiggling: determined together) over the phases seen, with
+    the truth's mean fixed-pattern offset over the pixels seen moved into it (the fit pins the
+    offsets' mean to 0); the pixel offsets against the truth's less that mean, RMS over the
+    pixels seen."""
+    depth = result.results["depth"]
+    v = result.verdicts
+    seen = depth.pixels_seen
+    freqs = list(np.asarray(frequencies_hz, dtype=float).ravel())
+    fitted = DepthErrorModel.from_spec(result.calibration.camera.depth, freqs, SHAPE)
+    truth = DepthErrorModel.from_spec(reality.camera.depth, freqs, SHAPE)
+    true_pix = truth.pixel_offsets_m if truth.pixel_offsets_m is not None else np.zeros(SHAPE)
+    fit_pix = fitted.pixel_offsets_m if fitted.pixel_offsets_m is not None else np.zeros(SHAPE)
+    mean_true = float(np.mean(true_pix[seen]))
+    out = []
+    phis = np.linspace(*depth.phase_span_rad, 64)
+    worst_rad, worst_mm = [], []
+    fit_global = _global_model(result.calibration.camera.depth, freqs)
+    true_global = _global_model(reality.camera.depth, freqs)
+    for k, f in enumerate(freqs):
+        g_fit = fit_global.phase_error_rad(phis[None, :], k)[0]
+        g_true = true_global.phase_error_rad(phis[None, :], k)[0] + float(
+            range_to_phase_rad(mean_true, f))
+        d = np.angle(np.exp(1j * (g_fit - g_true)))
+        worst_rad.append(float(np.max(np.abs(d))))
+        worst_mm.append(worst_rad[-1] / float(range_to_phase_rad(1.0, f)) * 1e3)
+    target_mm = targets.DEPTH_MODEL_M * 1e3
+    for key in ("camera.depth.phase_offset_rad", "camera.depth.wiggling"):
+        if key in v:
+            out.append(KeyFigure(key, v[key].verdict, _z(max(worst_rad), v[key].std),
+                                 max(worst_mm), target_mm))
+    key = "camera.depth.pixel_offset_m"
+    if key in v:
+        err = fit_pix[seen] - (true_pix[seen] - mean_true)
+        rms = float(np.sqrt(np.mean(err**2)))
+        out.append(KeyFigure(key, v[key].verdict, _z(rms, v[key].std), rms * 1e3, target_mm))
+    return out
+
+
+def _global_model(depth, freqs) -> DepthErrorModel:
+    """The depth model without its fixed pattern (one row of pixels, as many as phases)."""
+    return DepthErrorModel.from_spec(depth.model_copy(update={"pixel_offset_m": None}), freqs,
+                                     (1, 64))
+
+
+def table(figures: list[KeyFigure]) -> str:
+    """The figures as a Markdown table."""
+    rows = ["| key | verdict | abs(err)/std | abs(err) | target |", "|---|---|---|---|---|"]
+    rows += [f"| {f.key} | {f.verdict} | {f.z:.2f} | {f.error:.4g} | {f.target:.4g} |"
+             for f in figures]
+    return "\n".join(rows)
