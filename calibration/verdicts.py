@@ -161,9 +161,11 @@ def judge(
                        f"{chi2_limit:g} (noise explains about 1): the model does not explain "
                        "these data")
     if not math.isfinite(worst) or worst > limit:
-        worst_txt = f"{worst:.3g}" if math.isfinite(worst) else "unbounded"
-        return Verdict("not determined", reported if math.isfinite(worst) else None,
-                       f"standard deviation {worst_txt}{unit} above the limit {limit:g}{unit}")
+        if not math.isfinite(worst):
+            return Verdict("not determined", None, "its error is unbounded: the data do not "
+                           f"pin it down (the limit is {limit:g}{unit})")
+        return Verdict("not determined", reported,
+                       f"standard deviation {worst:.3g}{unit} above the limit {limit:g}{unit}")
     return Verdict("determined", reported)
 
 

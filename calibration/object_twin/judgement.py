@@ -60,6 +60,21 @@ def _where(refined: RefinedFit, angles_deg: Sequence[float]) -> str:
                                 f"{refined.chi2_per_view[i]:.3g})" for i in bad)
 
 
+#: why a key whose spread over the views is unbounded is not determined
+ONE_VIEW = ("one view alone determines it (leaving that view out leaves it undetermined): the "
+            "views cannot cross-check it; add angles that see it")
+
+
+def _judged(std: float | Sequence[float], spread: float | Sequence[float], limit: float, *,
+            chi2: float, unit: str, where: str) -> Verdict:
+    """:func:`calibration.verdicts.judge`, with the reason of a key only one view determines."""
+    verdict = judge(std, limit, reduced_chi2=chi2, spread=spread, unit=unit, where=where)
+    spreads = [spread] if isinstance(spread, int | float) else list(spread)
+    if verdict.verdict == "not determined" and not all(math.isfinite(s) for s in spreads):
+        return Verdict("not determined", None, ONE_VIEW)
+    return verdict
+
+
 def object_verdicts(refined: RefinedFit, pixels: Mapping[str, ObjectPixels],
                     angles_deg: Sequence[float]) -> Verdicts:
     """The verdict of each key the object file carries (module docstring); ``pixels`` are the
@@ -68,21 +83,19 @@ def object_verdicts(refined: RefinedFit, pixels: Mapping[str, ObjectPixels],
     where = _where(refined, angles_deg)
     chi2 = refined.chi2_after
     out = Verdicts()
-    out.add(POSITION_KEY, judge(refined.std_position_m, LIMITS[POSITION_KEY],
-                                reduced_chi2=chi2, spread=refined.jackknife_position_m,
-                                unit=" m", where=where))
-    out.add(ROTATION_KEY, judge(refined.std_rotation_deg, LIMITS[ROTATION_KEY],
-                                reduced_chi2=chi2, spread=refined.jackknife_rotation_deg,
-                                unit=" deg", where=where))
+    out.add(POSITION_KEY, _judged(refined.std_position_m, refined.jackknife_position_m,
+                                  LIMITS[POSITION_KEY], chi2=chi2, unit=" m", where=where))
+    out.add(ROTATION_KEY, _judged(refined.std_rotation_deg, refined.jackknife_rotation_deg,
+                                  LIMITS[ROTATION_KEY], chi2=chi2, unit=" deg", where=where))
     for name, px in pixels.items():
         if not px.determined:
             out.add(scale_key(name), Verdict("not determined", None,
                                              px.reason or "too few pixels of it in the views"))
             continue
-        out.add(scale_key(name), judge(refined.std_scale[name], LIMITS["reflectance_scale"],
-                                       reduced_chi2=chi2,
-                                       spread=refined.jackknife_scale.get(name, 0.0),
-                                       where=where))
+        out.add(scale_key(name), _judged(refined.std_scale[name],
+                                         refined.jackknife_scale.get(name, 0.0),
+                                         LIMITS["reflectance_scale"], chi2=chi2, unit="",
+                                         where=where))
     return out
 
 

@@ -371,38 +371,56 @@ def jackknife_covariance(jac: np.ndarray, r: np.ndarray,
     Stein). It measures how far the groups agree with each other, whatever the residual's noise
     model says: over views, a view the model gets wrong; over tiles, errors correlated across
     neighbouring pixels (the optics, a misfit silhouette), which the Jacobian's error, counting
-    every pixel as independent, does not see. Where leaving a group out leaves a direction
-    undetermined (a singular or near-singular system) every variance is inf
-    (``singular="unbounded"``), or that group is passed over (``"skip"``: tiles, where the
-    views' jackknife judges identifiability). Fewer than two groups counted: inf everywhere.
+    every pixel as independent, does not see.
+
+    Where leaving a group out leaves some parameters undetermined (``J^T J - J_g^T J_g``
+    singular along directions that involve them: an object only one view sees), those
+    parameters' variances are inf, with no covariance (``singular="unbounded"``: the groups
+    cannot cross-check them; the others keep theirs, from the least-norm move), or that group is
+    passed over (``"skip"``: tiles, where the views' jackknife judges identifiability). Fewer
+    than two groups counted: inf everywhere.
     """
     n_par = jac.shape[1]
     jtj = jac.T @ jac
     moves = []
+    unbounded = np.zeros(n_par, dtype=bool)
     for g in groups:
         jg = jac[g]
         if jg.shape[0] == 0:
             continue
         a = jtj - jg.T @ jg
-        if not np.all(np.isfinite(a)) or np.linalg.cond(a) > 1e12:
+        if not np.all(np.isfinite(a)):
+            unbounded[:] = True
+            continue
+        w, v = np.linalg.eigh(a)
+        null = w <= 1e-12 * max(float(w.max()), 1e-300)
+        if np.any(null):
             if singular == "skip":
                 continue
-            return np.full((n_par, n_par), np.inf)
-        moves.append(np.linalg.solve(a, jg.T @ r[g]))
+            unbounded |= np.any(np.abs(v[:, null]) > 1e-6, axis=1)
+        keep = ~null
+        moves.append(v[:, keep] @ ((v[:, keep].T @ (jg.T @ r[g])) / w[keep]))
     if len(moves) < 2:
         return np.full((n_par, n_par), np.inf)
     d = np.array(moves)
     d -= d.mean(axis=0)
     n = len(moves)
-    return (n - 1) / n * d.T @ d
+    cov = (n - 1) / n * d.T @ d
+    cov[unbounded, :] = 0.0
+    cov[:, unbounded] = 0.0
+    cov[unbounded, unbounded] = np.inf
+    return cov
 
 
 def conv_std(cov: np.ndarray, conv: np.ndarray) -> np.ndarray:
-    """The standard deviations of ``conv @ x`` for ``x`` of covariance ``cov`` (inf stays
-    inf)."""
-    if not np.all(np.isfinite(cov)):
-        return np.full(conv.shape[0], np.inf)
-    return np.sqrt(np.clip(np.diag(conv @ cov @ conv.T), 0.0, None))
+    """The standard deviations of ``conv @ x`` for ``x`` of covariance ``cov``: inf for a
+    component that depends on a parameter of infinite variance, the others from the finite
+    part."""
+    unbounded = ~np.isfinite(np.diag(cov))
+    finite = np.where(np.outer(~unbounded, ~unbounded), cov, 0.0)
+    std = np.sqrt(np.clip(np.diag(conv @ finite @ conv.T), 0.0, None))
+    std[np.any(conv[:, unbounded] != 0.0, axis=1)] = np.inf
+    return std
 
 
 def _steps(n_scales: int) -> np.ndarray:

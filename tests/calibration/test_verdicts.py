@@ -84,8 +84,8 @@ def test_verdicts_are_written_whole_as_a_flat_mapping_and_read_back(tmp_path):
     assert data == {
         "camera.fx_px": {"verdict": "determined", "std": 0.3, "reason": None},
         "turntable.zero_offset_deg": {"verdict": "not determined", "std": None,
-                                      "reason": "standard deviation unbounded above the "
-                                                "limit 0.1"},
+                                      "reason": "its error is unbounded: the data do not pin "
+                                                "it down (the limit is 0.1)"},
     }
     assert dict(read_verdicts(path)) == dict(verdicts)
     assert verdicts.counts() == {"determined": 1, "not determined": 1, "unexplained": 0}
