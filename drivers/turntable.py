@@ -602,14 +602,7 @@ class Turntable:
         controller refuses the move, reports an error or disable state, stalls, times out, or
         when the position read back differs from the target by more than ``tolerance_deg``.
         """
-        angle = float(angle_deg)
-        low, high = self._limits
-        if not math.isfinite(angle):
-            raise DeviceInputError("angle_deg", f"got {angle_deg!r}; a finite angle is required")
-        if not low <= angle <= high:
-            raise LimitError(
-                "angle_deg", angle, low, high, "deg", "turntable software limits SL/SR"
-            )
+        angle = self._checked_target(angle_deg)
         status = self.status()
         if status.state in MOVING_STATES | HOMING_STATES:
             status = self._wait_ready("previous motion", self.move_timeout_s)
@@ -628,11 +621,9 @@ class Turntable:
             time.sleep(self.settle_s)
         return self._verify(angle)
 
-    def start_move(self, angle_deg: float) -> None:
-        """Send the move to ``angle_deg`` (``PA``) and return at once, the stage moving: for a
-        capture while turning. The caller waits for READY (:meth:`move_to` to the same angle
-        does) and stops the stage on any failure (:meth:`stop`). Same checks as
-        :meth:`move_to` (limits, a finite angle); the stage must be READY (referenced)."""
+    def _checked_target(self, angle_deg: float) -> float:
+        """``angle_deg`` as a float, or :class:`DeviceInputError` (not finite) or
+        :class:`LimitError` (outside :attr:`limits_deg`) before anything is sent."""
         angle = float(angle_deg)
         low, high = self._limits
         if not math.isfinite(angle):
@@ -641,6 +632,14 @@ class Turntable:
             raise LimitError(
                 "angle_deg", angle, low, high, "deg", "turntable software limits SL/SR"
             )
+        return angle
+
+    def start_move(self, angle_deg: float) -> None:
+        """Send the move to ``angle_deg`` (``PA``) and return at once, the stage moving: for a
+        capture while turning. The caller waits for READY (:meth:`move_to` to the same angle
+        does) and stops the stage on any failure (:meth:`stop`). Same checks as
+        :meth:`move_to` (limits, a finite angle); the stage must be READY (referenced)."""
+        angle = self._checked_target(angle_deg)
         status = self.status()
         if not status.is_ready:
             raise TurntableError(f"cannot start a move: controller is {status.describe()}; "
