@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from calibration.board_detection import flat_field, flat_field_levels, saddle_std_px
 from calibration.noise_gain import tap_difference_variance_dn2
 from calibration.rig_verdicts import (
     GAIN_REL,
@@ -47,6 +46,9 @@ def corner_std_px(view, cap, noise) -> np.ndarray:
     """(n, 2) standard deviation of a view's corners: the amplitude's noise through the flat
     field and the saddle-point fit the detector ends with, and the detector's own error
     (:data:`CORNER_DETECTOR_FLOOR_PX`) in quadrature."""
+    # OpenCV's detector is imported with its use: the service starts without OpenCV
+    from calibration.board_detection import flat_field, flat_field_levels, saddle_std_px
+
     amp = np.asarray(cap.amplitude, dtype=np.float64)
     _, span = flat_field_levels(amp)
     # no contrast (span 0) defines no corner: its noise in the flat field is unbounded

@@ -41,7 +41,7 @@ def illumination_temperature_c(elapsed_s: float, spec: CameraTemperature) -> flo
     >>> spec = CameraTemperature(illumination_start_c=25, illumination_end_c=45,
     ...                          time_constant_s=600, depth_drift_mm_per_c=0.4)
     >>> illumination_temperature_c(0.0, spec), round(illumination_temperature_c(600.0, spec), 3)
-    (25.0, 37.358)
+    (25.0, 37.642)
     """
     t = float(elapsed_s)
     if not (math.isfinite(t) and t >= 0.0):
