@@ -40,6 +40,8 @@ from calibration.captures import AveragedCapture
 from calibration.object_twin.judgement import (
     POSITION_KEY,
     ROTATION_KEY,
+    estimates,
+    mark_driven,
     object_verdicts,
     scale_key,
     unfit_views,
@@ -238,14 +240,33 @@ def fit_object(
                     "reason": f"the model does not explain this view (reduced chi-square "
                               f"{refined.chi2_per_view[i]:.3g} after the fit with every view, "
                               f"above {CHI2_UNEXPLAINED:g}): left out"} for i in unfit]
-        again.report["dropped_views"] = dropped
-        again.report["with_every_view"] = json_safe(
-            {"refined": refined.summary(),
-             "verdicts": verdicts.to_json()}, non_finite=None)
-        again.report["seconds"]["total"] = time.perf_counter() - t0
-        procedures = again.object_twin.provenance.procedures
-        procedures["object_fit"] = again.report
-        return again
+        refit = again.report
+        marked = mark_driven(
+            again.verdicts,
+            estimates(refined.offset.position_m, refined.offset.rotation_deg, refined.scales),
+            estimates(again.object_twin.mount.pose_offset.position_m,
+                      again.object_twin.mount.pose_offset.rotation_deg,
+                      {n: e["reflectance_scale"] for n, e in refit["objects"].items()}),
+            "views " + ", ".join(f"{angles[i]:+g} deg" for i in unfit))
+        for n, entry in refit["objects"].items():
+            verdict = marked[scale_key(n)]
+            entry.update(determined=verdict.determined, verdict=verdict.verdict)
+            if not verdict.determined:
+                entry["reason"] = verdict.reason
+        refit["pose_determined"] = marked[POSITION_KEY].determined and marked[
+            ROTATION_KEY].determined
+        refit["verdicts"] = marked.to_json()
+        refit["dropped_views"] = dropped
+        refit["with_every_view"] = json_safe(
+            {"refined": refined.summary(), "verdicts": verdicts.to_json()}, non_finite=None)
+        refit["seconds"]["total"] = time.perf_counter() - t0
+        twin = again.object_twin
+        twin = twin.model_copy(update={
+            "objects": {n: p for n, p in twin.objects.items()
+                        if marked[scale_key(n)].determined},
+            "provenance": twin.provenance.model_copy(
+                update={"procedures": {**twin.provenance.procedures, "object_fit": refit}})})
+        return ObjectFit(twin, refit, marked)
     final_pred = refined.predicted
     objects_report = {}
     for n in model.names:

@@ -22,6 +22,8 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+
 from calibration.object_twin.refine import UNDETERMINED_STD, RefinedFit
 from calibration.object_twin.reflectance import ObjectPixels
 from calibration.verdicts import CHI2_UNEXPLAINED, Verdict, Verdicts, judge
@@ -99,5 +101,51 @@ def object_verdicts(refined: RefinedFit, pixels: Mapping[str, ObjectPixels],
     return out
 
 
-__all__ = ["LIMITS", "POSITION_KEY", "ROTATION_KEY", "object_verdicts", "scale_key",
-           "unfit_views"]
+#: how far (in the refit's standard deviations) a key may move when the views the model does not
+#: explain are left out before those views count as driving it
+DRIVEN_SIGMA = 3.0
+
+
+def estimates(offset_position_m: Sequence[float], offset_rotation_deg: Sequence[float],
+              scales: Mapping[str, float]) -> dict[str, np.ndarray]:
+    """A fit's value of each key (the object file's names)."""
+    out = {POSITION_KEY: np.asarray(offset_position_m, dtype=np.float64),
+           ROTATION_KEY: np.asarray(offset_rotation_deg, dtype=np.float64)}
+    out.update({scale_key(n): np.array([float(v)]) for n, v in scales.items()})
+    return out
+
+
+def mark_driven(verdicts: Verdicts, with_dropped: Mapping[str, np.ndarray],
+                without: Mapping[str, np.ndarray], dropped_where: str,
+                sigma: float = DRIVEN_SIGMA) -> Verdicts:
+    """The refit's verdicts, a determined key marked ``unexplained`` when leaving out the views
+    the model does not explain (``dropped_where``) moved it by more than ``sigma`` of its
+    standard deviation: those views drive it, and what the model misses in them is likely in
+    the others too (an effect every view has, seen most where the model failed)."""
+    out = Verdicts()
+    for key, v in verdicts.items():
+        if v.determined and key in with_dropped and key in without:
+            std = np.atleast_1d(np.asarray(v.std, dtype=np.float64))
+            moved = np.abs(np.asarray(with_dropped[key]) - np.asarray(without[key]))
+            ratio = float(np.max(moved / np.maximum(std, 1e-300)))
+            if ratio > sigma:
+                moved_txt = ", ".join(f"{m:.3g}" for m in moved)
+                v = Verdict("unexplained", v.std,
+                            f"{dropped_where}, which the model does not explain, move it by "
+                            f"{moved_txt} ({ratio:.3g} standard deviations) when left out: "
+                            "what the model misses there may bias the other views too")
+        out.add(key, v)
+    return out
+
+
+__all__ = [
+    "DRIVEN_SIGMA",
+    "LIMITS",
+    "POSITION_KEY",
+    "ROTATION_KEY",
+    "estimates",
+    "mark_driven",
+    "object_verdicts",
+    "scale_key",
+    "unfit_views",
+]
