@@ -40,8 +40,8 @@ from calibration.captures import AveragedCapture
 from calibration.object_twin.judgement import (
     POSITION_KEY,
     ROTATION_KEY,
+    after_dropped_views,
     estimates,
-    mark_driven,
     object_verdicts,
     scale_key,
     unfit_views,
@@ -241,7 +241,7 @@ def fit_object(
                               f"{refined.chi2_per_view[i]:.3g} after the fit with every view, "
                               f"above {CHI2_UNEXPLAINED:g}): left out"} for i in unfit]
         refit = again.report
-        marked = mark_driven(
+        marked = after_dropped_views(
             again.verdicts,
             estimates(refined.offset.position_m, refined.offset.rotation_deg, refined.scales),
             estimates(again.object_twin.mount.pose_offset.position_m,

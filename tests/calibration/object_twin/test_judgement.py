@@ -11,8 +11,8 @@ from calibration.object_twin.judgement import (
     ONE_VIEW,
     POSITION_KEY,
     ROTATION_KEY,
+    after_dropped_views,
     estimates,
-    mark_driven,
     object_verdicts,
     scale_key,
     unfit_views,
@@ -73,16 +73,17 @@ def test_the_views_that_do_not_fit_come_worst_first(chi2, expected):
     assert unfit_views(chi2, [0.0] * len(chi2)) == expected
 
 
-def test_keys_the_dropped_views_drive_are_unexplained_the_others_kept():
-    # Unmodelled stray light: the face-on view is left out (chi-square 3.1), and the body's
-    # scale moves by 3 % without it while its refit error is 0.2 %: a confident wrong number
-    # unless marked.
+def test_after_views_are_left_out_no_key_is_determined():
+    # Unmodelled stray light: the face-on view is left out (chi-square 7.3); the body's scale,
+    # 3 % low in every view, hardly moves without it and its refit error is 0.2 %: a confident
+    # wrong number unless marked. The pose moved; what was not determined stays so.
     refit = object_verdicts(_fit(jk_scale=0.001), PIXELS, ANGLES)
-    with_dropped = estimates((0.001, 0.002, 0.0), (0.5, 0.0, 0.0), {"body": 1.00})
-    without = estimates((0.00101, 0.002, 0.0), (0.5, 0.0, 0.0), {"body": 0.97})
-    marked = mark_driven(refit, with_dropped, without, "views +0 deg")
+    with_dropped = estimates((0.001, 0.002, 0.0), (0.5, 0.0, 0.0), {"body": 0.970})
+    without = estimates((0.0011, 0.002, 0.0), (0.5, 0.0, 0.0), {"body": 0.969})
+    marked = after_dropped_views(refit, with_dropped, without, "views +0 deg")
     body = marked[scale_key("body")]
     assert body.verdict == "unexplained" and "views +0 deg" in body.reason
-    assert "15 standard deviations" in body.reason  # its error: 0.2 %, the Jacobian's
-    assert marked[POSITION_KEY].determined  # moved 0.01 mm, std 0.1 mm
+    assert "0.001, 0.5 standard deviations" in body.reason and body.std == refit[
+        scale_key("body")].std
+    assert marked[POSITION_KEY].verdict == "unexplained"
     assert marked[scale_key("pedestal")] == refit[scale_key("pedestal")]
