@@ -43,6 +43,7 @@ from calibration.verdicts import (
     CHI2_UNEXPLAINED,
     Verdict,
     Verdicts,
+    above_limit,
     chi2_limit_for,
     honest_std,
     judge,
@@ -116,10 +117,11 @@ def jackknife_std(estimates: Sequence[np.ndarray | float]) -> np.ndarray:
 
 def unexplained_views(per_view_chi2: Mapping[str, float],
                       chi2_limit: float = CHI2_UNEXPLAINED) -> tuple[list[str], bool]:
-    """The views whose reduced chi-square is above ``chi2_limit`` (not finite counts as
-    above), and whether they may be dropped: True when they are at most
-    :data:`MAX_DROPPED_SHARE` of the views (outliers), False when more (the model is wrong)."""
-    bad = [n for n, c in per_view_chi2.items() if not (math.isfinite(c) and c <= chi2_limit)]
+    """The views whose reduced chi-square is above ``chi2_limit`` (:func:`calibration.verdicts.
+    above_limit`: worst first, not finite counts as above), and whether they may be dropped:
+    True when they are at most :data:`MAX_DROPPED_SHARE` of the views (outliers), False when
+    more (the model is wrong)."""
+    bad = above_limit(per_view_chi2, chi2_limit)
     return bad, len(bad) <= MAX_DROPPED_SHARE * len(per_view_chi2)
 
 

@@ -32,7 +32,7 @@ import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from sim_core.files import atomic_write
 from sim_core.json_safe import json_safe
@@ -45,6 +45,8 @@ CHI2_UNEXPLAINED = 2.0
 VERDICTS_FILE = "verdicts.json"
 
 Std = float | list[float] | None
+#: a group of residuals (a view's name or index, a slice)
+K = TypeVar("K")
 
 
 @dataclass(frozen=True)
@@ -198,6 +200,21 @@ def chi2_limit_for(dof: int, limit: float = CHI2_UNEXPLAINED, tail: float = 1e-3
     return max(limit, float(chi2.isf(tail, dof)) / dof)
 
 
+def above_limit(chi2_by_group: Mapping[K, float], limit: float = CHI2_UNEXPLAINED) -> list[K]:
+    """The groups (views, slices) whose reduced chi-square is above ``limit``, worst first; one
+    that is not finite counts as above every other.
+
+    >>> above_limit({"+30": 1.1, "-80": 4.2, "0": float("nan"), "+60": 2.5})
+    ['0', '-80', '+60']
+    """
+    def badness(group: K) -> float:
+        c = chi2_by_group[group]
+        return c if math.isfinite(c) else math.inf
+
+    return sorted((g for g, c in chi2_by_group.items() if not c <= limit), key=badness,
+                  reverse=True)
+
+
 def verdicts_beside(out: str | Path) -> Path:
     """Where a command whose output is one file writes its verdicts: beside it, the file's name
     without its suffix and ``.verdicts.json`` (``sample.yaml`` -> ``sample.verdicts.json``).
@@ -223,5 +240,5 @@ def verdict_lines(verdicts: Verdicts) -> list[str]:
 
 
 __all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
-           "chi2_limit_for", "count_line", "honest_std", "judge", "read_verdicts", "verdict_lines",
-           "verdicts_beside", "write_verdicts"]
+           "above_limit", "chi2_limit_for", "count_line", "honest_std", "judge", "read_verdicts",
+           "verdict_lines", "verdicts_beside", "write_verdicts"]

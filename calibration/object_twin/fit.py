@@ -228,7 +228,7 @@ def fit_object(
     refined = refine_object_twin(renderer, captures, reg.offset, centroid, scales, fitted)
     angles = [c.turntable_angle_deg for c in captures]
     verdicts = object_verdicts(refined, pixels, angles)
-    unfit = unfit_views(refined.chi2_per_view, angles)
+    unfit = unfit_views(refined.chi2_per_view)
     if (drop_unfit_views and refined.chi2_after > CHI2_UNEXPLAINED and unfit
             and len(captures) - len(unfit) >= 2):
         kept = [c for i, c in enumerate(captures) if i not in unfit]

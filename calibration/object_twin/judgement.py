@@ -26,7 +26,7 @@ import numpy as np
 
 from calibration.object_twin.refine import UNDETERMINED_STD, RefinedFit
 from calibration.object_twin.reflectance import ObjectPixels
-from calibration.verdicts import CHI2_UNEXPLAINED, Verdict, Verdicts, judge
+from calibration.verdicts import Verdict, Verdicts, above_limit, judge
 
 POSITION_KEY = "mount.pose_offset.position_m"
 ROTATION_KEY = "mount.pose_offset.rotation_deg"
@@ -41,21 +41,15 @@ def scale_key(name: str) -> str:
     return f"objects.{name}.reflectance_scale"
 
 
-def unfit_views(chi2_per_view: Sequence[float], angles_deg: Sequence[float],
-                limit: float = CHI2_UNEXPLAINED) -> list[int]:
-    """The indices of the views whose reduced chi-square is above ``limit`` (or not finite),
-    worst first."""
-    def badness(i: int) -> float:
-        c = chi2_per_view[i]
-        return c if math.isfinite(c) else math.inf
-
-    return sorted((i for i, c in enumerate(chi2_per_view) if not c <= limit), key=badness,
-                  reverse=True)
+def unfit_views(chi2_per_view: Sequence[float]) -> list[int]:
+    """The indices of the views whose reduced chi-square is above
+    :data:`calibration.verdicts.CHI2_UNEXPLAINED` (or not finite), worst first."""
+    return above_limit(dict(enumerate(chi2_per_view)))
 
 
 def _where(refined: RefinedFit, angles_deg: Sequence[float]) -> str:
     """The views a reason names: those that do not fit, with their chi-square."""
-    bad = unfit_views(refined.chi2_per_view, angles_deg)
+    bad = unfit_views(refined.chi2_per_view)
     if not bad:
         return f"all {len(angles_deg)} views together"
     return "views " + ", ".join(f"{angles_deg[i]:+g} deg (chi-square "

@@ -92,7 +92,7 @@ def test_few_degrees_of_freedom_raise_the_limit_by_the_chi_square_s_own_noise():
 def test_a_few_unexplained_views_are_dropped_many_blame_the_model():
     chi2 = {f"v{i}": 1.0 for i in range(20)} | {"bad": 30.0, "nan": math.nan}
     bad, droppable = unexplained_views(chi2)
-    assert bad == ["bad", "nan"] and droppable
+    assert bad == ["nan", "bad"] and droppable  # worst first: not finite is the worst
     bad, droppable = unexplained_views({f"v{i}": 5.0 for i in range(8)} | {"ok": 1.0})
     assert len(bad) == 8 and not droppable
 

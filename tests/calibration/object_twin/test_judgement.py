@@ -70,7 +70,7 @@ def test_a_spread_beyond_the_limit_is_not_determined():
     ((1.0, 3.0, 2.5), [1, 2]), ((1.0, 1.0), []), ((np.nan, 3.0), [0, 1]), ((np.inf, 9.0), [0, 1]),
 ])
 def test_the_views_that_do_not_fit_come_worst_first(chi2, expected):
-    assert unfit_views(chi2, [0.0] * len(chi2)) == expected
+    assert unfit_views(chi2) == expected
 
 
 def test_after_views_are_left_out_no_key_is_determined():
