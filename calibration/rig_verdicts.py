@@ -46,6 +46,7 @@ from calibration.verdicts import (
     above_limit,
     chi2_limit_for,
     honest_std,
+    jackknife_covariance_of,
     judge,
 )
 from sim_core.constants import SPEED_OF_LIGHT_M_S
@@ -111,8 +112,7 @@ def jackknife_std(estimates: Sequence[np.ndarray | float]) -> np.ndarray:
     x = np.asarray([np.atleast_1d(np.asarray(e, dtype=np.float64)) for e in estimates])
     if x.shape[0] < 2:
         return np.full(x.shape[1:] if x.ndim > 1 else (1,), np.inf)
-    g = x.shape[0]
-    return np.sqrt((g - 1) / g * np.sum((x - x.mean(axis=0)) ** 2, axis=0))
+    return np.sqrt(np.diag(jackknife_covariance_of(x.reshape(x.shape[0], -1))))
 
 
 def unexplained_views(per_view_chi2: Mapping[str, float],

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
+import numpy as np
+
 from sim_core.files import atomic_write
 from sim_core.json_safe import json_safe
 
@@ -215,6 +217,22 @@ def above_limit(chi2_by_group: Mapping[K, float], limit: float = CHI2_UNEXPLAINE
                   reverse=True)
 
 
+def jackknife_covariance_of(leave_one_out: np.ndarray) -> np.ndarray:
+    """The delete-one-group jackknife covariance (Efron and Stein) of an estimate from its ``g``
+    leave-one-out values, the rows of ``leave_one_out`` (g, n): ``(g - 1) / g * sum_i (x_i -
+    mean)(x_i - mean)^T``; inf everywhere with fewer than two (one has no spread).
+
+    >>> jackknife_covariance_of(np.array([[1.0], [3.0]])).tolist()
+    [[1.0]]
+    """
+    x = np.asarray(leave_one_out, dtype=np.float64)
+    n = x.shape[1] if x.ndim == 2 else 1
+    if x.ndim != 2 or x.shape[0] < 2:
+        return np.full((n, n), np.inf)
+    d = x - x.mean(axis=0)
+    return (x.shape[0] - 1) / x.shape[0] * d.T @ d
+
+
 def verdicts_beside(out: str | Path) -> Path:
     """Where a command whose output is one file writes its verdicts: beside it, the file's name
     without its suffix and ``.verdicts.json`` (``sample.yaml`` -> ``sample.verdicts.json``).
@@ -240,5 +258,6 @@ def verdict_lines(verdicts: Verdicts) -> list[str]:
 
 
 __all__ = ["CHI2_UNEXPLAINED", "VERDICTS", "VERDICTS_FILE", "Verdict", "VerdictName", "Verdicts",
-           "above_limit", "chi2_limit_for", "count_line", "honest_std", "judge", "read_verdicts",
+           "above_limit", "chi2_limit_for", "count_line", "honest_std", "jackknife_covariance_of",
+           "judge", "read_verdicts",
            "verdict_lines", "verdicts_beside", "write_verdicts"]

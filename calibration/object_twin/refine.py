@@ -45,6 +45,7 @@ import numpy as np
 
 from calibration.captures import AveragedCapture
 from calibration.object_twin.render_model import PredictedView, TwinRenderer, measured_phasor
+from calibration.verdicts import jackknife_covariance_of
 from sim_core.errors import InvalidInputError
 from sim_core.geometry import rotation_matrix_xyz_deg
 from sim_core.raw import ValidityThresholds
@@ -402,10 +403,7 @@ def jackknife_covariance(jac: np.ndarray, r: np.ndarray,
         moves.append(v[:, keep] @ ((v[:, keep].T @ (jg.T @ r[g])) / w[keep]))
     if len(moves) < 2:
         return np.full((n_par, n_par), np.inf)
-    d = np.array(moves)
-    d -= d.mean(axis=0)
-    n = len(moves)
-    cov = (n - 1) / n * d.T @ d
+    cov = jackknife_covariance_of(np.array(moves))
     cov[unbounded, :] = 0.0
     cov[:, unbounded] = 0.0
     cov[unbounded, unbounded] = np.inf
