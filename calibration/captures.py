@@ -46,6 +46,10 @@ class AveragedCapture:
     exposure_s : float
     frames : tuple of RawFrame
         The frames themselves, when kept (noise stacks).
+    illumination_temperature_c : float or None
+        The mean of the frames' reported illumination temperatures [degC] (None unless every
+        frame reports one): the warm-up drift is linear in it (:mod:`sim_core.warmup`), so the
+        mean phasor carries the drift at the mean temperature, to first order in its spread.
     """
 
     turntable_angle_deg: float
@@ -61,6 +65,7 @@ class AveragedCapture:
     frequencies_hz: np.ndarray = field(repr=False)
     exposure_s: float = 0.0
     frames: tuple[RawFrame, ...] = field(default=(), repr=False)
+    illumination_temperature_c: float | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -109,7 +114,17 @@ def average_frames(frames: list[RawFrame], keep_frames: bool = False) -> Average
         frequencies_hz=np.asarray(first.frequencies_hz, dtype=np.float64),
         exposure_s=float(first.exposure_s),
         frames=tuple(frames) if keep_frames else (),
+        illumination_temperature_c=_mean_temperature_c(frames),
     )
+
+
+def _mean_temperature_c(frames: list[RawFrame]) -> float | None:
+    """The frames' mean illumination temperature [degC], None unless every frame reports a
+    finite one."""
+    temps = [f.illumination_temperature_c for f in frames]
+    if any(t is None or not np.isfinite(t) for t in temps):
+        return None
+    return float(np.mean(temps))
 
 
 #: ``progress(done, total, message)`` callbacks of the procedures

@@ -132,7 +132,8 @@ def measured_points(
         depth = calibration.camera.depth if calibration is not None else None
         model_d = None if depth is None else DepthErrorModel.from_spec(
             depth, cap.frequencies_hz, cap.shape)
-        cloud = capture_cloud(cap, intr, model_d, min_amplitude_dn, edge_jump_m)
+        temperature = calibration.camera.temperature if calibration is not None else None
+        cloud = capture_cloud(cap, intr, model_d, min_amplitude_dn, edge_jump_m, temperature)
         m = mount_from_camera(cspec, calibration, cap.turntable_angle_deg)
         points.append(cloud.points_cam_m @ m[:3, :3].T + m[:3, 3])
         cams.append(m[:3, 3])

@@ -32,6 +32,8 @@ from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError
 from sim_core.raw import ValidityThresholds
 from sim_core.tof import ToFImage, range_from_phase, unwrap_two_frequencies
+from sim_core.twin_file import CameraTemperature
+from sim_core.warmup import TemperatureDrift
 
 #: default: least amplitude of an averaged pixel used as a point [DN]
 MIN_AMPLITUDE_DN = 10.0
@@ -104,6 +106,7 @@ def cloud_from_phases(
     depth_model: DepthErrorModel | None,
     turntable_angle_deg: float,
     edge_jump_m: float = EDGE_JUMP_M,
+    drift_rad: np.ndarray | None = None,
 ) -> ViewCloud:
     """Points of the ``usable`` pixels that are not at a depth edge (module docstring).
 
@@ -120,11 +123,19 @@ def cloud_from_phases(
         The calibration's depth errors (None: the phases are taken as true).
     turntable_angle_deg : float
     edge_jump_m : float
+    drift_rad : (n_f,) float, optional
+        The calibrated warm-up drift's phase offset at the capture's temperature
+        (:meth:`sim_core.warmup.TemperatureDrift.phase_offset_rad`), removed before the depth
+        errors.
     """
     phase = np.asarray(phase_rad, dtype=np.float64)
     if phase.shape[-2:] != intrinsics.shape:
         raise InvalidInputError("capture", f"image {phase.shape[-2:]} does not match the "
                                 f"calibrated camera's {intrinsics.shape}")
+    if drift_rad is not None:
+        # the warm-up drift acts after the depth errors (sim_core.pipeline): removed first
+        phase = np.mod(phase - np.asarray(drift_rad, dtype=np.float64).reshape(-1, 1, 1),
+                       2.0 * np.pi)
     if depth_model is not None:
         phase = depth_model.correct_phase(phase)
     rng = range_from_phases(phase, frequencies_hz)
@@ -154,12 +165,19 @@ def capture_cloud(
     depth_model: DepthErrorModel | None,
     min_amplitude_dn: float = MIN_AMPLITUDE_DN,
     edge_jump_m: float = EDGE_JUMP_M,
+    temperature: CameraTemperature | None = None,
 ) -> ViewCloud:
-    """The point cloud of an averaged capture (module docstring)."""
+    """The point cloud of an averaged capture (module docstring); ``temperature`` (the
+    calibration's ``camera.temperature``) removes the warm-up drift at the capture's reported
+    temperature, when it reports one."""
     usable = usable_pixels(capture.amplitude, capture.valid, min_amplitude_dn)
+    drift = None
+    if temperature is not None and capture.illumination_temperature_c is not None:
+        drift = TemperatureDrift.from_spec(temperature, capture.frequencies_hz).phase_offset_rad(
+            capture.illumination_temperature_c)
     return cloud_from_phases(capture.phase_rad, capture.amplitude, usable,
                              capture.frequencies_hz, intrinsics, depth_model,
-                             capture.turntable_angle_deg, edge_jump_m)
+                             capture.turntable_angle_deg, edge_jump_m, drift)
 
 
 def image_cloud(

@@ -206,7 +206,8 @@ class TwinRenderer:
     def _scene(self, cspec: SceneSpec, cap: AveragedCapture,
                object_twin: ObjectTwinParameters) -> Scene:
         return build_scene(cspec, self.base_dir, turntable_deg=cap.turntable_angle_deg,
-                           solar_suns=0.0, twin=with_object_twin(self.calibration, object_twin))
+                           solar_suns=0.0, twin=with_object_twin(self.calibration, object_twin),
+                           illumination_temperature_c=cap.illumination_temperature_c)
 
     def predict(self, object_twin: ObjectTwinParameters) -> list[PredictedView]:
         """The prediction of every captured view under ``object_twin``."""

@@ -116,3 +116,13 @@ def test_bad_input_names_the_field():
         fit_warmup(frames[:2], PATCH)
     with pytest.raises(InvalidInputError, match="patch"):
         fit_warmup(frames, np.zeros((171, 224), bool))
+
+
+def test_an_averaged_capture_keeps_its_frames_mean_temperature():
+    from calibration.captures import average_frames
+
+    frames = _frames_at([30.0, 31.0, 32.5])
+    assert average_frames(frames).illumination_temperature_c == pytest.approx(31.1666666)
+    # one frame without a report: the mean is not known
+    frames[1] = dataclasses.replace(frames[1], illumination_temperature_c=None)
+    assert average_frames(frames).illumination_temperature_c is None

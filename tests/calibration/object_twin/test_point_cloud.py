@@ -66,3 +66,26 @@ def test_flying_pixels_at_a_depth_step_and_flagged_pixels_are_dropped():
 def test_dim_pixels_are_not_used(amp, expected):
     usable = usable_pixels(np.full((3, 3), amp), np.zeros((3, 3), dtype=bool))
     assert bool(usable[1, 1]) is expected
+
+
+def test_the_calibrated_warm_up_drift_is_removed_at_the_captures_temperature():
+    from calibration.captures import average_frames
+    from calibration.object_twin.point_cloud import capture_cloud
+    from sim_core.raw import RawFrame
+    from sim_core.twin_file import CameraTemperature
+    from sim_core.warmup import TemperatureDrift
+
+    warm = CameraTemperature(illumination_start_c=25.0, illumination_end_c=45.0,
+                             time_constant_s=600.0, depth_drift_mm_per_c=[0.8])
+    drift = TemperatureDrift.from_spec(warm, FREQ)
+    true_phase = range_to_phase_rad(_plane_ranges(1.0), F_60_24_MHZ)
+    measured = true_phase + drift.phase_offset_rad(40.0)[0]  # 12 mm further at 40 degC
+    c = np.stack([60.0 * np.cos(measured + k * np.pi / 2) for k in range(4)])[None]
+    shape = INTR.shape
+    frame = RawFrame(c, np.full(shape, 100.0), FREQ, np.zeros(shape, bool),
+                     np.zeros(shape, bool), 500e-6, illumination_temperature_c=40.0)
+    cap = average_frames([frame, frame])
+    raw = capture_cloud(cap, INTR, None)
+    fixed = capture_cloud(cap, INTR, None, temperature=warm)
+    assert np.median(raw.points_cam_m[:, 2]) - 1.0 > 0.010  # the drift was there
+    np.testing.assert_allclose(fixed.points_cam_m[:, 2], 1.0, atol=1e-6)
