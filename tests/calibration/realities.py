@@ -165,3 +165,28 @@ def with_camera_effects(reality: RealityFile, seed: int) -> RealityFile:
     data = reality.model_dump(mode="json", exclude_defaults=True)
     data.setdefault("camera", {}).update(random_camera_effects(seed))
     return parse_reality(data)
+
+
+#: issue 27's turntable settling: plausible ranges of the table's ringing after a move
+SETTLING_AMPLITUDE_DEG = (0.1, 0.8)
+SETTLING_FREQUENCY_HZ = (1.0, 6.0)
+SETTLING_DAMPING_RATIO = (0.03, 0.2)
+
+
+def random_settling(seed: int) -> dict:
+    """Issue 27's ``turntable.settling`` drawn at random (a stream of its own, ``[seed, 2727]``):
+    amplitude, natural frequency and damping ratio in :data:`SETTLING_AMPLITUDE_DEG`,
+    :data:`SETTLING_FREQUENCY_HZ` and :data:`SETTLING_DAMPING_RATIO`."""
+    v = np.random.default_rng([seed, 2727]).uniform
+    return {"amplitude_deg": float(v(*SETTLING_AMPLITUDE_DEG)),
+            "frequency_hz": float(v(*SETTLING_FREQUENCY_HZ)),
+            "damping_ratio": float(v(*SETTLING_DAMPING_RATIO))}
+
+
+def with_world_effects(reality: RealityFile, seed: int) -> RealityFile:
+    """``reality`` with all three of issue 27's effects of ``seed``: the camera's warm-up drift
+    and stray light (:func:`random_camera_effects`) and the table's settling
+    (:func:`random_settling`)."""
+    data = with_camera_effects(reality, seed).model_dump(mode="json", exclude_defaults=True)
+    data.setdefault("turntable", {})["settling"] = random_settling(seed)
+    return parse_reality(data)

@@ -59,3 +59,23 @@ def test_a_random_reality_with_the_effects_warms_and_scatters_in_the_world():
     # the stray light lights the background corner of the image
     corner = np.s_[0:15, 0:25]
     assert frames[1].intensity[corner].mean() > frames[0].intensity[corner].mean()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_world_effects_add_the_tables_settling_in_its_ranges(seed):
+    from tests.calibration.realities import (
+        SETTLING_AMPLITUDE_DEG,
+        SETTLING_DAMPING_RATIO,
+        SETTLING_FREQUENCY_HZ,
+        with_world_effects,
+    )
+
+    plain = random_reality(seed)
+    reality = with_world_effects(plain, seed)
+    s = reality.turntable.settling
+    assert SETTLING_AMPLITUDE_DEG[0] <= s.amplitude_deg <= SETTLING_AMPLITUDE_DEG[1]
+    assert SETTLING_FREQUENCY_HZ[0] <= s.frequency_hz <= SETTLING_FREQUENCY_HZ[1]
+    assert SETTLING_DAMPING_RATIO[0] <= s.damping_ratio <= SETTLING_DAMPING_RATIO[1]
+    # the camera's effects and the rig's other keys are those of the same seed
+    assert reality.camera.stray_light == with_camera_effects(plain, seed).camera.stray_light
+    assert reality.turntable.zero_offset_deg == plain.turntable.zero_offset_deg
