@@ -87,6 +87,13 @@ class ObjectFit:
     verdicts: Verdicts = field(default_factory=Verdicts)
 
 
+def _too_few_pixels(cap: AveragedCapture, n_usable: int, min_valid_pixels: int,
+                    min_amplitude_dn: float) -> str:
+    return (f"{n_usable} valid pixels (amplitude >= {min_amplitude_dn:g} DN, not saturated) at "
+            f"{cap.turntable_angle_deg:g} deg; at least {min_valid_pixels} are needed (is the "
+            "lamp on, the object in view?)")
+
+
 def _check_captures(captures: Sequence[AveragedCapture], min_valid_pixels: int,
                     min_amplitude_dn: float) -> list[np.ndarray]:
     if not captures:
@@ -99,12 +106,34 @@ def _check_captures(captures: Sequence[AveragedCapture], min_valid_pixels: int,
                                     "the capture does not say the turntable's angle")
         u = usable_pixels(cap.amplitude, cap.valid, min_amplitude_dn)
         if int(u.sum()) < min_valid_pixels:
-            raise InvalidInputError(
-                f"captures[{i}]", f"{int(u.sum())} valid pixels (amplitude >= "
-                f"{min_amplitude_dn:g} DN, not saturated) at {cap.turntable_angle_deg:g} deg; at "
-                f"least {min_valid_pixels} are needed (is the lamp on, the object in view?)")
+            raise InvalidInputError(f"captures[{i}]", _too_few_pixels(
+                cap, int(u.sum()), min_valid_pixels, min_amplitude_dn))
         usable.append(u)
     return usable
+
+
+def _dark_views(captures: Sequence[AveragedCapture], min_valid_pixels: int,
+                min_amplitude_dn: float) -> list[dict[str, Any]]:
+    """The views with too few usable pixels to fit, each with its reason (the report's
+    ``dropped_views`` form)."""
+    out = []
+    for i, cap in enumerate(captures):
+        n = int(usable_pixels(cap.amplitude, cap.valid, min_amplitude_dn).sum())
+        if n < min_valid_pixels:
+            out.append({"index": i, "turntable_angle_deg": cap.turntable_angle_deg,
+                        "reduced_chi2": None, "reason": _too_few_pixels(
+                            cap, n, min_valid_pixels, min_amplitude_dn) + ": left out"})
+    return out
+
+
+def _with_dropped(fit: ObjectFit, dropped: list[dict[str, Any]], t0: float) -> ObjectFit:
+    """``fit`` with ``dropped`` added to its report's ``dropped_views`` (and provenance)."""
+    report = {**fit.report, "dropped_views": [*dropped, *fit.report["dropped_views"]]}
+    report["seconds"] = {**report["seconds"], "total": time.perf_counter() - t0}
+    twin = fit.object_twin
+    twin = twin.model_copy(update={"provenance": twin.provenance.model_copy(update={
+        "procedures": {**twin.provenance.procedures, "object_fit": report}})})
+    return ObjectFit(twin, report, fit.verdicts)
 
 
 def measured_points(
@@ -182,8 +211,9 @@ def fit_object(
     Raises
     ------
     InvalidInputError
-        ``captures[i]`` with too few valid pixels; ``mesh`` when the measured points do not
-        overlap the mounted objects' meshes (never a pose in that case).
+        ``captures[i]`` with too few valid pixels when fewer than two views have enough (with
+        more, those views are left out and named in ``dropped_views``); ``mesh`` when the
+        measured points do not overlap the mounted objects' meshes (never a pose in that case).
     """
     t0 = time.perf_counter()
     base = Path(base_dir)
@@ -191,6 +221,18 @@ def fit_object(
         calibration = TwinParameters(**{k: getattr(calibration, k)
                                          for k in TwinParameters.model_fields})
     captures = list(captures)
+    dark = _dark_views(captures, min_valid_pixels, min_amplitude_dn)
+    if dark and len(captures) - len(dark) >= 2:
+        # Views too dark to fit carry no evidence for or against the model: the others are
+        # fitted and the report names them.
+        lit = {d["index"] for d in dark}
+        again = fit_object(spec, base, calibration,
+                           [c for i, c in enumerate(captures) if i not in lit],
+                           render_settings=render_settings, min_valid_pixels=min_valid_pixels,
+                           min_amplitude_dn=min_amplitude_dn, edge_jump_m=edge_jump_m,
+                           rig_name=rig_name, drop_unfit_views=drop_unfit_views)
+        return _with_dropped(again, [{k: v for k, v in d.items() if k != "index"}
+                                     for d in dark], t0)
     usable = _check_captures(captures, min_valid_pixels, min_amplitude_dn)
     model = mount_model(spec, base)
 

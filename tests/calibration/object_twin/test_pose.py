@@ -163,3 +163,15 @@ def test_frames_with_too_few_valid_pixels_are_refused():
     with pytest.raises(InvalidInputError) as exc:
         fit_object(SPEC, EXAMPLES, None, [])
     assert exc.value.field == "captures"
+
+
+def test_views_too_dark_to_fit_are_named_and_all_dark_views_are_refused():
+    from calibration.object_twin.fit import _dark_views
+
+    dark = _dark_views([_dark_capture(-30.0), _dark_capture(45.0)], 300, 10.0)
+    assert [d["turntable_angle_deg"] for d in dark] == [-30.0, 45.0]
+    assert "0 valid pixels" in dark[1]["reason"] and dark[1]["reason"].endswith("left out")
+    # fewer than two views left: the fit is refused, naming the first dark view
+    with pytest.raises(InvalidInputError) as exc:
+        fit_object(SPEC, EXAMPLES, None, [_dark_capture(a) for a in (-30.0, 0.0, 30.0)])
+    assert exc.value.field == "captures[0]"
