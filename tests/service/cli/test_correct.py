@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from typer.testing import CliRunner
 
@@ -55,3 +57,28 @@ def test_a_bad_calibration_is_exit_2_naming_the_field(tmp_path):
     res = CliRunner().invoke(app, ["correct", str(tmp_path), "--calibration", str(bad)])
     assert res.exit_code == 2
     assert "calibration.camera.depth.phase_offset_rad[0]" in " ".join(res.output.split())
+
+
+def test_correct_removes_the_warm_up_drift_at_the_frames_temperature(tmp_path):
+    spec = load_scene_spec(EXAMPLES / "plane.yaml")
+    warm = {"illumination_start_c": 25.0, "illumination_end_c": 45.0, "time_constant_s": 600.0,
+            "depth_drift_mm_per_c": 0.6}
+    cal = parse_calibration({"camera": {**CAL["camera"], "temperature": warm}})
+    settings = RenderSettings(integrator="direct", spp=4, seed=1)
+    scene = build_scene(spec, EXAMPLES, twin=cal, illumination_temperature_c=40.0)
+    measured = expose_light(scene, render_light(scene, RenderRequest(settings)), noise=False)
+    # the camera reports the temperature it exposed the frame at (the simulated lab's world does)
+    raw = dataclasses.replace(measured.raw, illumination_temperature_c=40.0)
+    truth = simulate(build_scene(spec, EXAMPLES), RenderRequest(settings, ideal=True))
+    frame_io.write_measured(tmp_path / "m", raw, build_scene(spec, EXAMPLES).camera, {})
+    write_calibration(tmp_path / "cal.yaml", cal)
+    res = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
+                                   str(tmp_path / "cal.yaml")])
+    assert res.exit_code == 0, res.output
+    fixed = frame_io.read_measured(tmp_path / "m-corrected")
+    ok = fixed.image.valid & truth.image.valid & measured.image.valid
+    before = np.median((measured.image.range_m - truth.image.range_m)[ok])
+    after = np.median((fixed.image.range_m - truth.image.range_m)[ok])
+    assert before > 0.006  # 9 mm of drift at 40 degC, with the offset's few mm
+    assert abs(after) < 0.001
+    assert fixed.meta["corrected"]["warm_up_drift"].startswith("removed at 40.00 degC")
