@@ -15,7 +15,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from calibration.verdicts import VERDICTS_FILE, Verdicts, count_line, write_verdicts
+from calibration.verdicts import VERDICTS_FILE, count_line, write_verdicts
 from sim_core.html import jinja_environment, number
 from sim_core.twin_file import dump_yaml, twin_hash, write_calibration
 
@@ -50,21 +50,6 @@ def summary_rows(procedures: dict[str, dict]) -> list[dict[str, str]]:
                              and not isinstance(v, (dict, list)))[:200]
         rows.append({"procedure": name, "result": result, "residual": residual,
                      "typical": TYPICAL.get(name, "")})
-    return rows
-
-
-def verdict_rows(verdicts: Verdicts) -> list[dict[str, str]]:
-    """One row per key: its verdict, its standard deviation (four digits; a list per
-    component; a dash when there is none) and its reason."""
-    rows = []
-    for key, v in verdicts.items():
-        if v.std is None:
-            std = "-"
-        elif isinstance(v.std, list):
-            std = ", ".join(number(x, "{:.4g}") for x in v.std)
-        else:
-            std = number(v.std, "{:.4g}")
-        rows.append({"key": key, "verdict": v.verdict, "std": std, "reason": v.reason or ""})
     return rows
 
 
@@ -116,7 +101,7 @@ def write_report(out_dir: str | Path, result) -> dict[str, Path]:
         rig=prov.rig, created_utc=prov.created_utc, software=prov.software,
         frames_used=prov.frames_used, calibration_hash=data["calibration_hash"],
         summary=summary_rows(prov.procedures), rejected=rejected,
-        verdicts=verdict_rows(result.verdicts), verdict_counts=count_line(result.verdicts),
+        verdicts=result.verdicts, verdict_counts=count_line(result.verdicts),
         figures=_figures(out, result.results), calibration_yaml=dump_yaml(cal),
     )
     paths["html"] = out / "report.html"

@@ -34,13 +34,15 @@ FILTERS: dict[str, Callable[..., str]] = {"number": number}
 
 
 @cache
-def jinja_environment(package: str, folders: tuple[str, ...] = ("templates",)
-                      ) -> jinja2.Environment:
+def jinja_environment(package: str, folders: tuple[str, ...] = ("templates",),
+                      shared: tuple[tuple[str, str], ...] = ()) -> jinja2.Environment:
     """The environment of the templates in ``folders`` of ``package`` (shipped as package data;
-    a name is looked up in the folders in turn), made once per package and folders: autoescape
-    on for every template, :class:`jinja2.StrictUndefined`, ``trim_blocks`` and
-    ``lstrip_blocks``, the filters of :data:`FILTERS`."""
-    loader = jinja2.ChoiceLoader([jinja2.PackageLoader(package, f) for f in folders])
+    a name is looked up in the folders in turn, then in the ``(package, folder)`` pairs of
+    ``shared``: another package's macros, e.g. calibration's verdict table), made once per
+    arguments: autoescape on for every template, :class:`jinja2.StrictUndefined`,
+    ``trim_blocks`` and ``lstrip_blocks``, the filters of :data:`FILTERS`."""
+    loader = jinja2.ChoiceLoader([jinja2.PackageLoader(package, f) for f in folders]
+                                 + [jinja2.PackageLoader(p, f) for p, f in shared])
     env = jinja2.Environment(loader=loader, autoescape=True,
                              undefined=jinja2.StrictUndefined, trim_blocks=True,
                              lstrip_blocks=True)

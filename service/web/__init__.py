@@ -21,7 +21,11 @@ STATIC_DIR = Path(__file__).parent / "static"
 TEMPLATE_FOLDERS = ("templates", "static")
 
 
+#: other packages' macros the templates import: calibration's verdict table (``_verdicts.html``)
+SHARED_TEMPLATES = (("calibration", "templates"),)
+
+
 def environment() -> jinja2.Environment:
-    """The page's and the report's templates (``service/web/templates``, and the page's static
-    files for the report to inline)."""
-    return jinja_environment(__name__, TEMPLATE_FOLDERS)
+    """The page's and the report's templates (``service/web/templates``, the page's static
+    files for the report to inline, and :data:`SHARED_TEMPLATES`)."""
+    return jinja_environment(__name__, TEMPLATE_FOLDERS, SHARED_TEMPLATES)

@@ -50,4 +50,4 @@ def test_the_object_fit_s_verdicts_show_each_key_its_error_and_why():
     assert 'class="determined"' in rows[0] and "0.0002, 0.00015, 0.0004" in rows[0]
     assert 'class="unexplained"' in rows[1] and "0.02" in rows[1]
     assert "chi-square 31.2) &lt;b&gt;" in rows[1]  # a reason is text, never markup
-    assert 'class="not-determined"' in rows[2] and "<td>-</td>" in rows[2]
+    assert 'class="not-determined"' in rows[2] and "<td class=\"num\">-</td>" in rows[2]

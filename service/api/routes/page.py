@@ -16,7 +16,16 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from service.api.deps import RunnerDep, SessionDep, SessionsDep, SettingsDep, StoreDep
+from calibration.verdicts import Verdicts, count_line
+from service.api.deps import (
+    CalibrationsDep,
+    RunnerDep,
+    SessionDep,
+    SessionsDep,
+    SettingsDep,
+    StoreDep,
+)
+from service.api.routes.calibrations import JobId
 from service.api.routes.campaigns import CampaignId
 from service.api.routes.poses import PoseId, require_pose
 from service.errors import GoneError, NotFoundError
@@ -25,6 +34,7 @@ from service.export.plots import CAMPAIGN_PLOTS, EXPLAINED_PLOTS
 from service.export.report import ceiling_tof, explained_rows
 from service.export.results_table import result_rows
 from service.lab.calibration import active_public, calibration_residuals
+from service.lab.calibration_jobs import job_status
 from service.lab.campaigns import campaign_status
 from service.store import queries
 from service.web import environment
@@ -101,6 +111,17 @@ def explained_fragment(request: Request, campaign_id: CampaignId,
     return templates.TemplateResponse(request, "_explained_fragment.html", {
         "rows": rows, "medians": medians if rows else None,
         "fit_verdicts": report.get("verdicts") or {}})
+
+
+@router.get("/ui/calibrations/{job_id}/verdicts", response_class=HTMLResponse)
+def calibration_verdicts_fragment(request: Request, job_id: JobId, sessions: SessionsDep,
+                                  calibrations: CalibrationsDep) -> HTMLResponse:
+    """A calibration job's verdicts (empty until it is done): the count line and the table the
+    calibration's own report shows."""
+    verdicts = job_status(sessions, calibrations, job_id).get("verdicts") or {}
+    return templates.TemplateResponse(request, "_calibration_verdicts.html", {
+        "verdicts": verdicts,
+        "counts": count_line(Verdicts.from_json(verdicts)) if verdicts else None})
 
 
 @router.get("/ui/calibration", response_class=HTMLResponse)

@@ -492,39 +492,28 @@ function renderJob(job) {
       + ` &middot; <a href="${API}/calibrations/${job.id}/files/calibration.yaml">calibration.yaml</a>`
       + ` &middot; <a href="${API}/calibrations/${job.id}/files/verdicts.json">verdicts.json</a>`
     : "";
-  renderVerdicts(job.verdicts);
+  renderVerdicts(job);
 }
 
-// A standard deviation as the report shows it: four significant digits, a list per component.
-function stdText(std) {
-  if (std === null || std === undefined) return "-";
-  const one = (x) => (x === null ? "-" : Number(x).toPrecision(4));
-  return Array.isArray(std) ? std.map(one).join(", ") : one(std);
-}
-
-// The done job's verdicts (key, verdict, std, reason), built with textContent: a reason is
-// text, never markup.
-function renderVerdicts(verdicts) {
+// The done job's verdicts: the calibration report's table, rendered by the service
+// (/ui/calibrations/{id}/verdicts, escaped there); loaded once per job.
+function renderVerdicts(job) {
   const box = $("#cj-verdicts");
-  const keys = verdicts ? Object.keys(verdicts) : [];
-  box.hidden = keys.length === 0;
-  const body = $("#cj-verdicts tbody");
-  body.replaceChildren();
-  const counts = {"determined": 0, "not determined": 0, "unexplained": 0};
-  for (const key of keys) {
-    const v = verdicts[key];
-    counts[v.verdict] += 1;
-    const tr = document.createElement("tr");
-    tr.dataset.verdict = v.verdict;
-    for (const text of [key, v.verdict, stdText(v.std), v.reason || ""]) {
-      const td = document.createElement("td");
-      td.textContent = text;
-      tr.append(td);
-    }
-    body.append(tr);
+  if (job.state !== "done" || !job.verdicts) {
+    box.hidden = true;
+    box.replaceChildren();
+    delete box.dataset.job;
+    return;
   }
-  $("#cj-verdict-counts").textContent = `${keys.length} keys: ${counts["determined"]} determined, `
-    + `${counts["not determined"]} not determined, ${counts["unexplained"]} unexplained`;
+  if (box.dataset.job === job.id) return;
+  box.dataset.job = job.id;
+  fetch(`/ui/calibrations/${job.id}/verdicts`)
+    .then((res) => (res.ok ? res.text() : ""))
+    .then((html) => {
+      if (box.dataset.job !== job.id) return;  // another job meanwhile
+      box.innerHTML = html;
+      box.hidden = html.trim() === "";
+    });
 }
 
 function followJob(id) {

@@ -14,7 +14,7 @@ from calibration.report import write_report
 from calibration.rig_sequence import RigCalibration
 from calibration.verdicts import Verdict, Verdicts, read_verdicts
 from service.api.routes import api_docs, page
-from service.web import STATIC_DIR, TEMPLATE_FOLDERS, environment
+from service.web import SHARED_TEMPLATES, STATIC_DIR, TEMPLATE_FOLDERS, environment
 from sim_core.html import jinja_environment, number
 from sim_core.twin_file import parse_calibration
 from tests.service.api.conftest import AUTH
@@ -39,7 +39,7 @@ def test_no_module_but_the_factory_makes_a_jinja_environment():
 
 
 def test_the_page_the_api_docs_and_both_reports_share_the_factory_s_rules():
-    web = jinja_environment("service.web", TEMPLATE_FOLDERS)
+    web = jinja_environment("service.web", TEMPLATE_FOLDERS, SHARED_TEMPLATES)
     assert environment() is web and page.templates.env is web and api_docs.templates.env is web
     for env in (web, jinja_environment("calibration")):
         assert env.autoescape is True and env.undefined is jinja2.StrictUndefined
@@ -75,7 +75,10 @@ def test_a_calibration_s_provenance_is_text_on_the_page_and_in_its_report(client
     assert f"<tr><td>{ESCAPED}</td><td>{ESCAPED}</td></tr>" in html  # a view not used, and why
     # every key's verdict, its reason as text, beside the file in verdicts.json
     assert "2 keys: 1 determined, 0 not determined, 1 unexplained" in html
-    assert f'<td class="fail">unexplained</td>\n<td class="num">0.4</td><td>{ESCAPED}</td>' in html
+    # the one verdict table (calibration/templates/_verdicts.html), as the page shows it
+    assert ('<tr class="unexplained"><td class="what">camera.fx_px</td>\n      '
+            f'<td>unexplained</td><td class="num">0.4</td>\n      '
+            f'<td class="what">{ESCAPED}</td></tr>') in html
     assert '<td class="num">0.0001, 0.0002, 0</td>' in html
     assert read_verdicts(paths["verdicts"]) == verdicts
 
