@@ -375,6 +375,9 @@ class Turntable:
         :meth:`connect`); the allowed range is their intersection.
     settings : SerialSettings
         Port settings; the default is the SMC100's 57600 8N1 XON/XOFF, CR LF.
+    sleep : callable
+        How the post-move wait (``settle_s``) is spent: :func:`time.sleep` on a real rig; the
+        simulated lab passes its clock's (an instant clock's table has settled at once).
 
     Examples
     --------
@@ -397,8 +400,10 @@ class Turntable:
         poll_interval_s: float = 0.05,
         limits_deg: tuple[float, float] | None = None,
         settings: SerialSettings = SMC100_SETTINGS,
+        sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         self.address = validate_address(address)
+        self.sleep = sleep
         for field, value in (
             ("tolerance_deg", tolerance_deg),
             ("move_timeout_s", move_timeout_s),
@@ -618,7 +623,7 @@ class Turntable:
         self._wait_ready(f"move to {angle:g} deg", self.move_timeout_s, target=angle)
         self._verify(angle)
         if self.settle_s > 0:
-            time.sleep(self.settle_s)
+            self.sleep(self.settle_s)
         return self._verify(angle)
 
     def _checked_target(self, angle_deg: float) -> float:

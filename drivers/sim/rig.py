@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from drivers.camera import UsbCamera, UsbCameraSettings
 from drivers.rig import Rig, RigState
+from drivers.sim import SimClock
 from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
 from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
@@ -129,6 +131,7 @@ def simulated_rig(
             settings=dataclasses.replace(
                 SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
             ),
+            sleep=_clock_sleep(tt_sim.models["turntable"].clock),
         )
         turntable.connect()
         started.append(turntable.close)
@@ -178,3 +181,16 @@ def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], Rig
         )
 
     return state
+
+
+def _clock_sleep(clock: SimClock) -> Callable[[float], None]:
+    """The turntable driver's post-move wait on the simulated stage's clock: ``seconds`` of
+    simulated time are ``seconds / time_scale`` of wall time, none on an instant clock (whose
+    table has settled at once: :class:`drivers.sim.smc100.Smc100Sim`)."""
+
+    def sleep(seconds: float) -> None:
+        wall_s = clock.duration(seconds) / clock.time_scale
+        if wall_s > 0.0:
+            time.sleep(wall_s)
+
+    return sleep

@@ -40,12 +40,22 @@ def test_moves_wait_for_the_settling_only_inside_and_not_when_motion_is_asked_fo
             assert wait == rig.turntable.settle_s == pytest.approx(settle_wait_s(CALIBRATION))
             t0 = time.perf_counter()
             rig.apply(RigState(10.0, 0.0, False))
-            assert time.perf_counter() - t0 >= wait
+            # an instant clock's table has settled at once: the wait costs no wall time
+            assert time.perf_counter() - t0 < 0.5 * wait
         assert rig.turntable.settle_s == base  # restored
         with settled_moves(rig, CALIBRATION, motion=True) as wait:
             assert wait == base == rig.turntable.settle_s
         with settled_moves(rig, None):
             assert rig.turntable.settle_s == base  # never lowered, never raised for nothing
+
+
+def test_the_wait_is_spent_on_the_simulated_stage_s_clock():
+    with (simulated_rig(seed=1, turntable_instant=False, time_scale=4.0) as rig,
+          settled_moves(rig, CALIBRATION) as wait):
+        t0 = time.perf_counter()
+        rig.turntable.sleep(wait)  # what a move ends with
+        elapsed = time.perf_counter() - t0
+    assert wait / 4.0 <= elapsed < wait  # simulated seconds at four times the wall's pace
 
 
 def test_a_capture_after_a_settled_move_sees_the_table_at_rest():
