@@ -16,7 +16,8 @@ scatter about its mean over the sequence, after the patch's common change is rem
 weighted straight-line fit of those ranges against the temperatures gives ``k_f`` with its
 standard error, and the fit's reduced chi-square says whether a straight line explains them;
 the verdict comes from :func:`calibration.verdicts.judge` (the standard error made honest by
-the residual).
+the residual; the chi-square's limit :func:`calibration.verdicts.chi2_limit_for` the line's
+degrees of freedom).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.verdicts import Verdict, honest_std, judge
+from calibration.verdicts import Verdict, chi2_limit_for, honest_std, judge
 from sim_core.errors import InvalidInputError
 from sim_core.raw import RawFrame
 from sim_core.tof import range_from_phase
@@ -163,8 +164,11 @@ def fit_warmup(frames: Sequence[RawFrame], patch: np.ndarray) -> WarmupFit:
                           f"{MIN_TEMPERATURE_SPAN_C:g} degC a drift needs (capture longer after "
                           "power-on)")
     else:
+        # a straight line through n frames leaves n - 2 degrees of freedom: with few frames
+        # the chi-square itself is noisy, and its limit the chi-square's 0.1 % tail
         verdict = judge(std, DRIFT_STD_LIMIT_MM_PER_C, reduced_chi2=max(chi2),
-                        unit=" mm/degC", where=f"the warm-up sequence ({n} frames)")
+                        chi2_limit=chi2_limit_for(n - 2), unit=" mm/degC",
+                        where=f"the warm-up sequence ({n} frames)")
     honest = [honest_std(s, c) for s, c in zip(std, chi2, strict=True)]
     return WarmupFit(np.asarray(drift), np.asarray(honest), np.asarray(chi2), temps,
                      patch_mm.T.copy(), np.repeat(frame_std[:, None], n, axis=1), verdict)
