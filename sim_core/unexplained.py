@@ -10,6 +10,8 @@ a second capture of the same state, the ceiling) and takes the residual's excess
     a gain, power or reflectance scale);
 ``object``
     an offset of its own on one named region (an object) beyond the common one;
+``on_object``
+    excess concentrated on one named region (an object), whatever its sign;
 ``edges``
     excess concentrated on silhouette edges (motion: a table still ringing, a capture while
     turning, or a pose error);
@@ -166,7 +168,8 @@ def locate_excess(
     overall : str
         What the mask covers, for the text ("the turntable objects").
     regions : {name: (H, W) bool}
-        Named parts (objects) that may carry an offset of their own (shape ``object``).
+        Named parts (objects) that may carry an offset of their own (shape ``object``) or hold
+        the excess (shape ``on_object``).
     sets : {shape: (H, W) bool}
         Pixel sets the excess may concentrate on, keyed by shape; ``edges`` and ``dark`` read
         as silhouette edges and dark pixels next to bright ones; the image's thirds
@@ -216,9 +219,11 @@ def locate_excess(
 
     everywhere = np.ones(count, bool)
     after_common = r - offset("offset", overall, everywhere, r)
+    with_offset = set()
     for name, region in (regions or {}).items():
         sel = _check_image(f"regions[{name!r}]", region, shape).astype(bool)[m]
-        offset("object", name, sel, after_common)
+        if offset("object", name, sel, after_common) != 0.0:
+            with_offset.add(name)
 
     # Per-pixel excess of what the common offset leaves (a region's offset may be the very
     # concentration a set shows: a dark rim inside one object); under "explained" its sum over a
@@ -227,6 +232,9 @@ def locate_excess(
     e = after_common**2 - n**2
     spread = float(np.std(n**2))
     tried = dict(sets or {})
+    # an object whose offset is named already is not named again for the same excess
+    tried.update({f"on_object:{k}": v for k, v in (regions or {}).items()
+                  if k not in with_offset})
     tried.update({f"region:{k}": v for k, v in image_thirds(shape).items()})
     for key, pixels in tried.items():
         sel = _check_image(f"sets[{key!r}]", pixels, shape).astype(bool)[m]
@@ -248,6 +256,8 @@ def locate_excess(
 def _set_name(key: str) -> tuple[str, str]:
     if key.startswith("region:"):
         return "region", f"the {key.removeprefix('region:')} of the image"
+    if key.startswith("on_object:"):
+        return "on_object", key.removeprefix("on_object:")
     return key, {"edges": "silhouette edges",
                  "dark": "dark pixels next to bright ones"}.get(key, key)
 
@@ -274,7 +284,7 @@ def image_thirds(shape: tuple[int, int]) -> dict[str, np.ndarray]:
     return out
 
 
-def dark_next_to_bright(amplitude: np.ndarray, valid: np.ndarray, radius_px: float = 10.0,
+def dark_next_to_bright(amplitude: np.ndarray, valid: np.ndarray, radius_px: float = 30.0,
                         ratio: float = 0.5) -> np.ndarray:
     """Pixels whose amplitude is below ``ratio`` times the mean amplitude around them (a
     Gaussian of ``radius_px`` over the valid pixels): where a little of the bright neighbours'

@@ -22,7 +22,7 @@ import numpy as np
 
 from service.lab.requests import MaskSpec
 from sim_core import frame_io, metrics
-from sim_core.edges import edge_mask
+from sim_core.edges import object_edge_mask
 from sim_core.errors import InvalidInputError
 from sim_core.frame_io import Frame
 from sim_core.json_safe import json_safe
@@ -161,7 +161,7 @@ def explained_difference(
                if fitted_object_id is not None else {})
     out["unexplained"] = unexplained_residual(
         measured, second, fitted_image, mask, (grey_full_scale, fitted_grey_full_scale),
-        out["fitted"], out["ceiling"], regions)
+        out["fitted"], out["ceiling"], regions, fitted_object_id)
     if nominal is not None:
         out["explained"] = {
             ch: explained_fraction(getattr(nominal, ch).mse, getattr(fitted, ch).mse,
@@ -208,13 +208,15 @@ def unexplained_residual(
     measured: ToFImage, second: ToFImage, fitted: ToFImage, mask: np.ndarray | None,
     grey_full_scales: tuple[float, float], fitted_figures: dict[str, Any],
     ceiling_figures: dict[str, Any], regions: dict[str, np.ndarray],
+    object_id: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """Per channel on which the fitted twin is beyond the ceiling (:func:`beyond_ceiling`):
     what is left and where (:func:`sim_core.unexplained.locate_excess`), from the residual image
     (measured - fitted) against the ceiling's own (measured - second capture): range in mm,
     grey in the frames' 8-bit grey levels. ``regions``: the named objects' pixels (of the
-    fitted twin). The sets tried are the fitted twin's silhouette edges and the measured
-    frame's dark pixels next to bright ones. Empty when the twin is within the ceiling.
+    fitted twin). The sets tried are the fitted twin's silhouette edges (from its
+    ``object_id`` image, :func:`sim_core.edges.object_edge_mask`; none without it) and the
+    measured frame's dark pixels next to bright ones. Empty when the twin is within the ceiling.
 
     Each entry: ``{"channel", "by", "where": Location.to_dict(), "text"}``, where ``text`` reads
     "depth RMSE 3.10 mm against the ceiling's 1.20 mm (2.58x): a common offset of +2.9 mm over
@@ -235,8 +237,9 @@ def unexplained_residual(
     shape = measured.range_m.shape
     both = (np.ones(shape, bool) if mask is None else np.asarray(mask, bool))
     both = both & measured.valid & fitted.valid & second.valid
-    sets = {"edges": edge_mask(fitted.range_m, fitted.valid, width_px=1),
-            "dark": dark_next_to_bright(measured.amplitude, measured.valid)}
+    sets = {"dark": dark_next_to_bright(measured.amplitude, measured.valid)}
+    if object_id is not None:
+        sets["edges"] = object_edge_mask(np.asarray(object_id))
     overall = "the compared pixels" if mask is None else "the compared objects"
     out = []
     for channel, by in channels.items():

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim_core.edges import edge_mask
+from sim_core.edges import object_edge_mask
 from sim_core.errors import InvalidInputError
 from sim_core.unexplained import (
     MIN_PIXELS,
@@ -34,13 +34,13 @@ def scene() -> dict[str, np.ndarray]:
     rim = body & ((yy - 85) ** 2 + (xx - 112) ** 2 > 33**2)
     amplitude[rim] = 0.08
     mask = body | left | right
-    range_m = np.where(mask, 1.0, np.nan)
+    object_id = np.select([body, left, right], [0, 1, 2], default=-1)
     return {"body": body, "panel_left": left, "panel_right": right, "mask": mask,
-            "amplitude": amplitude, "range_m": range_m, "rim": rim}
+            "amplitude": amplitude, "object_id": object_id, "rim": rim}
 
 
 S = scene()
-EDGES = edge_mask(S["range_m"], S["mask"], width_px=1)
+EDGES = object_edge_mask(S["object_id"]) & S["mask"]
 DARK = dark_next_to_bright(S["amplitude"], S["mask"])
 
 
@@ -108,6 +108,19 @@ def test_stray_light_on_dark_pixels_next_to_bright_ones_is_named_as_such():
     assert "dark pixels next to bright ones" in loc.text()
 
 
+def test_excess_on_one_object_whatever_its_sign_names_the_object():
+    sign = np.where(np.random.default_rng(8).random((H, W)) < 0.5, -1.0, 1.0)
+    r = noise(8) + np.where(S["panel_right"] & ~EDGES, 8.0 * sign, 0.0)
+    c = top(locate(r))
+    assert (c.shape, c.where) == ("on_object", "panel_right") and c.share > 0.8
+    assert "excess on panel_right: " in locate(r).text()
+
+
+def test_an_object_s_offset_is_not_named_again_as_its_excess():
+    loc = locate(noise(9) + np.where(S["panel_left"], -5.0, 0.0))
+    assert ("on_object", "panel_left") not in [(c.shape, c.where) for c in loc.components]
+
+
 def test_excess_in_one_part_of_the_image_names_that_part():
     thirds = image_thirds((H, W))
     r = noise(5) + np.where(thirds["middle left"], 9.0 * np.sin(np.arange(W) / 2.0), 0.0)
@@ -166,6 +179,9 @@ def test_bad_input_names_the_field_and_the_allowed_range():
     with pytest.raises(InvalidInputError, match=f"at least {MIN_PIXELS}") as exc:
         locate_excess(r, r, few, unit="mm")
     assert exc.value.field == "mask"
+    with pytest.raises(InvalidInputError) as exc:
+        object_edge_mask(S["amplitude"])
+    assert exc.value.field == "object_id"
     with pytest.raises(InvalidInputError) as exc:
         dark_next_to_bright(S["amplitude"], S["mask"], radius_px=0.0)
     assert exc.value.field == "radius_px"
