@@ -110,14 +110,19 @@ class Location:
         return tuple(c for c in self.components if c.share >= MIN_SHARE)
 
     def text(self) -> str:
-        """One line a person reads: the named shapes, or that the excess is spread."""
+        """One line a person reads: the named shapes; else that the excess is spread (beyond
+        the noise's own spread of a mean square), or that no shape stands out of the noise, or
+        (no excess) that the residual is within the noise."""
         parts = [_describe(c, self.unit) for c in self.named()]
         if parts:
             return "; ".join(parts)
+        rms = (f"rms {self.residual_rms:.3g} {self.unit} against {self.noise_rms:.3g} "
+               f"{self.unit} of noise")
         if self._spread:
-            return (f"spread over the compared pixels (rms {self.residual_rms:.3g} {self.unit} "
-                    f"against {self.noise_rms:.3g} {self.unit} of noise), no offset, edge, "
-                    "dark-pixel or image-region concentration")
+            return (f"spread over the compared pixels ({rms}), no offset, edge, dark-pixel or "
+                    "image-region concentration")
+        if self.excess_ms > 0.0:
+            return f"no shape stands out of the noise ({rms})"
         return "within the noise"
 
     def to_dict(self) -> dict:

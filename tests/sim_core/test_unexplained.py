@@ -69,7 +69,10 @@ def test_the_scene_has_edges_and_dark_pixels_next_to_bright_ones():
 def test_a_residual_of_noise_alone_is_within_the_noise(seed):
     loc = locate(noise(seed))
     assert loc.components == (), loc.to_dict()
-    assert loc.text() == "within the noise"
+    text = loc.text()
+    assert text == "within the noise" or text.startswith("no shape stands out of the noise"), text
+    if loc.excess_ms <= 0.0:
+        assert text == "within the noise"
 
 
 def test_a_common_range_offset_is_named_with_its_value():
