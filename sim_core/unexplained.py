@@ -137,8 +137,11 @@ def _describe(c: Component, unit: str) -> str:
         return f"a common offset of {c.mean:+.3g} {unit} over {c.where} ({pct})"
     if c.shape == "object":
         return f"an offset of {c.mean:+.3g} {unit} on {c.where} ({pct})"
+    # two-signed (mean well inside the rms: a shift or motion moves light both ways across an
+    # edge) or one-signed (stray light brightens dark pixels, an object's own offset)
+    sign = "two-signed" if abs(c.mean) < 0.5 * c.rms else f"one-signed, mean {c.mean:+.3g} {unit}"
     return (f"excess on {c.where}: {c.pixels} px hold {pct} (rms {c.rms:.3g} {unit} against "
-            f"{c.noise_rms:.3g} {unit} of noise)")
+            f"{c.noise_rms:.3g} {unit} of noise, {sign})")
 
 
 def _check_image(name: str, a: np.ndarray, shape: tuple[int, ...] | None) -> np.ndarray:

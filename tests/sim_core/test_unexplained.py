@@ -99,6 +99,7 @@ def test_excess_at_silhouette_edges_is_named_as_such():
     c = top(locate(r))
     assert c.shape == "edges" and c.where == "silhouette edges"
     assert c.share > 0.8 and c.rms > 3.0 * c.noise_rms
+    assert "two-signed" in locate(r).text()  # light moved both ways: motion, not a haze
 
 
 def test_stray_light_on_dark_pixels_next_to_bright_ones_is_named_as_such():
@@ -109,6 +110,7 @@ def test_stray_light_on_dark_pixels_next_to_bright_ones_is_named_as_such():
     dark = next(c for c in loc.named() if c.shape == "dark")
     assert dark.share > 0.5
     assert "dark pixels next to bright ones" in loc.text()
+    assert "one-signed, mean +" in loc.text()  # a haze brightens (here: lengthens) one way
 
 
 def test_excess_on_one_object_whatever_its_sign_names_the_object():
