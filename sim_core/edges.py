@@ -15,7 +15,7 @@ from scipy import ndimage
 
 from sim_core.errors import InvalidInputError
 
-__all__ = ["EDGE_JUMP_M", "EdgeError", "edge_depth_error", "edge_mask"]
+__all__ = ["EDGE_JUMP_M", "EdgeError", "edge_depth_error", "edge_mask", "object_edge_mask"]
 
 #: a range jump between neighbouring pixels that makes an edge [m]
 EDGE_JUMP_M = 0.05
@@ -49,6 +49,35 @@ def edge_mask(range_m: np.ndarray, valid: np.ndarray, jump_m: float = EDGE_JUMP_
     if width_px > 0:
         jump = ndimage.binary_dilation(jump, iterations=width_px)
     return jump & ok
+
+
+def object_edge_mask(object_id: np.ndarray, width_px: int = 1) -> np.ndarray:
+    """Pixels within ``width_px`` of a 4-neighbour that sees another object (or nothing, id < 0)
+    in a simulator's object-id image: the silhouettes as the twin draws them, free of the range
+    noise that makes a measured frame's jumps (:func:`edge_mask`) fire on noisy pixels,
+    (H, W) bool.
+
+    >>> ids = np.zeros((3, 6), int); ids[:, 3:] = 1
+    >>> object_edge_mask(ids, width_px=0).astype(int)[0].tolist()
+    [0, 0, 1, 1, 0, 0]
+    """
+    ids = np.asarray(object_id)
+    if ids.ndim != 2 or not np.issubdtype(ids.dtype, np.integer):
+        raise InvalidInputError("object_id", f"got a {ids.dtype} array of shape {ids.shape}; "
+                                "allowed: a 2-D integer image")
+    if not (isinstance(width_px, int) and 0 <= width_px <= 20):
+        raise InvalidInputError("width_px", f"got {width_px!r}; allowed: 0 to 20 px")
+    edge = np.zeros(ids.shape, bool)
+    for axis in (0, 1):
+        change = np.diff(ids, axis=axis) != 0
+        lo = [slice(None)] * 2
+        hi = [slice(None)] * 2
+        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
+        edge[tuple(lo)] |= change
+        edge[tuple(hi)] |= change
+    if width_px > 0:
+        edge = ndimage.binary_dilation(edge, iterations=width_px)
+    return edge
 
 
 @dataclass(frozen=True)

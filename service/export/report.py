@@ -26,6 +26,7 @@ from service.store import queries
 from service.store.frame_files import FrameStore
 from service.web import environment
 from sim_core.preview import colour_bar_png
+from sim_core.unexplained import MIN_SHARE
 
 #: poses with image panels (the plots show every pose)
 MAX_PANEL_POSES = 60
@@ -60,10 +61,65 @@ def explained_rows(first: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], d
             "depth_rmse_m": {t: explained(t, "depth_rmse_m")(r) for t in EXPLAINED_TWINS},
             "grey_psnr_db": {t: explained(t, "grey_psnr_db")(r) for t in EXPLAINED_TWINS},
             "explained": {ch: ex.get(ch) for ch in ("depth", "grey")},
+            "unexplained": [u.get("text") for u in unexplained_entries(r)],
         })
     medians = {key: {t: _median([row[key][t] for row in rows]) for t in EXPLAINED_TWINS}
                for key in ("depth_rmse_m", "grey_psnr_db")}
     return rows, medians
+
+
+def unexplained_entries(row: dict[str, Any]) -> list[dict[str, Any]]:
+    """A result row's unexplained residual: per channel beyond the noise ceiling, by how much
+    and where (:func:`service.lab.comparison.unexplained_residual`); empty when within it."""
+    return list((row["metrics"].get("explained") or {}).get("unexplained") or [])
+
+
+def _shape_phrase(shape: str, where: str, values: list[float], unit: str) -> str:
+    if shape == "offset":
+        return f"a common offset of {_median(values):+.3g} {unit} over {where} (median)"
+    if shape == "object":
+        return f"an offset of {_median(values):+.3g} {unit} on {where} (median)"
+    return f"excess on {where}"
+
+
+def unexplained_summary(first: list[dict[str, Any]]) -> str | None:
+    """The campaign's line on what its fitted twin leaves unexplained: on how many of the poses
+    with an explained difference, per channel on how many, and the shape that holds the
+    largest share on most of them (with the median offset over those poses), e.g.
+    "unexplained residual on 4 of 5 poses: depth on 4 (a common offset of +3.2 mm over the
+    compared objects (median) on 4)". None without an explained difference.
+    """
+    poses = [r for r in first if (r["metrics"].get("explained") or {}).get("fitted")]
+    if not poses:
+        return None
+    hit = [r for r in poses if unexplained_entries(r)]
+    if not hit:
+        return f"no unexplained residual: all {len(poses)} poses within the noise ceiling"
+    parts = []
+    for channel in ("depth", "grey"):
+        entries = [u for r in hit for u in unexplained_entries(r) if u.get("channel") == channel]
+        if not entries:
+            continue
+        groups: dict[tuple[str, str], list[float]] = {}
+        unit = ""
+        spread = 0
+        for u in entries:
+            where = u.get("where") or {}
+            named = [c for c in where.get("components") or [] if c["share"] >= MIN_SHARE]
+            unit = where.get("unit", unit)
+            if not named:
+                spread += 1
+                continue
+            groups.setdefault((named[0]["shape"], named[0]["where"]), []).append(
+                named[0]["mean"])
+        text = f"{channel} on {len(entries)}"
+        if groups:
+            (shape, where), values = max(groups.items(), key=lambda kv: len(kv[1]))
+            text += f" ({_shape_phrase(shape, where, values, unit)} on {len(values)})"
+        elif spread:
+            text += " (spread, no shape)"
+        parts.append(text)
+    return f"unexplained residual on {len(hit)} of {len(poses)} poses: " + "; ".join(parts)
 
 
 def explained_context(camp: Any, first: list[dict[str, Any]]) -> dict[str, Any]:
@@ -81,7 +137,7 @@ def explained_context(camp: Any, first: list[dict[str, Any]]) -> dict[str, Any]:
             "verdicts": report.get("verdicts") or {},
             "report": json.dumps(report, indent=1)[:20000],
             "plots": [Markup(plot_svg(p, first)) for p in EXPLAINED_PLOTS],
-            "rows": rows, "medians": medians}
+            "rows": rows, "medians": medians, "summary": unexplained_summary(first)}
 
 
 def ceiling_tof(metrics: dict[str, Any]) -> dict[str, Any] | None:

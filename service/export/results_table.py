@@ -78,6 +78,9 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
             flat[f"{twin}_{f}"] = values.get(f)
     for ch in ("depth", "grey"):
         flat[f"explained_{ch}"] = (explained.get("explained") or {}).get(ch)
+    for ch in ("depth", "grey"):  # the channel beyond the noise ceiling: by how much and where
+        flat[f"unexplained_{ch}"] = next((u.get("text") for u in explained.get("unexplained") or []
+                                          if u.get("channel") == ch), None)
     for twin in TOF_TWINS:
         values = (explained.get(twin) or {}).get("tof") or {}
         for f in TOF_FIELDS:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from service.export.report import explained_rows
+from service.export.report import explained_rows, unexplained_summary
 from service.web import environment
 
 
@@ -51,3 +51,43 @@ def test_the_object_fit_s_verdicts_show_each_key_its_error_and_why():
     assert 'class="unexplained"' in rows[1] and "0.02" in rows[1]
     assert "chi-square 31.2) &lt;b&gt;" in rows[1]  # a reason is text, never markup
     assert 'class="not-determined"' in rows[2] and "<td class=\"num\">-</td>" in rows[2]
+
+
+def _unexplained(channel: str, shape: str, where: str, mean: float, share: float) -> dict:
+    comp = {"shape": shape, "where": where, "share": share, "pixels": 900, "mean": mean,
+            "rms": abs(mean), "noise_rms": 1.0}
+    return {"channel": channel, "by": f"{channel} beyond", "where": {
+        "unit": "mm" if channel == "depth" else "grey levels", "components": [comp]},
+        "text": f"{channel} beyond: {shape} on {where}"}
+
+
+def test_the_unexplained_residual_shows_per_pose_and_in_one_line_for_the_campaign():
+    first = [_row(i, 0.004, 0.003, 0.001) for i in range(5)]
+    for i, mean in enumerate((3.0, 3.4, 3.2, 2.0)):  # pose 4 within the ceiling
+        first[i]["metrics"]["explained"]["unexplained"] = [
+            _unexplained("depth", "offset", "the compared objects", mean, 0.9)]
+    first[3]["metrics"]["explained"]["unexplained"] = [
+        _unexplained("depth", "edges", "silhouette edges", 1.0, 0.7),
+        _unexplained("grey", "dark", "dark pixels next to bright ones", 9.0, 0.6)]
+    summary = unexplained_summary(first)
+    assert summary == ("unexplained residual on 4 of 5 poses: depth on 4 (a common offset of "
+                       "+3.2 mm over the compared objects (median) on 3); grey on 1 (excess on "
+                       "dark pixels next to bright ones on 1)")
+    rows, medians = explained_rows(first)
+    html = environment().get_template("_explained_fragment.html").render(
+        rows=rows, medians=medians, fit_verdicts={}, summary=summary)
+    assert summary in html
+    cells = [c.split("</td>")[0] for c in html.split("<td")[1:]]
+    pose3 = html.split("<tr>")[5]  # header, then poses 0.. 3
+    assert "depth beyond: edges on silhouette edges<br>grey beyond: dark on dark" in pose3
+    assert 'class="unexplained">-' in html.split("<tr>")[6]  # pose 4: nothing unexplained
+    assert len(cells) > 10
+
+
+def test_a_campaign_within_the_ceiling_says_so():
+    first = [_row(i, 0.004, 0.001, 0.001) for i in range(3)]
+    for r in first:
+        r["metrics"]["explained"].update(fitted={"depth_rmse_m": 0.001}, unexplained=[])
+    assert unexplained_summary(first) == (
+        "no unexplained residual: all 3 poses within the noise ceiling")
+    assert unexplained_summary([]) is None

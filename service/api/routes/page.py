@@ -31,7 +31,7 @@ from service.api.routes.poses import PoseId, require_pose
 from service.errors import GoneError, NotFoundError
 from service.export.panels import pose_panels
 from service.export.plots import CAMPAIGN_PLOTS, EXPLAINED_PLOTS
-from service.export.report import ceiling_tof, explained_rows
+from service.export.report import ceiling_tof, explained_rows, unexplained_summary
 from service.export.results_table import result_rows
 from service.lab.calibration import active_public, calibration_residuals
 from service.lab.calibration_jobs import job_status
@@ -109,7 +109,7 @@ def explained_fragment(request: Request, campaign_id: CampaignId,
     first = [r for r in result_rows(sessions, campaign_id) if r["repeat"] == 0]
     rows, medians = explained_rows([r for r in first if r["metrics"].get("explained")])
     return templates.TemplateResponse(request, "_explained_fragment.html", {
-        "rows": rows, "medians": medians if rows else None,
+        "rows": rows, "medians": medians if rows else None, "summary": unexplained_summary(first),
         "fit_verdicts": report.get("verdicts") or {}})
 
 

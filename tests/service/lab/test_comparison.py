@@ -47,3 +47,36 @@ def test_the_noise_ceiling_reports_the_same_figures_for_two_captures():
     assert out["ceiling"]["tof"]["flying_share_simulated"] == pytest.approx(1 / W)
     assert out["fitted"]["tof"]["flying_share_simulated"] == 0.0
     assert out["ceiling"]["tof"]["depth_diff_n_pixels"] == H * (W - 1)
+
+
+def test_a_fitted_twin_beyond_the_ceiling_names_the_residual_and_where_it_is():
+    gen = np.random.default_rng(2)
+    truth = np.full((H, W), 1.2)
+    measured, second, twin = (truth + gen.normal(0.0, 0.002, (H, W)) for _ in range(3))
+    ex = lambda fitted: explained_difference(  # noqa: E731
+        MaskSpec(kind="all"), frame(measured), frame(second), 2048.0, None, frame(fitted),
+        None, 2048.0, [], [])
+    # a twin as good as a second capture: within the ceiling, nothing unexplained
+    assert ex(twin)["unexplained"] == []
+    # 5 mm too far everywhere (a warm-up drift the twin does not model)
+    out = ex(twin + 0.005)["unexplained"]
+    assert [u["channel"] for u in out] == ["depth"], out
+    top = out[0]["where"]["components"][0]
+    assert top["shape"] == "offset" and top["mean"] == pytest.approx(-5.0, abs=0.3)
+    assert out[0]["text"].startswith("depth RMSE 5.")
+    assert "a common offset of -5" in out[0]["text"] and "the compared pixels" in out[0]["text"]
+
+
+def test_a_twin_too_dark_is_beyond_the_grey_ceiling():
+    gen = np.random.default_rng(3)
+    truth = np.full((H, W), 1.2)
+    measured, second = (truth + gen.normal(0.0, 0.002, (H, W)) for _ in range(2))
+    amplitude = lambda a: gen.normal(a, 40.0, (H, W))  # noqa: E731
+    m, s, f = (frame(r) for r in (measured, second, measured))
+    m.amplitude[:], s.amplitude[:], f.amplitude[:] = amplitude(1000), amplitude(1000), amplitude(
+        800)
+    out = explained_difference(MaskSpec(kind="all"), m, s, 2048.0, None, f, None, 2048.0, [], [])
+    grey = [u for u in out["unexplained"] if u["channel"] == "grey"]
+    assert grey and "dB below" in grey[0]["by"], out["unexplained"]
+    top = grey[0]["where"]["components"][0]
+    assert top["shape"] == "offset" and top["mean"] > 20.0  # the twin is 25 grey levels darker
