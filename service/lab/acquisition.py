@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from calibration.capture_plan import CapturePlan, Captures, CaptureStep, Operator
+from calibration.capture_plan import CapturePlan, Captures, CaptureStep, Operator, WaitStep
 from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
 from calibration.rig_material import (
     DEFAULT_MODEL,
@@ -49,16 +49,17 @@ def acquire(
     total: int | None = None,
     settle_for: TwinParameters | None = None,
 ) -> dict[str, AveragedCapture]:
-    """Run ``plan`` on ``rig``: its mounts by ``operator``, its captures in order, every move
-    waited out for ``settle_for``'s turntable settling (:func:`service.lab.settling.
-    settled_moves`; None: the driver's own wait).
+    """Run ``plan`` on ``rig``: its mounts by ``operator``, its waits by the rig
+    (:meth:`drivers.rig.Rig.wait`: a real rig sleeps, the simulated lab advances its clock), its
+    captures in order, every move waited out for ``settle_for``'s turntable settling
+    (:func:`service.lab.settling.settled_moves`; None: the driver's own wait).
 
-    Before each capture ``progress(done, total, step.message)`` is called (``done`` captures
-    so far; ``total`` defaults to the plan's captures: a procedure whose fit reports further
-    steps passes its own). That call is where a run stops: a callback that raises (a job's
-    cancel or emergency stop, as the fits' progress does too) stops the acquisition before the
-    next capture. The plan's ``restore`` mount is done at the end, and also when a step fails
-    or stops.
+    Before each capture and each wait ``progress(done, total, step.message)`` is called
+    (``done`` captures so far; ``total`` defaults to the plan's captures: a procedure whose
+    fit reports further steps passes its own). That call is where a run stops: a callback
+    that raises (a job's cancel or emergency stop, as the fits' progress does too) stops the
+    acquisition before the next capture or wait. The plan's ``restore`` mount is done at the
+    end, and also when a step fails or stops.
 
     Returns
     -------
@@ -79,6 +80,9 @@ def acquire(
                 if isinstance(step, CaptureStep):
                     progress(len(captures), total, step.message)
                     captures[step.name] = _capture(rig, step)
+                elif isinstance(step, WaitStep):
+                    progress(len(captures), total, step.message)
+                    rig.wait(step.seconds)
                 else:
                     operator.mount(step.objects, step.instruction)
     finally:

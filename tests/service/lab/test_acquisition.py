@@ -5,16 +5,26 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import pytest
 
-from calibration.capture_plan import CapturePlan, CaptureStep, mount
+from calibration.capture_plan import CapturePlan, CaptureStep, WaitStep, mount
 from calibration.rig_sequence import RigCalibrationPlan, rig_capture_plan
+from drivers.rig import Rig
 from drivers.sim.rig import simulated_rig
+from drivers.sim.world import SimulatedWorld
 from service.lab.acquisition import acquire
 from sim_core.errors import InvalidInputError
-from sim_core.scene_spec import ObjectSpec, load_scene_spec
+from sim_core.render import RenderSettings
+from sim_core.render_request import RenderRequest
+from sim_core.scene_spec import ObjectSpec, load_scene_spec, parse_scene_spec
+from sim_core.twin_file import parse_reality
+from sim_core.warmup import illumination_temperature_c
+from tests.calibration.test_warmup import WALL
 from tests.sim_core.scenes import EXAMPLES
 
+WARMUP = {"illumination_start_c": 25.0, "illumination_end_c": 45.0, "time_constant_s": 600.0,
+          "depth_drift_mm_per_c": 0.4}
 PLATE = ObjectSpec.model_validate({"name": "plate", "material": "white-matte-tile",
                                    "mesh": {"kind": "rectangle", "size_m": [0.2, 0.2]}})
 
@@ -106,3 +116,43 @@ def test_the_rig_sequences_plan_captures_what_it_counts_in_the_order_it_fits():
     assert [s.name for s in cp.captures][6:] == ["noise/dark", "noise/solar", "solar/0",
                                                  "solar/1", "solar/2", "solar/3"]
     assert [s.solar_suns for s in cp.captures][8:] == [0.0, *plan.solar_levels_suns]
+
+
+def test_a_wait_lets_the_simulated_labs_clock_run_so_the_illumination_warms_between_captures():
+    """The plan's wait (a real rig's sleep) advances the simulated lab's clock: the capture after
+    it reports the temperature the reality's warm-up has reached by then."""
+    world = SimulatedWorld(parse_scene_spec(WALL), ".", RenderRequest(
+        RenderSettings(integrator="direct", spp=1), effects="auto"), reality=parse_reality(
+        {"camera": {"temperature": WARMUP}}))
+    events: list = []
+    plan = CapturePlan((CaptureStep("cold", 0.0, 0.0, False, 2),
+                        WaitStep(600.0, "the illumination warms"),
+                        CaptureStep("warm", 0.0, 0.0, False, 2)))
+    with simulated_rig(frame_source=world, seed=1, lab_wait=world.clock.wait) as rig:
+        caps = acquire(rig, RecordingOperator([]), plan,
+                       lambda done, total, message: events.append((done, total, message)))
+        period_s = 1.0 / rig.camera.use_case.frame_rate_hz
+    assert events[1] == (1, 2, "the illumination warms")
+    assert plan.waited_s == 600.0
+    cold, warm = caps["cold"].illumination_temperature_c, caps["warm"].illumination_temperature_c
+    spec = parse_reality({"camera": {"temperature": WARMUP}}).camera.temperature
+    # two frames before the wait (0 and one period), two after it; the wire carries float32
+    assert cold == pytest.approx(np.mean([illumination_temperature_c(t, spec)
+                                          for t in (0.0, period_s)]), abs=1e-4)
+    assert warm == pytest.approx(np.mean([illumination_temperature_c(600.0 + k * period_s, spec)
+                                          for k in (2, 3)]), abs=1e-4)
+    assert warm - cold > 10.0
+
+
+def test_a_wait_on_a_rig_without_a_lab_clock_returns_and_a_bad_wait_names_its_field(rig):
+    with pytest.raises(InvalidInputError, match=r"wait.seconds.*0 to 86400 s"):
+        WaitStep(-1.0)
+    with pytest.raises(InvalidInputError, match=r"wait\.seconds"):
+        WaitStep(float("nan"))
+    with pytest.raises(ValueError, match="seconds: got -2"):
+        rig.wait(-2.0)
+    rig.wait(3600.0)  # an instant simulated rig: an hour passes at once
+    slept: list[float] = []
+    r = Rig(rig.turntable, rig.solar, rig.camera, sleep=slept.append)
+    r.wait(1.5)
+    assert slept == [1.5]
