@@ -3,8 +3,12 @@
 The sequence is a plan and a fit: :func:`rig_capture_plan` says what to capture (none of it
 depends on what the fits find), the service runs it on the rig
 (:func:`service.lab.acquisition.run_rig_calibration`) and :func:`fit_rig_calibration` fits
-steps 1-7 from the averaged captures it is handed (:mod:`calibration.capture_plan`).
+steps 0-7 from the averaged captures it is handed (:mod:`calibration.capture_plan`).
 
+0. **Warm-up**, first, as on a real rig from power-on: the first fixture's board, nothing
+   moves, captures spread over the warm-up by the plan's waits, each frame with its reported
+   illumination temperature; the depth drift per degree (:mod:`calibration.rig_warmup`), which
+   every depth fit of step 4 removes at its capture's temperature.
 1. **Board sweeps.** For each fixture (tilt) the operator mounts the board (the simulated lab
    mounts it itself); the turntable sweeps the board past the camera with the solar simulator
    off; each view averages several frames (:mod:`calibration.captures`) and OpenCV finds the
@@ -56,6 +60,7 @@ from calibration.capture_plan import (
     CaptureStep,
     MountStep,
     Step,
+    WaitStep,
     mount,
 )
 from calibration.captures import AveragedCapture, Progress, no_progress
@@ -117,6 +122,11 @@ NOISE_FRAMES_RANGE = (2, 256)
 SOLAR_LEVELS_COUNT = (1, 8)
 #: frames averaged per solar level
 SOLAR_FRAMES_RANGE = (1, 64)
+#: captures of the warm-up stage (besides 0: none), and frames per capture
+WARMUP_CAPTURES_RANGE = (3, 64)
+WARMUP_FRAMES_RANGE = (1, 64)
+#: the wait between two warm-up captures [s]
+WARMUP_INTERVAL_RANGE_S = (0.0, 3600.0)
 #: rounds of the corner-bias synthesis (each renders every view at the poses the turntable
 #: model places it, with the calibrated camera)
 DEBIAS_ROUNDS = 1
@@ -143,6 +153,13 @@ class RigCalibrationPlan:
     solar_reference_suns : float or None
         A reference cell's reading at a set level of 1 sun, used if the frames do not
         determine the scale.
+    warmup_captures : int
+        Captures of the warm-up stage (0: none; else at least 3), the first right after
+        power-on (:mod:`calibration.rig_warmup`).
+    warmup_interval_s : float
+        The wait between two of them [s] (the rig sleeps, the simulated lab's clock runs).
+    warmup_frames : int
+        Frames per warm-up capture, each kept with its reported temperature.
     """
 
     board: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_BOARD))
@@ -153,6 +170,9 @@ class RigCalibrationPlan:
     solar_levels_suns: tuple[float, ...] = (0.8, 1.0, 1.2)
     solar_frames: int = 8
     solar_reference_suns: float | None = None
+    warmup_captures: int = 10
+    warmup_interval_s: float = 120.0
+    warmup_frames: int = 4
 
     def __post_init__(self) -> None:
         if len(self.fixtures) < 1:
@@ -176,6 +196,14 @@ class RigCalibrationPlan:
         _count("solar_frames", self.solar_frames, *SOLAR_FRAMES_RANGE, "frames per level")
         if self.solar_reference_suns is not None:
             check_reference_suns(self.solar_reference_suns)
+        if self.warmup_captures != 0:
+            _count("warmup_captures", self.warmup_captures, *WARMUP_CAPTURES_RANGE,
+                   "captures (or 0: no warm-up stage)")
+        lo_s, hi_s = WARMUP_INTERVAL_RANGE_S
+        if not (np.isfinite(self.warmup_interval_s) and lo_s <= self.warmup_interval_s <= hi_s):
+            raise InvalidInputError("warmup_interval_s", f"got {self.warmup_interval_s!r} s; "
+                                    f"allowed: {lo_s:g} to {hi_s:g} s")
+        _count("warmup_frames", self.warmup_frames, *WARMUP_FRAMES_RANGE, "frames per capture")
 
     def summary(self) -> dict[str, Any]:
         """The plan as JSON values: the fixtures by name, the rest as given (what
@@ -185,7 +213,16 @@ class RigCalibrationPlan:
                 "noise_frames": self.noise_frames,
                 "solar_levels_suns": list(self.solar_levels_suns),
                 "solar_frames": self.solar_frames,
-                "solar_reference_suns": self.solar_reference_suns}
+                "solar_reference_suns": self.solar_reference_suns,
+                "warmup_captures": self.warmup_captures,
+                "warmup_interval_s": self.warmup_interval_s,
+                "warmup_frames": self.warmup_frames}
+
+    @property
+    def warmup_times_s(self) -> tuple[float, ...]:
+        """Each warm-up capture's start after the first's, as planned [s] (the waits only: a
+        capture's own frames take a second or less)."""
+        return tuple(i * self.warmup_interval_s for i in range(self.warmup_captures))
 
 
 def build_rig_plan(
@@ -200,6 +237,9 @@ def build_rig_plan(
     solar_frames: int = RigCalibrationPlan.solar_frames,
     solar_reference_suns: float | None = None,
     fields: Mapping[str, str] = SWEEP_FIELDS,
+    warmup_captures: int = RigCalibrationPlan.warmup_captures,
+    warmup_interval_s: float = RigCalibrationPlan.warmup_interval_s,
+    warmup_frames: int = RigCalibrationPlan.warmup_frames,
 ) -> RigCalibrationPlan:
     """The calibration sequence's plan from its inputs: the one builder of the command line
     (``toftwin calibrate rig``) and the service (``POST /calibrations``).
@@ -219,7 +259,9 @@ def build_rig_plan(
         return RigCalibrationPlan(
             fixtures=chosen, sweep_deg=angles, frames_per_view=frames_per_view,
             noise_frames=noise_frames, solar_levels_suns=tuple(solar_levels_suns),
-            solar_frames=solar_frames, solar_reference_suns=solar_reference_suns)
+            solar_frames=solar_frames, solar_reference_suns=solar_reference_suns,
+            warmup_captures=warmup_captures, warmup_interval_s=warmup_interval_s,
+            warmup_frames=warmup_frames)
     except InvalidInputError as exc:  # the plan's own checks, named as the caller names them
         raise InvalidInputError(exc.field.replace("sweep_deg", fields["sweep"]),
                                 exc.message) from None
@@ -249,16 +291,26 @@ def _board_step(fixture: BoardFixture, index: int) -> str:
 NOISE_STEPS = ("noise/dark", "noise/solar")
 
 
+#: the warm-up stage's turntable angle: the first fixture's board facing the camera, as for
+#: the noise stacks [deg]
+WARMUP_ANGLE_DEG = 0.0
+
+
+def _warmup_step(index: int) -> str:
+    return f"warmup/{index}"
+
+
 def _solar_step(index: int) -> str:
     return f"solar/{index}"
 
 
 def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
-    """What the sequence captures on ``spec``'s rig, in order (steps 1, 5 and 7 of the module
-    docstring): none of it depends on what the fits find."""
-    steps: list[Step] = []
-    for fixture in plan.fixtures:
-        steps.append(_mount_board(plan, fixture, spec))
+    """What the sequence captures on ``spec``'s rig, in order (steps 0, 1, 5 and 7 of the
+    module docstring): none of it depends on what the fits find."""
+    steps: list[Step] = _warmup_steps(plan, spec)
+    for k, fixture in enumerate(plan.fixtures):
+        if k > 0 or not steps:  # the warm-up stage has mounted the first fixture already
+            steps.append(_mount_board(plan, fixture, spec))
         steps += [CaptureStep(_board_step(fixture, i), angle, 0.0, False, plan.frames_per_view,
                               message=f"board {fixture.name} at {angle:+.0f} deg")
                   for i, angle in enumerate(plan.sweep_deg)]
@@ -275,6 +327,22 @@ def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
                   for i, s in enumerate(_solar_levels(plan))]
     steps.append(mount(None, "mount the test object again"))
     return CapturePlan(tuple(steps))
+
+
+def _warmup_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
+    """Step 0: the first fixture mounted, nothing moves, captures from power-on with the plan's
+    waits between them (:mod:`calibration.rig_warmup`); none with ``warmup_captures`` 0."""
+    if plan.warmup_captures == 0:
+        return []
+    steps: list[Step] = [_mount_board(plan, plan.fixtures[0], spec)]
+    for i in range(plan.warmup_captures):
+        if i > 0:
+            steps.append(WaitStep(plan.warmup_interval_s,
+                                  f"warm-up: waiting {plan.warmup_interval_s:g} s"))
+        steps.append(CaptureStep(_warmup_step(i), WARMUP_ANGLE_DEG, 0.0, False,
+                                 plan.warmup_frames, keep_frames=True,
+                                 message=f"warm-up capture {i + 1} of {plan.warmup_captures}"))
+    return steps
 
 
 def _mount_board(plan: RigCalibrationPlan, fixture: BoardFixture, spec: SceneSpec) -> MountStep:
@@ -296,7 +364,7 @@ def fit_rig_calibration(
     progress: Progress = no_progress,
     rig_name: str = "rig",
 ) -> RigCalibration:
-    """Steps 1-7 of the module docstring from the captures of :func:`rig_capture_plan`.
+    """Steps 0-7 of the module docstring from the captures of :func:`rig_capture_plan`.
 
     ``spec`` is the nominal scene (camera pose, turntable, solar simulator); ``use_case`` the
     camera's use case the frames were taken in. Progress is reported with every capture done.
@@ -370,9 +438,13 @@ def fit_rig_calibration(
         "joint_reduced_chi2": stage["chi2"],
         "corner_std_median_px": _finite_median(corner_std.values()),
         "per_view_reduced_chi2": stage["per_view"], "fixture_spread": spread}
+    # 0. the warm-up drift, removed from the depth fit's phases at each capture's temperature
+    progress(done, total, "warm-up drift")
+    warm = _warmup(captures, plan)
+    results["warmup"] = warm.summary
     # 4. depth errors ----------------------------------------------------------------------
     progress(done, total, "depth errors")
-    depth = _depth(views, intr, plan, use_case.frequencies_hz, noise)
+    depth = _depth(views, intr, plan, use_case.frequencies_hz, noise, warm.temperature)
     results["depth"] = depth
 
     partial = TwinParameters(
@@ -408,7 +480,8 @@ def fit_rig_calibration(
 
     cal = CalibrationFile(
         camera=CameraParameters(**_camera_keys(intr), depth=depth.depth_errors,
-                                sensor=noise.to_sensor_overrides()),
+                                sensor=noise.to_sensor_overrides(),
+                                temperature=warm.temperature),
         illumination=IlluminationParameters(power_w=power.power_w),
         turntable=_turntable_keys(axis),
         solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
@@ -425,9 +498,12 @@ def fit_rig_calibration(
                             tuple(bad) if bad and not droppable else ()),
         std=stage["std"], spread=spread, basis=axis.basis, fx_px=intr.intrinsics.fx_px,
         fy_px=intr.intrinsics.fy_px, corner_radius=corner_radius(views, intr))
-    verdicts = rig_verdicts(calibration_keys(cal), evidence,
-                            depth_evidence(depth, use_case.frequencies_hz),
-                            other_verdicts(noise, power, solar))
+    keys = calibration_keys(cal)
+    verdicts = rig_verdicts(keys, evidence, depth_evidence(depth, use_case.frequencies_hz),
+                            {**other_verdicts(noise, power, solar), **warm.verdicts})
+    # the effects' keys not written (not determined), judged all the same: verdicts.json says
+    # why the file has no such key
+    verdicts.update_from({k: v for k, v in warm.verdicts.items() if k not in keys})
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
 
 def _finite_median(arrays) -> float | None:
@@ -523,12 +599,26 @@ def _turntable_keys(axis) -> TurntableParameters:
                                axis_direction=tuple(float(v) for v in axis.axis_direction),
                                zero_offset_deg=float(axis.zero_offset_deg))
 
-def _depth(views, intr, plan, frequencies_hz, noise=None):
+def _depth(views, intr, plan, frequencies_hz, noise=None, temperature=None):
     from calibration.depth import depth_views_from_captures, fit_depth_errors
 
     board = ObjectSpec.model_validate({"name": "b", "mesh": plan.board}).mesh
-    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board, noise)
+    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board, noise,
+                                       temperature)
     return fit_depth_errors(dviews, frequencies_hz)
+
+
+def _warmup(captures: Captures, plan: RigCalibrationPlan):
+    """Step 0 (:func:`calibration.rig_warmup.fit_rig_warmup`) from the warm-up captures; a plan
+    without them determines no drift."""
+    from calibration.rig_warmup import fit_rig_warmup, no_warmup
+
+    caps = [captures[_warmup_step(i)] for i in range(plan.warmup_captures)
+            if _warmup_step(i) in captures]
+    if len(caps) < plan.warmup_captures or not caps:
+        return no_warmup("the plan has no warm-up stage (warmup_captures 0)" if not caps else
+                         f"{len(caps)} of the plan's {plan.warmup_captures} warm-up captures")
+    return fit_rig_warmup(caps, plan.warmup_times_s)
 
 
 def _noise(stacks: list[AveragedCapture]):

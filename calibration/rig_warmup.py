@@ -35,7 +35,7 @@ from calibration.verdicts import Verdict, Verdicts
 from calibration.warmup import DRIFT_KEY, WarmupFit, fit_warmup
 from sim_core.twin_file import CameraTemperature
 
-__all__ = ["MIN_DRIFT_SIGMAS", "RigWarmup", "fit_rig_warmup",
+__all__ = ["MIN_DRIFT_SIGMAS", "RigWarmup", "fit_rig_warmup", "no_warmup",
            "observed_time_constant_s", "warmup_patch"]
 
 #: the keys of ``camera.temperature`` besides the drift
@@ -115,16 +115,21 @@ def observed_time_constant_s(times_s: Sequence[float], temperatures_c: Sequence[
     return float(min(best_tau, MAX_TIME_CONSTANT_S))
 
 
+def no_warmup(reason: str) -> RigWarmup:
+    """The stage's outcome when there is nothing to fit: the drift not determined, for
+    ``reason``; no key written, nothing removed."""
+    return RigWarmup(None, Verdicts({DRIFT_KEY: Verdict("not determined", None, reason)}),
+                     None, {"determined": False, "reason": reason})
+
+
 def fit_rig_warmup(captures: Sequence[AveragedCapture], times_s: Sequence[float]) -> RigWarmup:
     """The warm-up stage fitted from its captures (in order, each with its frames kept) taken at
     the plan's ``times_s`` after the first (module docstring)."""
     frames = [f for c in captures for f in c.frames]
     temps = [c.illumination_temperature_c for c in captures]
     if not frames or any(t is None for t in temps):
-        reason = ("the camera reports no illumination temperature with its frames: no drift "
-                  "can be measured, none is removed")
-        return RigWarmup(None, Verdicts({DRIFT_KEY: Verdict("not determined", None, reason)}),
-                         None, {"determined": False, "reason": reason})
+        return no_warmup("the camera reports no illumination temperature with its frames: no "
+                         "drift can be measured, none is removed")
     fit = fit_warmup(frames, warmup_patch(captures[0]))
     drift, std = fit.drift_mm_per_c, fit.drift_std_mm_per_c
     verdict = fit.verdict

@@ -3,12 +3,13 @@ a stop before the next capture."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
 import pytest
 
-from calibration.capture_plan import CapturePlan, CaptureStep, WaitStep, mount
+from calibration.capture_plan import CapturePlan, CaptureStep, MountStep, WaitStep, mount
 from calibration.rig_sequence import RigCalibrationPlan, rig_capture_plan
 from drivers.rig import Rig
 from drivers.sim.rig import simulated_rig
@@ -107,7 +108,18 @@ def test_the_rig_sequences_plan_captures_what_it_counts_in_the_order_it_fits():
     plan = RigCalibrationPlan(fixtures=RigCalibrationPlan().fixtures[:2],
                               sweep_deg=(-10.0, 0.0, 10.0))
     cp = rig_capture_plan(plan, spec)
-    assert cp.n_captures == 2 * 3 + 2 + 3 + 1
+    # the warm-up stage first: the first fixture mounted once, captures with waits between
+    n_warm = plan.warmup_captures
+    assert cp.n_captures == n_warm + 2 * 3 + 2 + 3 + 1
+    assert [s.name for s in cp.captures][:n_warm] == [f"warmup/{i}" for i in range(n_warm)]
+    assert all(c.keep_frames and c.turntable_angle_deg == 0.0 for c in cp.captures[:n_warm])
+    assert cp.waited_s == (n_warm - 1) * plan.warmup_interval_s
+    assert isinstance(cp.steps[2], WaitStep) and cp.steps[1].name == "warmup/0"
+    cold = rig_capture_plan(dataclasses.replace(plan, warmup_captures=0), spec)
+    assert cp.captures[n_warm:] == cold.captures and cold.waited_s == 0.0
+    assert [s for s in cp.steps if isinstance(s, MountStep)] == [
+        s for s in cold.steps if isinstance(s, MountStep)]
+    cp = cold
     mounts = [s.instruction for s in cp.steps if not isinstance(s, CaptureStep)]
     assert mounts[0].endswith(plan.fixtures[0].instruction)
     assert mounts[1].endswith(plan.fixtures[1].instruction)
@@ -156,3 +168,15 @@ def test_a_wait_on_a_rig_without_a_lab_clock_returns_and_a_bad_wait_names_its_fi
     r = Rig(rig.turntable, rig.solar, rig.camera, sleep=slept.append)
     r.wait(1.5)
     assert slept == [1.5]
+
+
+def test_a_warmup_stage_out_of_range_names_its_field():
+    with pytest.raises(InvalidInputError, match=r"warmup_captures.*got 2; allowed: 3 to 64"):
+        RigCalibrationPlan(warmup_captures=2)
+    with pytest.raises(InvalidInputError, match=r"warmup_interval_s.*allowed: 0 to 3600 s"):
+        RigCalibrationPlan(warmup_interval_s=-5.0)
+    with pytest.raises(InvalidInputError, match="warmup_frames"):
+        RigCalibrationPlan(warmup_frames=0)
+    assert RigCalibrationPlan(warmup_captures=0).warmup_times_s == ()
+    assert RigCalibrationPlan(warmup_captures=3, warmup_interval_s=60.0).warmup_times_s == (
+        0.0, 60.0, 120.0)
