@@ -126,3 +126,40 @@ def test_a_phase_of_the_wrong_frequencies_names_the_field():
         d.remove_from_phase_rad(np.zeros((1, 4, 4)), 30.0)
     with pytest.raises(InvalidInputError, match="illumination_temperature_c"):
         d.remove_from_phase_rad(np.zeros((2, 4, 4)), float("nan"))
+
+
+def test_the_rig_plans_warmup_stage_on_the_simulated_lab_measures_the_worlds_drift():
+    """The plan's warm-up steps acquired on the simulated rig (its waits run the lab's clock),
+    fitted as the rig calibration fits them: the world's drift within 10 %."""
+    from calibration.capture_plan import CapturePlan
+    from calibration.rig_sequence import RigCalibrationPlan, rig_capture_plan
+    from drivers.sim.operator import SimulatedOperator
+    from drivers.sim.rig import simulated_rig
+    from drivers.sim.world import SimulatedWorld
+    from service.lab.acquisition import acquire
+    from sim_core.render import RenderSettings
+    from sim_core.render_request import RenderRequest
+    from sim_core.scene_spec import load_scene_spec
+    from sim_core.twin_file import parse_reality
+    from tests.sim_core.scenes import EXAMPLES
+
+    spec = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
+    reality = parse_reality({"camera": {"temperature": {
+        "illumination_start_c": 25.0, "illumination_end_c": 45.0, "time_constant_s": 900.0,
+        "depth_drift_mm_per_c": 0.3}}})
+    world = SimulatedWorld(spec, EXAMPLES, RenderRequest(RenderSettings(integrator="direct",
+                                                                        spp=1), effects="auto"),
+                           reality=reality)
+    plan = RigCalibrationPlan(warmup_captures=6, warmup_interval_s=180.0, warmup_frames=3)
+    full = rig_capture_plan(plan, spec)
+    n_steps = 1 + 2 * plan.warmup_captures - 1  # the mount, the captures and the waits
+    stage = CapturePlan(full.steps[:n_steps])
+    assert [c.name for c in stage.captures] == [f"warmup/{i}" for i in range(6)]
+    with simulated_rig(frame_source=world, seed=2, lab_wait=world.clock.wait) as rig:
+        caps = acquire(rig, SimulatedOperator(world), stage)
+    assert world.mounted != "scene"  # the first fixture's board
+    warm = fit_rig_warmup(list(caps.values()), plan.warmup_times_s)
+    assert warm.verdicts[DRIFT_KEY].determined, warm.verdicts[DRIFT_KEY]
+    assert warm.temperature.depth_drift_mm_per_c[0] == pytest.approx(0.3, rel=0.10)
+    assert warm.summary["patch_px"] > 500
+    assert warm.temperature.illumination_end_c - warm.temperature.illumination_start_c > 10.0
