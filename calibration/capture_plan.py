@@ -42,6 +42,10 @@ class CaptureStep:
         Keep the individual frames in the capture (noise stacks, standard errors).
     message : str
         What the step does, in words (progress).
+    settle : bool
+        Wait for the turntable to settle after the move before the exposure (the driver's and
+        the service's wait); False: capture at once after the move, while the table may still
+        ring (the settling stage, :mod:`calibration.rig_settling`).
     """
 
     name: str
@@ -51,6 +55,7 @@ class CaptureStep:
     frames: int
     keep_frames: bool = False
     message: str = ""
+    settle: bool = True
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.turntable_angle_deg):

@@ -8,7 +8,9 @@ steps 0-7 from the averaged captures it is handed (:mod:`calibration.capture_pla
 0. **Warm-up**, first, as on a real rig from power-on: the first fixture's board, nothing
    moves, captures spread over the warm-up by the plan's waits, each frame with its reported
    illumination temperature; the depth drift per degree (:mod:`calibration.rig_warmup`), which
-   every depth fit of step 4 removes at its capture's temperature.
+   every depth fit of step 4 removes at its capture's temperature. Then the **settling**: the
+   board at rest, one move, and frames at once after it, not waiting for the table
+   (:mod:`calibration.rig_settling`; fitted after step 3, at the calibrated intrinsics).
 1. **Board sweeps.** For each fixture (tilt) the operator mounts the board (the simulated lab
    mounts it itself); the turntable sweeps the board past the camera with the solar simulator
    off; each view averages several frames (:mod:`calibration.captures`) and OpenCV finds the
@@ -127,6 +129,10 @@ WARMUP_CAPTURES_RANGE = (3, 64)
 WARMUP_FRAMES_RANGE = (1, 64)
 #: the wait between two warm-up captures [s]
 WARMUP_INTERVAL_RANGE_S = (0.0, 3600.0)
+#: frames after the settling stage's move (besides 0: none) and at rest; its move [deg]
+SETTLING_FRAMES_RANGE = (12, 1024)
+SETTLING_REST_FRAMES_RANGE = (2, 1024)
+SETTLING_MOVE_RANGE_DEG = (1.0, 90.0)
 #: rounds of the corner-bias synthesis (each renders every view at the poses the turntable
 #: model places it, with the calibrated camera)
 DEBIAS_ROUNDS = 1
@@ -160,6 +166,13 @@ class RigCalibrationPlan:
         The wait between two of them [s] (the rig sleeps, the simulated lab's clock runs).
     warmup_frames : int
         Frames per warm-up capture, each kept with its reported temperature.
+    settling_frames : int
+        Frames captured at once after the settling stage's move, not waiting for the table to
+        settle (0: no settling stage; :mod:`calibration.rig_settling`).
+    settling_rest_frames : int
+        Frames of the board at rest before the move (the yaw's noise).
+    settling_move_deg : float
+        The settling stage's move, from the warm-up's angle [deg].
     """
 
     board: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_BOARD))
@@ -173,6 +186,9 @@ class RigCalibrationPlan:
     warmup_captures: int = 10
     warmup_interval_s: float = 120.0
     warmup_frames: int = 4
+    settling_frames: int = 90
+    settling_rest_frames: int = 16
+    settling_move_deg: float = 20.0
 
     def __post_init__(self) -> None:
         if len(self.fixtures) < 1:
@@ -204,6 +220,16 @@ class RigCalibrationPlan:
             raise InvalidInputError("warmup_interval_s", f"got {self.warmup_interval_s!r} s; "
                                     f"allowed: {lo_s:g} to {hi_s:g} s")
         _count("warmup_frames", self.warmup_frames, *WARMUP_FRAMES_RANGE, "frames per capture")
+        if self.settling_frames != 0:
+            _count("settling_frames", self.settling_frames, *SETTLING_FRAMES_RANGE,
+                   "frames after the move (or 0: no settling stage)")
+            _count("settling_rest_frames", self.settling_rest_frames,
+                   *SETTLING_REST_FRAMES_RANGE, "frames at rest (a yaw noise needs 2)")
+        lo_d, hi_d = SETTLING_MOVE_RANGE_DEG
+        if not (np.isfinite(self.settling_move_deg)
+                and lo_d <= abs(self.settling_move_deg) <= hi_d):
+            raise InvalidInputError("settling_move_deg", f"got {self.settling_move_deg!r} deg; "
+                                    f"allowed: {lo_d:g} to {hi_d:g} deg either way")
 
     def summary(self) -> dict[str, Any]:
         """The plan as JSON values: the fixtures by name, the rest as given (what
@@ -216,7 +242,10 @@ class RigCalibrationPlan:
                 "solar_reference_suns": self.solar_reference_suns,
                 "warmup_captures": self.warmup_captures,
                 "warmup_interval_s": self.warmup_interval_s,
-                "warmup_frames": self.warmup_frames}
+                "warmup_frames": self.warmup_frames,
+                "settling_frames": self.settling_frames,
+                "settling_rest_frames": self.settling_rest_frames,
+                "settling_move_deg": self.settling_move_deg}
 
     @property
     def warmup_times_s(self) -> tuple[float, ...]:
@@ -240,6 +269,9 @@ def build_rig_plan(
     warmup_captures: int = RigCalibrationPlan.warmup_captures,
     warmup_interval_s: float = RigCalibrationPlan.warmup_interval_s,
     warmup_frames: int = RigCalibrationPlan.warmup_frames,
+    settling_frames: int = RigCalibrationPlan.settling_frames,
+    settling_rest_frames: int = RigCalibrationPlan.settling_rest_frames,
+    settling_move_deg: float = RigCalibrationPlan.settling_move_deg,
 ) -> RigCalibrationPlan:
     """The calibration sequence's plan from its inputs: the one builder of the command line
     (``toftwin calibrate rig``) and the service (``POST /calibrations``).
@@ -261,7 +293,8 @@ def build_rig_plan(
             noise_frames=noise_frames, solar_levels_suns=tuple(solar_levels_suns),
             solar_frames=solar_frames, solar_reference_suns=solar_reference_suns,
             warmup_captures=warmup_captures, warmup_interval_s=warmup_interval_s,
-            warmup_frames=warmup_frames)
+            warmup_frames=warmup_frames, settling_frames=settling_frames,
+            settling_rest_frames=settling_rest_frames, settling_move_deg=settling_move_deg)
     except InvalidInputError as exc:  # the plan's own checks, named as the caller names them
         raise InvalidInputError(exc.field.replace("sweep_deg", fields["sweep"]),
                                 exc.message) from None
@@ -296,6 +329,10 @@ NOISE_STEPS = ("noise/dark", "noise/solar")
 WARMUP_ANGLE_DEG = 0.0
 
 
+#: the settling stage's captures: at rest, then right after the move
+SETTLING_STEPS = ("settling/rest", "settling/moved")
+
+
 def _warmup_step(index: int) -> str:
     return f"warmup/{index}"
 
@@ -307,7 +344,7 @@ def _solar_step(index: int) -> str:
 def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
     """What the sequence captures on ``spec``'s rig, in order (steps 0, 1, 5 and 7 of the
     module docstring): none of it depends on what the fits find."""
-    steps: list[Step] = _warmup_steps(plan, spec)
+    steps: list[Step] = _warmup_steps(plan, spec) + _settling_steps(plan, spec)
     for k, fixture in enumerate(plan.fixtures):
         if k > 0 or not steps:  # the warm-up stage has mounted the first fixture already
             steps.append(_mount_board(plan, fixture, spec))
@@ -343,6 +380,24 @@ def _warmup_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
                                  plan.warmup_frames, keep_frames=True,
                                  message=f"warm-up capture {i + 1} of {plan.warmup_captures}"))
     return steps
+
+
+def _settling_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
+    """The settling stage (:mod:`calibration.rig_settling`): the first fixture's board at rest
+    (mounted here unless the warm-up has mounted it), then one move and frames at once after
+    it, NOT waiting for the table to settle; none with ``settling_frames`` 0."""
+    if plan.settling_frames == 0:
+        return []
+    steps: list[Step] = [] if plan.warmup_captures else [
+        _mount_board(plan, plan.fixtures[0], spec)]
+    return [*steps,
+            CaptureStep(SETTLING_STEPS[0], WARMUP_ANGLE_DEG, 0.0, False,
+                        plan.settling_rest_frames, keep_frames=True,
+                        message="settling: the board at rest"),
+            CaptureStep(SETTLING_STEPS[1], WARMUP_ANGLE_DEG + plan.settling_move_deg, 0.0,
+                        False, plan.settling_frames, keep_frames=True, settle=False,
+                        message="settling: frames right after a move, the table not waited "
+                                "for")]
 
 
 def _mount_board(plan: RigCalibrationPlan, fixture: BoardFixture, spec: SceneSpec) -> MountStep:
@@ -430,6 +485,9 @@ def fit_rig_calibration(
         results["views"]["used"] = len(views)
     results["intrinsics"] = intr
     results["views"]["corner_bias_rms_px"] = corner_bias_px
+    progress(done, total, "turntable settling")
+    settle = _settling(captures, plan, intr.intrinsics)
+    results["settling"] = settle.summary
     results["turntable"] = axis
     progress(done, total, "spread over the fixtures")
     spread = _fixture_jackknife(views, plan, spec, camera, intr, axis)
@@ -483,7 +541,7 @@ def fit_rig_calibration(
                                 sensor=noise.to_sensor_overrides(),
                                 temperature=warm.temperature),
         illumination=IlluminationParameters(power_w=power.power_w),
-        turntable=_turntable_keys(axis),
+        turntable=_turntable_keys(axis, settle.settling),
         solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
         if solar is not None else SolarParameters(),
         provenance=Provenance(
@@ -500,10 +558,12 @@ def fit_rig_calibration(
         fy_px=intr.intrinsics.fy_px, corner_radius=corner_radius(views, intr))
     keys = calibration_keys(cal)
     verdicts = rig_verdicts(keys, evidence, depth_evidence(depth, use_case.frequencies_hz),
-                            {**other_verdicts(noise, power, solar), **warm.verdicts})
+                            {**other_verdicts(noise, power, solar), **warm.verdicts,
+                             **settle.verdicts})
     # the effects' keys not written (not determined), judged all the same: verdicts.json says
     # why the file has no such key
-    verdicts.update_from({k: v for k, v in warm.verdicts.items() if k not in keys})
+    verdicts.update_from({k: v for k, v in {**warm.verdicts, **settle.verdicts}.items()
+                          if k not in keys})
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
 
 def _finite_median(arrays) -> float | None:
@@ -594,10 +654,21 @@ def _fixture_jackknife(views, plan, spec, camera, intr, axis) -> dict[str, float
     return {n: float(s) for n, s in zip(names, jackknife_std(rows), strict=True)}
 
 
-def _turntable_keys(axis) -> TurntableParameters:
+def _turntable_keys(axis, settling=None) -> TurntableParameters:
     return TurntableParameters(axis_point_m=tuple(float(v) for v in axis.axis_point_m),
                                axis_direction=tuple(float(v) for v in axis.axis_direction),
-                               zero_offset_deg=float(axis.zero_offset_deg))
+                               zero_offset_deg=float(axis.zero_offset_deg), settling=settling)
+
+
+def _settling(captures: Captures, plan: RigCalibrationPlan, intrinsics):
+    """The settling stage (:func:`calibration.rig_settling.fit_rig_settling`) at the calibrated
+    intrinsics; a plan without it determines no settling."""
+    from calibration.rig_settling import fit_rig_settling, no_settling
+
+    if plan.settling_frames == 0 or not all(n in captures for n in SETTLING_STEPS):
+        return no_settling("the plan has no settling stage (settling_frames 0)")
+    return fit_rig_settling(captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]],
+                            intrinsics)
 
 def _depth(views, intr, plan, frequencies_hz, noise=None, temperature=None):
     from calibration.depth import depth_views_from_captures, fit_depth_errors

@@ -11,6 +11,7 @@ alike (and the object fit's captures, for ``toftwin fit-object`` and a campaign'
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -33,7 +34,7 @@ from calibration.rig_sequence import (
 )
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
 from drivers.rig import Rig, RigState
-from service.lab.settling import settled_moves
+from service.lab.settling import settled_moves, unsettled_moves
 from sim_core.materials import Material
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import SceneSpec
@@ -94,7 +95,8 @@ def acquire(
 def _capture(rig: Rig, step: CaptureStep) -> AveragedCapture:
     target = RigState(step.turntable_angle_deg, step.solar_suns, step.shutter_open)
     with rig.hold():  # nobody moves the rig between the move and the exposure
-        rig.apply(target)
+        with contextlib.nullcontext() if step.settle else unsettled_moves(rig):
+            rig.apply(target)
         # checked against the target for the whole exposure (Rig.capture)
         frames = rig.capture(step.frames, target=target)
     return average_frames(frames, keep_frames=step.keep_frames)

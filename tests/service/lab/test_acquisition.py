@@ -110,13 +110,19 @@ def test_the_rig_sequences_plan_captures_what_it_counts_in_the_order_it_fits():
     cp = rig_capture_plan(plan, spec)
     # the warm-up stage first: the first fixture mounted once, captures with waits between
     n_warm = plan.warmup_captures
-    assert cp.n_captures == n_warm + 2 * 3 + 2 + 3 + 1
+    assert cp.n_captures == n_warm + 2 + 2 * 3 + 2 + 3 + 1
     assert [s.name for s in cp.captures][:n_warm] == [f"warmup/{i}" for i in range(n_warm)]
     assert all(c.keep_frames and c.turntable_angle_deg == 0.0 for c in cp.captures[:n_warm])
     assert cp.waited_s == (n_warm - 1) * plan.warmup_interval_s
     assert isinstance(cp.steps[2], WaitStep) and cp.steps[1].name == "warmup/0"
-    cold = rig_capture_plan(dataclasses.replace(plan, warmup_captures=0), spec)
-    assert cp.captures[n_warm:] == cold.captures and cold.waited_s == 0.0
+    # then the settling stage: the board at rest, a move, frames at once after it
+    rest, moved = cp.captures[n_warm:n_warm + 2]
+    assert (rest.name, moved.name) == ("settling/rest", "settling/moved")
+    assert rest.settle and not moved.settle and moved.keep_frames
+    assert moved.turntable_angle_deg - rest.turntable_angle_deg == plan.settling_move_deg
+    cold = rig_capture_plan(dataclasses.replace(plan, warmup_captures=0, settling_frames=0),
+                            spec)
+    assert cp.captures[n_warm + 2:] == cold.captures and cold.waited_s == 0.0
     assert [s for s in cp.steps if isinstance(s, MountStep)] == [
         s for s in cold.steps if isinstance(s, MountStep)]
     cp = cold
@@ -180,3 +186,39 @@ def test_a_warmup_stage_out_of_range_names_its_field():
     assert RigCalibrationPlan(warmup_captures=0).warmup_times_s == ()
     assert RigCalibrationPlan(warmup_captures=3, warmup_interval_s=60.0).warmup_times_s == (
         0.0, 60.0, 120.0)
+
+
+def test_a_settling_stage_out_of_range_names_its_field():
+    with pytest.raises(InvalidInputError, match=r"settling_frames.*got 5; allowed: 12 to 1024"):
+        RigCalibrationPlan(settling_frames=5)
+    with pytest.raises(InvalidInputError, match=r"settling_move_deg.*allowed: 1 to 90 deg"):
+        RigCalibrationPlan(settling_move_deg=0.0)
+    only = rig_capture_plan(RigCalibrationPlan(warmup_captures=0),
+                            load_scene_spec(EXAMPLES / "satellite_ground_test.yaml"))
+    assert isinstance(only.steps[0], MountStep)  # the settling stage mounts its own board
+    assert [c.name for c in only.captures[:2]] == ["settling/rest", "settling/moved"]
+
+
+def test_a_capture_that_does_not_settle_lifts_the_turntables_wait_for_its_move_only(rig):
+    """The settling stage's capture: the driver's post-move wait is 0 during its move and
+    restored after it, also inside the service's wait for a calibrated settling."""
+    seen: list[float] = []
+    real_move = rig.turntable.move_to
+
+    def move_to(angle_deg: float, *args, **kwargs):
+        seen.append(rig.turntable.settle_s)
+        return real_move(angle_deg, *args, **kwargs)
+
+    base = rig.turntable.settle_s
+    rig.turntable.settle_s = 0.3
+    rig.turntable.move_to = move_to
+    try:
+        acquire(rig, RecordingOperator([]), CapturePlan((
+            CaptureStep("rest", 0.0, 0.0, False, 1),
+            CaptureStep("moved", 20.0, 0.0, False, 2, settle=False),
+            CaptureStep("after", 0.0, 0.0, False, 1))))
+    finally:
+        del rig.turntable.move_to
+        after = rig.turntable.settle_s
+        rig.turntable.settle_s = base
+    assert seen == [0.3, 0.0, 0.3] and after == 0.3
