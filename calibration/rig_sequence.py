@@ -86,7 +86,7 @@ from calibration.rig_verdicts import (
 )
 from calibration.solar import check_reference_suns, fit_solar_scale
 from calibration.twin_prediction import CameraUseCase, mounted_spec, predict_view
-from calibration.verdicts import Verdicts
+from calibration.verdicts import Verdict, Verdicts
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 from sim_core.scene import build_camera
@@ -329,6 +329,14 @@ NOISE_STEPS = ("noise/dark", "noise/solar")
 WARMUP_ANGLE_DEG = 0.0
 
 
+#: the stray light's keys: no stage of the sequence measures them yet (a bright patch beside a
+#: dark view needs a scene with nothing else within range and taps on a pedestal:
+#: calibration.stray_light)
+STRAY_LIGHT_NOT_MEASURED = {
+    key: Verdict("not determined", None, "the rig calibration has no stray-light stage yet "
+                 "(calibration.stray_light needs a bright patch beside a dark view and the "
+                 "dark pixels' taps on a pedestal): no key written")
+    for key in ("camera.stray_light.fraction", "camera.stray_light.kernel_radius_px")}
 #: the settling stage's captures: at rest, then right after the move
 SETTLING_STEPS = ("settling/rest", "settling/moved")
 
@@ -564,6 +572,7 @@ def fit_rig_calibration(
     # why the file has no such key
     verdicts.update_from({k: v for k, v in {**warm.verdicts, **settle.verdicts}.items()
                           if k not in keys})
+    verdicts.update_from(STRAY_LIGHT_NOT_MEASURED)
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
 
 def _finite_median(arrays) -> float | None:
