@@ -11,7 +11,8 @@ fit_warmup` fits the range drift per degree on the board's bright pixels.
 
 The key written (``camera.temperature``, :meth:`calibration.warmup.WarmupFit.temperature_key`)
 holds the drift and the first capture's temperature as the start: every later depth fit of the
-rig calibration removes the drift at its capture's temperature (:func:`drift_free_phase_rad`),
+rig calibration removes the drift at its capture's temperature
+(:func:`calibration.captures.drift_free_phase_rad`),
 so the depth model is the one at the start temperature, as the twin applies it
 (:mod:`sim_core.warmup`). The end temperature is the last capture's, and the time constant the
 exponential through the captures' temperatures at the plan's times (the twin does not use it:
