@@ -1,8 +1,9 @@
 """What a calibration procedure needs captured, and the captures it is handed back.
 
-Calibration never drives the rig. Each procedure declares a :class:`CapturePlan` (mounts and
-captures, in order); the service runs it on the rig (:func:`service.lab.acquisition.acquire`:
-the operator mounts, the rig moves and captures, the frames are averaged) and hands the
+Calibration never drives the rig. Each procedure declares a :class:`CapturePlan` (mounts,
+waits and captures, in order); the service runs it on the rig
+(:func:`service.lab.acquisition.acquire`: the operator mounts, the rig waits, moves and
+captures, the frames are averaged) and hands the
 :class:`~calibration.captures.AveragedCapture` of every :class:`CaptureStep` back, keyed by the
 step's name (:data:`Captures`), to the procedure's fit. The plan names the rig state in its own
 plain values (turntable angle, solar level, shutter), so calibration imports no driver (an
@@ -41,6 +42,10 @@ class CaptureStep:
         Keep the individual frames in the capture (noise stacks, standard errors).
     message : str
         What the step does, in words (progress).
+    settle : bool
+        Wait for the turntable to settle after the move before the exposure (the driver's and
+        the service's wait); False: capture at once after the move, while the table may still
+        ring (the settling stage, :mod:`calibration.rig_settling`).
     """
 
     name: str
@@ -50,6 +55,7 @@ class CaptureStep:
     frames: int
     keep_frames: bool = False
     message: str = ""
+    settle: bool = True
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.turntable_angle_deg):
@@ -78,8 +84,33 @@ class MountStep:
     instruction: str
 
 
+@dataclass(frozen=True)
+class WaitStep:
+    """Time passes with nothing captured and nothing moved (a warm-up sequence's pause between
+    captures): a real rig sleeps, the simulated lab advances its clock
+    (:meth:`drivers.rig.Rig.wait`).
+
+    Attributes
+    ----------
+    seconds : float
+        How long [s] (finite, >= 0).
+    message : str
+        What the wait is for, in words (progress).
+    """
+
+    seconds: float
+    message: str = ""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.seconds) and 0.0 <= self.seconds <= MAX_WAIT_S):
+            raise InvalidInputError("wait.seconds", f"got {self.seconds!r}; allowed: 0 to "
+                                    f"{MAX_WAIT_S:g} s")
+
+
+#: the longest single wait a plan may ask for [s] (a day: a longer one is a mistake)
+MAX_WAIT_S = 86_400.0
 #: a plan's step
-Step = CaptureStep | MountStep
+Step = CaptureStep | MountStep | WaitStep
 #: what a plan's captures gave: step name -> averaged capture, in the plan's order
 Captures = Mapping[str, AveragedCapture]
 
@@ -90,7 +121,7 @@ class CapturePlan:
 
     Attributes
     ----------
-    steps : tuple of CaptureStep or MountStep
+    steps : tuple of CaptureStep, MountStep or WaitStep
     restore : MountStep or None
         A mount done after the steps even when one of them fails (the test object back).
     """
@@ -108,6 +139,11 @@ class CapturePlan:
     def captures(self) -> tuple[CaptureStep, ...]:
         """The capture steps, in order."""
         return tuple(s for s in self.steps if isinstance(s, CaptureStep))
+
+    @property
+    def waited_s(self) -> float:
+        """The seconds the plan's waits add up to."""
+        return float(sum(s.seconds for s in self.steps if isinstance(s, WaitStep)))
 
     @property
     def n_captures(self) -> int:

@@ -18,6 +18,8 @@ import numpy as np
 from sim_core.errors import InvalidInputError
 from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.tof import phase_from_phasor
+from sim_core.twin_file import CameraTemperature
+from sim_core.warmup import TemperatureDrift
 
 
 @dataclass(frozen=True)
@@ -125,6 +127,17 @@ def _mean_temperature_c(frames: list[RawFrame]) -> float | None:
     if any(t is None or not np.isfinite(t) for t in temps):
         return None
     return float(np.mean(temps))
+
+
+def drift_free_phase_rad(capture: AveragedCapture,
+                         temperature: CameraTemperature | None) -> np.ndarray:
+    """(n_f, H, W) the capture's phases with the calibrated warm-up drift at its reported
+    temperature removed (:meth:`sim_core.warmup.TemperatureDrift.remove_from_phase_rad`); the
+    phases as measured without a calibrated drift or a reported temperature."""
+    if temperature is None or capture.illumination_temperature_c is None:
+        return capture.phase_rad
+    drift = TemperatureDrift.from_spec(temperature, capture.frequencies_hz)
+    return drift.remove_from_phase_rad(capture.phase_rad, capture.illumination_temperature_c)
 
 
 #: ``progress(done, total, message)`` callbacks of the procedures

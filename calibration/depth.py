@@ -252,10 +252,15 @@ def _noise_evidence(views, design, keep, seen, pix, fk, phi, vid, sd, k_rad, aft
             "pixel_offset_std_m": float(np.sqrt(np.mean(pix_var)))}
 
 
-def depth_views_from_captures(intr_result, views_caps, board, noise=None) -> list[DepthView]:
+def depth_views_from_captures(intr_result, views_caps, board, noise=None,
+                              temperature=None) -> list[DepthView]:
     """DepthViews of the board views that have a pose: true range from the pose, its mask;
     with ``noise`` (a :class:`calibration.noise_gain.NoiseCalibration`) each phase's standard
-    deviation from the noise model over the frames averaged."""
+    deviation from the noise model over the frames averaged; with ``temperature`` (the
+    calibrated ``camera.temperature``) the warm-up drift removed from each capture's phases at
+    its reported temperature (:func:`calibration.captures.drift_free_phase_rad`), so the depth
+    errors fitted are the ones at the start temperature, as the twin applies them."""
+    from calibration.captures import drift_free_phase_rad
     from sim_core.boards import board_size_m
 
     out = []
@@ -265,7 +270,7 @@ def depth_views_from_captures(intr_result, views_caps, board, noise=None) -> lis
             continue
         rng, inside = board_range_m(intr_result.intrinsics, pose[0], pose[1],
                                     board_size_m(board))
-        out.append(DepthView(view.name, cap.phase_rad, cap.amplitude, rng,
+        out.append(DepthView(view.name, drift_free_phase_rad(cap, temperature), cap.amplitude, rng,
                              inside & cap.valid, phase_std_rad(cap, noise)))
     return out
 

@@ -3,8 +3,14 @@
 The sequence is a plan and a fit: :func:`rig_capture_plan` says what to capture (none of it
 depends on what the fits find), the service runs it on the rig
 (:func:`service.lab.acquisition.run_rig_calibration`) and :func:`fit_rig_calibration` fits
-steps 1-7 from the averaged captures it is handed (:mod:`calibration.capture_plan`).
+steps 0-7 from the averaged captures it is handed (:mod:`calibration.capture_plan`).
 
+0. **Warm-up**, first, as on a real rig from power-on: the first fixture's board, nothing
+   moves, captures spread over the warm-up by the plan's waits, each frame with its reported
+   illumination temperature; the depth drift per degree (:mod:`calibration.rig_warmup`), which
+   every depth fit of step 4 removes at its capture's temperature. Then the **settling**: the
+   board at rest, one move, and frames at once after it, not waiting for the table
+   (:mod:`calibration.rig_settling`; fitted after step 3, at the calibrated intrinsics).
 1. **Board sweeps.** For each fixture (tilt) the operator mounts the board (the simulated lab
    mounts it itself); the turntable sweeps the board past the camera with the solar simulator
    off; each view averages several frames (:mod:`calibration.captures`) and OpenCV finds the
@@ -56,6 +62,7 @@ from calibration.capture_plan import (
     CaptureStep,
     MountStep,
     Step,
+    WaitStep,
     mount,
 )
 from calibration.captures import AveragedCapture, Progress, no_progress
@@ -79,7 +86,7 @@ from calibration.rig_verdicts import (
 )
 from calibration.solar import check_reference_suns, fit_solar_scale
 from calibration.twin_prediction import CameraUseCase, mounted_spec, predict_view
-from calibration.verdicts import Verdicts
+from calibration.verdicts import Verdict, Verdicts
 from sim_core.errors import InvalidInputError
 from sim_core.lights import SUNS_RANGE
 from sim_core.scene import build_camera
@@ -117,6 +124,15 @@ NOISE_FRAMES_RANGE = (2, 256)
 SOLAR_LEVELS_COUNT = (1, 8)
 #: frames averaged per solar level
 SOLAR_FRAMES_RANGE = (1, 64)
+#: captures of the warm-up stage (besides 0: none), and frames per capture
+WARMUP_CAPTURES_RANGE = (3, 64)
+WARMUP_FRAMES_RANGE = (1, 64)
+#: the wait between two warm-up captures [s]
+WARMUP_INTERVAL_RANGE_S = (0.0, 3600.0)
+#: frames after the settling stage's move (besides 0: none) and at rest; its move [deg]
+SETTLING_FRAMES_RANGE = (12, 1024)
+SETTLING_REST_FRAMES_RANGE = (2, 1024)
+SETTLING_MOVE_RANGE_DEG = (1.0, 90.0)
 #: rounds of the corner-bias synthesis (each renders every view at the poses the turntable
 #: model places it, with the calibrated camera)
 DEBIAS_ROUNDS = 1
@@ -143,6 +159,20 @@ class RigCalibrationPlan:
     solar_reference_suns : float or None
         A reference cell's reading at a set level of 1 sun, used if the frames do not
         determine the scale.
+    warmup_captures : int
+        Captures of the warm-up stage (0: none; else at least 3), the first right after
+        power-on (:mod:`calibration.rig_warmup`).
+    warmup_interval_s : float
+        The wait between two of them [s] (the rig sleeps, the simulated lab's clock runs).
+    warmup_frames : int
+        Frames per warm-up capture, each kept with its reported temperature.
+    settling_frames : int
+        Frames captured at once after the settling stage's move, not waiting for the table to
+        settle (0: no settling stage; :mod:`calibration.rig_settling`).
+    settling_rest_frames : int
+        Frames of the board at rest before the move (the yaw's noise).
+    settling_move_deg : float
+        The settling stage's move, from the warm-up's angle [deg].
     """
 
     board: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_BOARD))
@@ -153,6 +183,12 @@ class RigCalibrationPlan:
     solar_levels_suns: tuple[float, ...] = (0.8, 1.0, 1.2)
     solar_frames: int = 8
     solar_reference_suns: float | None = None
+    warmup_captures: int = 10
+    warmup_interval_s: float = 120.0
+    warmup_frames: int = 4
+    settling_frames: int = 90
+    settling_rest_frames: int = 16
+    settling_move_deg: float = 20.0
 
     def __post_init__(self) -> None:
         if len(self.fixtures) < 1:
@@ -176,6 +212,24 @@ class RigCalibrationPlan:
         _count("solar_frames", self.solar_frames, *SOLAR_FRAMES_RANGE, "frames per level")
         if self.solar_reference_suns is not None:
             check_reference_suns(self.solar_reference_suns)
+        if self.warmup_captures != 0:
+            _count("warmup_captures", self.warmup_captures, *WARMUP_CAPTURES_RANGE,
+                   "captures (or 0: no warm-up stage)")
+        lo_s, hi_s = WARMUP_INTERVAL_RANGE_S
+        if not (np.isfinite(self.warmup_interval_s) and lo_s <= self.warmup_interval_s <= hi_s):
+            raise InvalidInputError("warmup_interval_s", f"got {self.warmup_interval_s!r} s; "
+                                    f"allowed: {lo_s:g} to {hi_s:g} s")
+        _count("warmup_frames", self.warmup_frames, *WARMUP_FRAMES_RANGE, "frames per capture")
+        if self.settling_frames != 0:
+            _count("settling_frames", self.settling_frames, *SETTLING_FRAMES_RANGE,
+                   "frames after the move (or 0: no settling stage)")
+            _count("settling_rest_frames", self.settling_rest_frames,
+                   *SETTLING_REST_FRAMES_RANGE, "frames at rest (a yaw noise needs 2)")
+        lo_d, hi_d = SETTLING_MOVE_RANGE_DEG
+        if not (np.isfinite(self.settling_move_deg)
+                and lo_d <= abs(self.settling_move_deg) <= hi_d):
+            raise InvalidInputError("settling_move_deg", f"got {self.settling_move_deg!r} deg; "
+                                    f"allowed: {lo_d:g} to {hi_d:g} deg either way")
 
     def summary(self) -> dict[str, Any]:
         """The plan as JSON values: the fixtures by name, the rest as given (what
@@ -185,7 +239,19 @@ class RigCalibrationPlan:
                 "noise_frames": self.noise_frames,
                 "solar_levels_suns": list(self.solar_levels_suns),
                 "solar_frames": self.solar_frames,
-                "solar_reference_suns": self.solar_reference_suns}
+                "solar_reference_suns": self.solar_reference_suns,
+                "warmup_captures": self.warmup_captures,
+                "warmup_interval_s": self.warmup_interval_s,
+                "warmup_frames": self.warmup_frames,
+                "settling_frames": self.settling_frames,
+                "settling_rest_frames": self.settling_rest_frames,
+                "settling_move_deg": self.settling_move_deg}
+
+    @property
+    def warmup_times_s(self) -> tuple[float, ...]:
+        """Each warm-up capture's start after the first's, as planned [s] (the waits only: a
+        capture's own frames take a second or less)."""
+        return tuple(i * self.warmup_interval_s for i in range(self.warmup_captures))
 
 
 def build_rig_plan(
@@ -200,6 +266,12 @@ def build_rig_plan(
     solar_frames: int = RigCalibrationPlan.solar_frames,
     solar_reference_suns: float | None = None,
     fields: Mapping[str, str] = SWEEP_FIELDS,
+    warmup_captures: int = RigCalibrationPlan.warmup_captures,
+    warmup_interval_s: float = RigCalibrationPlan.warmup_interval_s,
+    warmup_frames: int = RigCalibrationPlan.warmup_frames,
+    settling_frames: int = RigCalibrationPlan.settling_frames,
+    settling_rest_frames: int = RigCalibrationPlan.settling_rest_frames,
+    settling_move_deg: float = RigCalibrationPlan.settling_move_deg,
 ) -> RigCalibrationPlan:
     """The calibration sequence's plan from its inputs: the one builder of the command line
     (``toftwin calibrate rig``) and the service (``POST /calibrations``).
@@ -219,7 +291,10 @@ def build_rig_plan(
         return RigCalibrationPlan(
             fixtures=chosen, sweep_deg=angles, frames_per_view=frames_per_view,
             noise_frames=noise_frames, solar_levels_suns=tuple(solar_levels_suns),
-            solar_frames=solar_frames, solar_reference_suns=solar_reference_suns)
+            solar_frames=solar_frames, solar_reference_suns=solar_reference_suns,
+            warmup_captures=warmup_captures, warmup_interval_s=warmup_interval_s,
+            warmup_frames=warmup_frames, settling_frames=settling_frames,
+            settling_rest_frames=settling_rest_frames, settling_move_deg=settling_move_deg)
     except InvalidInputError as exc:  # the plan's own checks, named as the caller names them
         raise InvalidInputError(exc.field.replace("sweep_deg", fields["sweep"]),
                                 exc.message) from None
@@ -249,16 +324,38 @@ def _board_step(fixture: BoardFixture, index: int) -> str:
 NOISE_STEPS = ("noise/dark", "noise/solar")
 
 
+#: the warm-up stage's turntable angle: the first fixture's board facing the camera, as for
+#: the noise stacks [deg]
+WARMUP_ANGLE_DEG = 0.0
+
+
+#: the stray light's keys: no stage of the sequence measures them yet (a bright patch beside a
+#: dark view needs a scene with nothing else within range and taps on a pedestal:
+#: calibration.stray_light)
+STRAY_LIGHT_NOT_MEASURED = {
+    key: Verdict("not determined", None, "the rig calibration has no stray-light stage yet "
+                 "(calibration.stray_light needs a bright patch beside a dark view and the "
+                 "dark pixels' taps on a pedestal): no key written")
+    for key in ("camera.stray_light.fraction", "camera.stray_light.kernel_radius_px")}
+#: the settling stage's captures: at rest, then right after the move
+SETTLING_STEPS = ("settling/rest", "settling/moved")
+
+
+def _warmup_step(index: int) -> str:
+    return f"warmup/{index}"
+
+
 def _solar_step(index: int) -> str:
     return f"solar/{index}"
 
 
 def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
-    """What the sequence captures on ``spec``'s rig, in order (steps 1, 5 and 7 of the module
-    docstring): none of it depends on what the fits find."""
-    steps: list[Step] = []
-    for fixture in plan.fixtures:
-        steps.append(_mount_board(plan, fixture, spec))
+    """What the sequence captures on ``spec``'s rig, in order (steps 0, 1, 5 and 7 of the
+    module docstring): none of it depends on what the fits find."""
+    steps: list[Step] = _warmup_steps(plan, spec) + _settling_steps(plan, spec)
+    for k, fixture in enumerate(plan.fixtures):
+        if k > 0 or not steps:  # the warm-up stage has mounted the first fixture already
+            steps.append(_mount_board(plan, fixture, spec))
         steps += [CaptureStep(_board_step(fixture, i), angle, 0.0, False, plan.frames_per_view,
                               message=f"board {fixture.name} at {angle:+.0f} deg")
                   for i, angle in enumerate(plan.sweep_deg)]
@@ -275,6 +372,40 @@ def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
                   for i, s in enumerate(_solar_levels(plan))]
     steps.append(mount(None, "mount the test object again"))
     return CapturePlan(tuple(steps))
+
+
+def _warmup_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
+    """Step 0: the first fixture mounted, nothing moves, captures from power-on with the plan's
+    waits between them (:mod:`calibration.rig_warmup`); none with ``warmup_captures`` 0."""
+    if plan.warmup_captures == 0:
+        return []
+    steps: list[Step] = [_mount_board(plan, plan.fixtures[0], spec)]
+    for i in range(plan.warmup_captures):
+        if i > 0:
+            steps.append(WaitStep(plan.warmup_interval_s,
+                                  f"warm-up: waiting {plan.warmup_interval_s:g} s"))
+        steps.append(CaptureStep(_warmup_step(i), WARMUP_ANGLE_DEG, 0.0, False,
+                                 plan.warmup_frames, keep_frames=True,
+                                 message=f"warm-up capture {i + 1} of {plan.warmup_captures}"))
+    return steps
+
+
+def _settling_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
+    """The settling stage (:mod:`calibration.rig_settling`): the first fixture's board at rest
+    (mounted here unless the warm-up has mounted it), then one move and frames at once after
+    it, NOT waiting for the table to settle; none with ``settling_frames`` 0."""
+    if plan.settling_frames == 0:
+        return []
+    steps: list[Step] = [] if plan.warmup_captures else [
+        _mount_board(plan, plan.fixtures[0], spec)]
+    return [*steps,
+            CaptureStep(SETTLING_STEPS[0], WARMUP_ANGLE_DEG, 0.0, False,
+                        plan.settling_rest_frames, keep_frames=True,
+                        message="settling: the board at rest"),
+            CaptureStep(SETTLING_STEPS[1], WARMUP_ANGLE_DEG + plan.settling_move_deg, 0.0,
+                        False, plan.settling_frames, keep_frames=True, settle=False,
+                        message="settling: frames right after a move, the table not waited "
+                                "for")]
 
 
 def _mount_board(plan: RigCalibrationPlan, fixture: BoardFixture, spec: SceneSpec) -> MountStep:
@@ -296,7 +427,7 @@ def fit_rig_calibration(
     progress: Progress = no_progress,
     rig_name: str = "rig",
 ) -> RigCalibration:
-    """Steps 1-7 of the module docstring from the captures of :func:`rig_capture_plan`.
+    """Steps 0-7 of the module docstring from the captures of :func:`rig_capture_plan`.
 
     ``spec`` is the nominal scene (camera pose, turntable, solar simulator); ``use_case`` the
     camera's use case the frames were taken in. Progress is reported with every capture done.
@@ -362,6 +493,9 @@ def fit_rig_calibration(
         results["views"]["used"] = len(views)
     results["intrinsics"] = intr
     results["views"]["corner_bias_rms_px"] = corner_bias_px
+    progress(done, total, "turntable settling")
+    settle = _settling(captures, plan, intr.intrinsics)
+    results["settling"] = settle.summary
     results["turntable"] = axis
     progress(done, total, "spread over the fixtures")
     spread = _fixture_jackknife(views, plan, spec, camera, intr, axis)
@@ -370,9 +504,13 @@ def fit_rig_calibration(
         "joint_reduced_chi2": stage["chi2"],
         "corner_std_median_px": _finite_median(corner_std.values()),
         "per_view_reduced_chi2": stage["per_view"], "fixture_spread": spread}
+    # 0. the warm-up drift, removed from the depth fit's phases at each capture's temperature
+    progress(done, total, "warm-up drift")
+    warm = _warmup(captures, plan)
+    results["warmup"] = warm.summary
     # 4. depth errors ----------------------------------------------------------------------
     progress(done, total, "depth errors")
-    depth = _depth(views, intr, plan, use_case.frequencies_hz, noise)
+    depth = _depth(views, intr, plan, use_case.frequencies_hz, noise, warm.temperature)
     results["depth"] = depth
 
     partial = TwinParameters(
@@ -408,9 +546,10 @@ def fit_rig_calibration(
 
     cal = CalibrationFile(
         camera=CameraParameters(**_camera_keys(intr), depth=depth.depth_errors,
-                                sensor=noise.to_sensor_overrides()),
+                                sensor=noise.to_sensor_overrides(),
+                                temperature=warm.temperature),
         illumination=IlluminationParameters(power_w=power.power_w),
-        turntable=_turntable_keys(axis),
+        turntable=_turntable_keys(axis, settle.settling),
         solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
         if solar is not None else SolarParameters(),
         provenance=Provenance(
@@ -425,9 +564,15 @@ def fit_rig_calibration(
                             tuple(bad) if bad and not droppable else ()),
         std=stage["std"], spread=spread, basis=axis.basis, fx_px=intr.intrinsics.fx_px,
         fy_px=intr.intrinsics.fy_px, corner_radius=corner_radius(views, intr))
-    verdicts = rig_verdicts(calibration_keys(cal), evidence,
-                            depth_evidence(depth, use_case.frequencies_hz),
-                            other_verdicts(noise, power, solar))
+    keys = calibration_keys(cal)
+    verdicts = rig_verdicts(keys, evidence, depth_evidence(depth, use_case.frequencies_hz),
+                            {**other_verdicts(noise, power, solar), **warm.verdicts,
+                             **settle.verdicts})
+    # the effects' keys not written (not determined), judged all the same: verdicts.json says
+    # why the file has no such key
+    verdicts.update_from({k: v for k, v in {**warm.verdicts, **settle.verdicts}.items()
+                          if k not in keys})
+    verdicts.update_from(STRAY_LIGHT_NOT_MEASURED)
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
 
 def _finite_median(arrays) -> float | None:
@@ -518,17 +663,42 @@ def _fixture_jackknife(views, plan, spec, camera, intr, axis) -> dict[str, float
     return {n: float(s) for n, s in zip(names, jackknife_std(rows), strict=True)}
 
 
-def _turntable_keys(axis) -> TurntableParameters:
+def _turntable_keys(axis, settling=None) -> TurntableParameters:
     return TurntableParameters(axis_point_m=tuple(float(v) for v in axis.axis_point_m),
                                axis_direction=tuple(float(v) for v in axis.axis_direction),
-                               zero_offset_deg=float(axis.zero_offset_deg))
+                               zero_offset_deg=float(axis.zero_offset_deg), settling=settling)
 
-def _depth(views, intr, plan, frequencies_hz, noise=None):
+
+def _settling(captures: Captures, plan: RigCalibrationPlan, intrinsics):
+    """The settling stage (:func:`calibration.rig_settling.fit_rig_settling`) at the calibrated
+    intrinsics; a plan without it determines no settling."""
+    from calibration.rig_settling import fit_rig_settling, no_settling
+
+    if plan.settling_frames == 0 or not all(n in captures for n in SETTLING_STEPS):
+        return no_settling("the plan has no settling stage (settling_frames 0)")
+    return fit_rig_settling(captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]],
+                            intrinsics)
+
+def _depth(views, intr, plan, frequencies_hz, noise=None, temperature=None):
     from calibration.depth import depth_views_from_captures, fit_depth_errors
 
     board = ObjectSpec.model_validate({"name": "b", "mesh": plan.board}).mesh
-    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board, noise)
+    dviews = depth_views_from_captures(intr, [(v, cap) for v, cap, _ in views], board, noise,
+                                       temperature)
     return fit_depth_errors(dviews, frequencies_hz)
+
+
+def _warmup(captures: Captures, plan: RigCalibrationPlan):
+    """Step 0 (:func:`calibration.rig_warmup.fit_rig_warmup`) from the warm-up captures; a plan
+    without them determines no drift."""
+    from calibration.rig_warmup import fit_rig_warmup, no_warmup
+
+    caps = [captures[_warmup_step(i)] for i in range(plan.warmup_captures)
+            if _warmup_step(i) in captures]
+    if len(caps) < plan.warmup_captures or not caps:
+        return no_warmup("the plan has no warm-up stage (warmup_captures 0)" if not caps else
+                         f"{len(caps)} of the plan's {plan.warmup_captures} warm-up captures")
+    return fit_rig_warmup(caps, plan.warmup_times_s)
 
 
 def _noise(stacks: list[AveragedCapture]):

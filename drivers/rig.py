@@ -95,6 +95,9 @@ class Rig:
     camera : CameraProtocol
     on_close : iterable of callables
         Called (in order) by :meth:`close` after the devices are closed, e.g. to stop simulators.
+    sleep : callable
+        How :meth:`wait` lets time pass: ``time.sleep`` on a real rig; the simulated lab's clock
+        (:meth:`drivers.sim.lab_clock.LabClock.wait`) on a simulated one.
 
     Examples
     --------
@@ -115,6 +118,7 @@ class Rig:
         camera: CameraProtocol,
         *,
         on_close: Iterable[Callable[[], None]] = (),
+        sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         self.turntable = turntable
         self.solar = solar
@@ -123,6 +127,7 @@ class Rig:
         self._owner: int | None = None
         self._held_since = 0.0
         self._on_close = list(on_close)
+        self._sleep = sleep
         self._closed = False
         #: the lamp should be burning: a pose or the operator lit it and nobody put it out since
         #: (a lamp found out while this holds went out by itself: it is not relit by a pose)
@@ -309,6 +314,20 @@ class Rig:
                     f"solar simulator shutter: shutter not {want} {when}: target {want}, read "
                     f"back {got}"),
                 "solar simulator shutter", want, got)
+
+    def wait(self, seconds: float) -> None:
+        """Let ``seconds`` pass with nothing captured and nothing moved (a warm-up sequence's
+        pause between captures), holding the rig so that nobody moves it meanwhile.
+
+        Raises
+        ------
+        ValueError
+            ``seconds`` is not a finite time >= 0.
+        """
+        if not (math.isfinite(seconds) and seconds >= 0.0):
+            raise ValueError(f"seconds: got {seconds!r}; allowed: a finite time >= 0 s")
+        with self.hold():
+            self._sleep(float(seconds))
 
     def capture(self, n: int = 1, *, target: RigState | None = None) -> list[RawFrame]:
         """Capture ``n`` frames; each frame's ``meta["rig"]`` holds the rig state at capture.

@@ -97,6 +97,19 @@ class TemperatureDrift:
         d = self.range_drift_m(temperature_c)
         return np.array([range_to_phase_rad(d[k], f) for k, f in enumerate(self.frequencies_hz)])
 
+    def remove_from_phase_rad(self, phase_rad: np.ndarray, temperature_c: float) -> np.ndarray:
+        """Phases (n_f, H, W) in [0, 2 pi) measured at ``temperature_c`` -> the phases at the
+        start temperature: the drift's offset subtracted, wrapped into [0, 2 pi) again (the
+        drift acts after the camera's other depth errors, :mod:`sim_core.pipeline`: a fit or a
+        correction of those removes it first)."""
+        phase = np.asarray(phase_rad, dtype=np.float64)
+        if phase.ndim < 1 or phase.shape[0] != self.frequencies_hz.size:
+            raise InvalidInputError(
+                "phase_rad", f"has shape {phase.shape}; the drift is for "
+                f"{self.frequencies_hz.size} frequencies (n_f, H, W)")
+        offsets = self.phase_offset_rad(temperature_c).reshape((-1,) + (1,) * (phase.ndim - 1))
+        return np.mod(phase - offsets, 2.0 * np.pi)
+
     def apply_to_phasor(self, phasor: np.ndarray, temperature_c: float) -> np.ndarray:
         """Phasors ``A exp(-1j phi)`` (n_f, H, W) -> with the drift's phase added.
 

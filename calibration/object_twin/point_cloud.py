@@ -26,14 +26,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from calibration.captures import AveragedCapture
+from calibration.captures import AveragedCapture, drift_free_phase_rad
 from sim_core.camera import Intrinsics, pixel_to_camera_direction
 from sim_core.depth_errors import DepthErrorModel
 from sim_core.errors import InvalidInputError
 from sim_core.raw import ValidityThresholds
 from sim_core.tof import ToFImage, range_from_phase, unwrap_two_frequencies
 from sim_core.twin_file import CameraTemperature
-from sim_core.warmup import TemperatureDrift
 
 #: default: least amplitude of an averaged pixel used as a point [DN]
 MIN_AMPLITUDE_DN = 10.0
@@ -106,7 +105,6 @@ def cloud_from_phases(
     depth_model: DepthErrorModel | None,
     turntable_angle_deg: float,
     edge_jump_m: float = EDGE_JUMP_M,
-    drift_rad: np.ndarray | None = None,
 ) -> ViewCloud:
     """Points of the ``usable`` pixels that are not at a depth edge (module docstring).
 
@@ -123,19 +121,11 @@ def cloud_from_phases(
         The calibration's depth errors (None: the phases are taken as true).
     turntable_angle_deg : float
     edge_jump_m : float
-    drift_rad : (n_f,) float, optional
-        The calibrated warm-up drift's phase offset at the capture's temperature
-        (:meth:`sim_core.warmup.TemperatureDrift.phase_offset_rad`), removed before the depth
-        errors.
     """
     phase = np.asarray(phase_rad, dtype=np.float64)
     if phase.shape[-2:] != intrinsics.shape:
         raise InvalidInputError("capture", f"image {phase.shape[-2:]} does not match the "
                                 f"calibrated camera's {intrinsics.shape}")
-    if drift_rad is not None:
-        # the warm-up drift acts after the depth errors (sim_core.pipeline): removed first
-        phase = np.mod(phase - np.asarray(drift_rad, dtype=np.float64).reshape(-1, 1, 1),
-                       2.0 * np.pi)
     if depth_model is not None:
         phase = depth_model.correct_phase(phase)
     rng = range_from_phases(phase, frequencies_hz)
@@ -171,13 +161,10 @@ def capture_cloud(
     calibration's ``camera.temperature``) removes the warm-up drift at the capture's reported
     temperature, when it reports one."""
     usable = usable_pixels(capture.amplitude, capture.valid, min_amplitude_dn)
-    drift = None
-    if temperature is not None and capture.illumination_temperature_c is not None:
-        drift = TemperatureDrift.from_spec(temperature, capture.frequencies_hz).phase_offset_rad(
-            capture.illumination_temperature_c)
-    return cloud_from_phases(capture.phase_rad, capture.amplitude, usable,
-                             capture.frequencies_hz, intrinsics, depth_model,
-                             capture.turntable_angle_deg, edge_jump_m, drift)
+    # the warm-up drift acts after the depth errors (sim_core.pipeline): removed first
+    return cloud_from_phases(drift_free_phase_rad(capture, temperature), capture.amplitude,
+                             usable, capture.frequencies_hz, intrinsics, depth_model,
+                             capture.turntable_angle_deg, edge_jump_m)
 
 
 def image_cloud(

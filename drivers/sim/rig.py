@@ -61,6 +61,7 @@ def simulated_rig(
     camera_faults: Iterable[str] = (),
     camera_settings: UsbCameraSettings | None = None,
     turntable_settling: TurntableSettling | None = None,
+    lab_wait: Callable[[float], None] | None = None,
 ) -> Rig:
     """Start the three simulators and return a rig with real drivers connected to them.
 
@@ -95,6 +96,10 @@ def simulated_rig(
     turntable_settling : TurntableSettling or None
         The table's ringing after every move (a reality's ``turntable.settling``); it needs a
         turntable that is not instant (an instant one has settled at once).
+    lab_wait : callable or None
+        How the rig's :meth:`~drivers.rig.Rig.wait` lets time pass: the simulated lab's clock
+        (``world.clock.wait`` of a :class:`drivers.sim.world.SimulatedWorld`, whose warm-up
+        follows it); None: at once (an instant rig) or asleep in scaled real time.
 
     Examples
     --------
@@ -155,9 +160,20 @@ def simulated_rig(
             with contextlib.suppress(Exception):
                 stop()
         raise
-    rig = Rig(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop])
+    rig = Rig(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop],
+              sleep=lab_wait or _scaled_sleep(0.0 if instant else time_scale))
     rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
     return rig
+
+
+def _scaled_sleep(time_scale: float) -> Callable[[float], None]:
+    """Sleep ``seconds / time_scale`` of wall time; 0: return at once (an instant rig)."""
+
+    def sleep(seconds: float) -> None:
+        if time_scale > 0.0:
+            time.sleep(seconds / time_scale)
+
+    return sleep
 
 
 def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], RigState]:

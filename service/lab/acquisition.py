@@ -11,12 +11,13 @@ alike (and the object fit's captures, for ``toftwin fit-object`` and a campaign'
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from calibration.capture_plan import CapturePlan, Captures, CaptureStep, Operator
+from calibration.capture_plan import CapturePlan, Captures, CaptureStep, Operator, WaitStep
 from calibration.captures import AveragedCapture, Progress, average_frames, no_progress
 from calibration.rig_material import (
     DEFAULT_MODEL,
@@ -33,7 +34,7 @@ from calibration.rig_sequence import (
 )
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
 from drivers.rig import Rig, RigState
-from service.lab.settling import settled_moves
+from service.lab.settling import settled_moves, unsettled_moves
 from sim_core.materials import Material
 from sim_core.render import RenderSettings
 from sim_core.scene_spec import SceneSpec
@@ -49,16 +50,17 @@ def acquire(
     total: int | None = None,
     settle_for: TwinParameters | None = None,
 ) -> dict[str, AveragedCapture]:
-    """Run ``plan`` on ``rig``: its mounts by ``operator``, its captures in order, every move
-    waited out for ``settle_for``'s turntable settling (:func:`service.lab.settling.
-    settled_moves`; None: the driver's own wait).
+    """Run ``plan`` on ``rig``: its mounts by ``operator``, its waits by the rig
+    (:meth:`drivers.rig.Rig.wait`: a real rig sleeps, the simulated lab advances its clock), its
+    captures in order, every move waited out for ``settle_for``'s turntable settling
+    (:func:`service.lab.settling.settled_moves`; None: the driver's own wait).
 
-    Before each capture ``progress(done, total, step.message)`` is called (``done`` captures
-    so far; ``total`` defaults to the plan's captures: a procedure whose fit reports further
-    steps passes its own). That call is where a run stops: a callback that raises (a job's
-    cancel or emergency stop, as the fits' progress does too) stops the acquisition before the
-    next capture. The plan's ``restore`` mount is done at the end, and also when a step fails
-    or stops.
+    Before each capture and each wait ``progress(done, total, step.message)`` is called
+    (``done`` captures so far; ``total`` defaults to the plan's captures: a procedure whose
+    fit reports further steps passes its own). That call is where a run stops: a callback
+    that raises (a job's cancel or emergency stop, as the fits' progress does too) stops the
+    acquisition before the next capture or wait. The plan's ``restore`` mount is done at the
+    end, and also when a step fails or stops.
 
     Returns
     -------
@@ -79,6 +81,9 @@ def acquire(
                 if isinstance(step, CaptureStep):
                     progress(len(captures), total, step.message)
                     captures[step.name] = _capture(rig, step)
+                elif isinstance(step, WaitStep):
+                    progress(len(captures), total, step.message)
+                    rig.wait(step.seconds)
                 else:
                     operator.mount(step.objects, step.instruction)
     finally:
@@ -90,7 +95,8 @@ def acquire(
 def _capture(rig: Rig, step: CaptureStep) -> AveragedCapture:
     target = RigState(step.turntable_angle_deg, step.solar_suns, step.shutter_open)
     with rig.hold():  # nobody moves the rig between the move and the exposure
-        rig.apply(target)
+        with contextlib.nullcontext() if step.settle else unsettled_moves(rig):
+            rig.apply(target)
         # checked against the target for the whole exposure (Rig.capture)
         frames = rig.capture(step.frames, target=target)
     return average_frames(frames, keep_frames=step.keep_frames)

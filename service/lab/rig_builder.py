@@ -99,5 +99,6 @@ def _open_simulated(settings: Settings, scene: SceneSource) -> tuple[Rig, Simula
                         turntable_faults=armed["turntable"],
                         solar_faults=armed["solar-simulator"],
                         camera_faults=armed["camera"],
-                        turntable_settling=world.reality.turntable.settling)
+                        turntable_settling=world.reality.turntable.settling,
+                        lab_wait=world.clock.wait)
     return rig, world

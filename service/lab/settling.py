@@ -18,7 +18,7 @@ from sim_core.settling import settle_time_s
 from sim_core.subframes import MOTION_TOLERANCE_DEG
 from sim_core.twin_file import TwinParameters
 
-__all__ = ["SETTLE_TOLERANCE_DEG", "settle_wait_s", "settled_moves"]
+__all__ = ["SETTLE_TOLERANCE_DEG", "settle_wait_s", "settled_moves", "unsettled_moves"]
 
 #: the ringing the service accepts in a capture [deg]: the same as a table "not moving" during a
 #: frame (below it a frame is rendered once: :data:`sim_core.subframes.MOTION_TOLERANCE_DEG`)
@@ -54,5 +54,23 @@ def settled_moves(rig: Any, calibration: TwinParameters | None,
     turntable.settle_s = max(base_s, settle_wait_s(calibration))
     try:
         yield turntable.settle_s
+    finally:
+        turntable.settle_s = base_s
+
+
+@contextlib.contextmanager
+def unsettled_moves(rig: Any) -> Iterator[None]:
+    """Inside, a move of ``rig``'s turntable returns as soon as the controller reports it done,
+    with no post-move wait at all (the driver's ``settle_s`` 0): the settling stage captures
+    the table while it still rings (:mod:`calibration.rig_settling`). The wait in force before
+    is restored on exit."""
+    turntable = rig.turntable
+    base_s = getattr(turntable, "settle_s", None)
+    if base_s is None:  # a turntable without a post-move wait: nothing to lift
+        yield
+        return
+    turntable.settle_s = 0.0
+    try:
+        yield
     finally:
         turntable.settle_s = base_s

@@ -88,6 +88,7 @@ def key_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
     add("turntable.zero_offset_deg", e, v["turntable.zero_offset_deg"].std, e,
         targets.ZERO_OFFSET_DEG)
     out += _depth_figures(result, reality, frequencies_hz)
+    out += effect_figures(result, reality)
     s = c.sensor
     for name, target in (("adc_gain_e_per_dn", targets.GAIN_REL),
                          ("read_noise_e", targets.READ_NOISE_REL)):
@@ -102,6 +103,44 @@ def key_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
         e = cal.solar_simulator.irradiance_scale - t
         add("solar_simulator.irradiance_scale", e, v["solar_simulator.irradiance_scale"].std,
             e / t, targets.SOLAR_REL)
+    return out
+
+
+#: issue 27's targets for the effects, relative to the truth: drift, stray-light fraction,
+#: settling frequency
+EFFECT_TARGETS_REL = {"camera.temperature.depth_drift_mm_per_c": 0.10,
+                      "camera.stray_light.fraction": 0.20,
+                      "turntable.settling.frequency_hz": 0.05}
+
+
+def effect_figures(result, reality) -> list[KeyFigure]:
+    """Issue 27's effect keys the calibration judged and the reality has (each against its
+    relative target, :data:`EFFECT_TARGETS_REL`): the worst component's error relative to the
+    truth, and |error| / std where the key was written."""
+    v = result.verdicts
+    fitted, truth = result.calibration, reality
+    values = {
+        "camera.temperature.depth_drift_mm_per_c": lambda f: None if f.camera.temperature is None
+        else f.camera.temperature.depth_drift_mm_per_c,
+        "camera.stray_light.fraction": lambda f: None if f.camera.stray_light is None
+        else [f.camera.stray_light.fraction],
+        "turntable.settling.frequency_hz": lambda f: None if f.turntable.settling is None
+        else [f.turntable.settling.frequency_hz],
+    }
+    out = []
+    for key, value in values.items():
+        t = value(truth)
+        if key not in v or t is None:
+            continue
+        est = value(fitted)
+        if est is None:  # not written: no estimate to hold against the truth
+            out.append(KeyFigure(key, v[key].verdict, math.nan, math.nan,
+                                 EFFECT_TARGETS_REL[key]))
+            continue
+        t_arr = np.broadcast_to(np.asarray(t, dtype=float), np.shape(est))
+        err = np.asarray(est, dtype=float) - t_arr
+        out.append(KeyFigure(key, v[key].verdict, _z(err, v[key].std),
+                             float(np.max(np.abs(err / t_arr))), EFFECT_TARGETS_REL[key]))
     return out
 
 
