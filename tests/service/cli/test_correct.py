@@ -23,6 +23,18 @@ CAL = {"camera": {"depth": {
     "pixel_offset_m": {"sigma": 0.004, "correlation_px": 10, "seed": 3}}}}
 
 
+def _corrected(tmp_path, spec, settings, cal, raw):
+    """``raw`` written as a measured frame and corrected by ``toftwin correct`` with ``cal``:
+    the ideal simulation of the nominal scene and the corrected frame."""
+    truth = simulate(build_scene(spec, EXAMPLES), RenderRequest(settings, ideal=True))
+    frame_io.write_measured(tmp_path / "m", raw, build_scene(spec, EXAMPLES).camera, {})
+    write_calibration(tmp_path / "cal.yaml", cal)
+    res = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
+                                   str(tmp_path / "cal.yaml")])
+    assert res.exit_code == 0, res.output
+    return truth, frame_io.read_measured(tmp_path / "m-corrected")
+
+
 def test_correct_removes_the_depth_errors(tmp_path):
     spec = load_scene_spec(EXAMPLES / "plane.yaml")
     cal = parse_calibration(CAL)
@@ -31,13 +43,7 @@ def test_correct_removes_the_depth_errors(tmp_path):
     # is then the correction's own error, not noise of dim pixels that decides an RMS.
     scene = build_scene(spec, EXAMPLES, twin=cal)
     measured = expose_light(scene, render_light(scene, RenderRequest(settings)), noise=False)
-    truth = simulate(build_scene(spec, EXAMPLES), RenderRequest(settings, ideal=True))
-    frame_io.write_measured(tmp_path / "m", measured.raw, build_scene(spec, EXAMPLES).camera, {})
-    write_calibration(tmp_path / "cal.yaml", cal)
-    res = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
-                                   str(tmp_path / "cal.yaml")])
-    assert res.exit_code == 0, res.output
-    fixed = frame_io.read_measured(tmp_path / "m-corrected")
+    truth, fixed = _corrected(tmp_path, spec, settings, cal, measured.raw)
     ok = fixed.image.valid & truth.image.valid & measured.image.valid
     before = (measured.image.range_m - truth.image.range_m)[ok]
     after = (fixed.image.range_m - truth.image.range_m)[ok]
@@ -69,13 +75,7 @@ def test_correct_removes_the_warm_up_drift_at_the_frames_temperature(tmp_path):
     measured = expose_light(scene, render_light(scene, RenderRequest(settings)), noise=False)
     # the camera reports the temperature it exposed the frame at (the simulated lab's world does)
     raw = dataclasses.replace(measured.raw, illumination_temperature_c=40.0)
-    truth = simulate(build_scene(spec, EXAMPLES), RenderRequest(settings, ideal=True))
-    frame_io.write_measured(tmp_path / "m", raw, build_scene(spec, EXAMPLES).camera, {})
-    write_calibration(tmp_path / "cal.yaml", cal)
-    res = CliRunner().invoke(app, ["correct", str(tmp_path / "m"), "--calibration",
-                                   str(tmp_path / "cal.yaml")])
-    assert res.exit_code == 0, res.output
-    fixed = frame_io.read_measured(tmp_path / "m-corrected")
+    truth, fixed = _corrected(tmp_path, spec, settings, cal, raw)
     ok = fixed.image.valid & truth.image.valid & measured.image.valid
     before = np.median((measured.image.range_m - truth.image.range_m)[ok])
     after = np.median((fixed.image.range_m - truth.image.range_m)[ok])
