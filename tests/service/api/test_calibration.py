@@ -464,7 +464,11 @@ def test_on_a_real_rig_the_job_asks_the_operator_and_the_emergency_stop_cancels_
             "operator_instruction"] or ""):
         assert time.monotonic() < deadline and status["state"] == "running", status
         time.sleep(0.05)
-    assert status["steps_done"] == 3  # progress is noted before each capture: 3 of 4 angles
+    # progress is noted before each capture: the warm-up stage's captures, the settling stage's
+    # two (at rest, after its move), then 3 of the first fixture's 4 angles
+    from calibration.rig_sequence import RigCalibrationPlan
+
+    assert status["steps_done"] == RigCalibrationPlan().warmup_captures + 2 + 3
     assert status["message"].startswith("waiting for the operator")
     stop = client.post("/api/v1/devices/stop", headers=AUTH).json()
     assert stop["calibration_cancelled"] == jid

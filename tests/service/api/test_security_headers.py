@@ -24,7 +24,7 @@ pytestmark = pytest.mark.timeout(120)
 #: campaign report, the API docs and a calibration job's report.html
 HTML_ROUTES = {"page", "pose_fragment", "campaigns_fragment", "explained_fragment",
                "calibration_fragment", "get_campaign_report", "api_docs",
-               "get_calibration_job_file"}
+               "get_calibration_job_file", "calibration_verdicts_fragment"}
 #: where the token is typed: no inline style either
 STRICT_STYLE = {"page", "api_docs"}
 #: the sources a directive may name: this service, nothing, or inline images (``data:``)
