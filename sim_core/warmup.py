@@ -108,7 +108,9 @@ class TemperatureDrift:
                 "phase_rad", f"has shape {phase.shape}; the drift is for "
                 f"{self.frequencies_hz.size} frequencies (n_f, H, W)")
         offsets = self.phase_offset_rad(temperature_c).reshape((-1,) + (1,) * (phase.ndim - 1))
-        return np.mod(phase - offsets, 2.0 * np.pi)
+        wrapped = np.mod(phase - offsets, 2.0 * np.pi)
+        # np.mod of a tiny negative number rounds to 2 pi itself: that is a phase of 0
+        return np.where(wrapped >= 2.0 * np.pi, 0.0, wrapped)
 
     def apply_to_phasor(self, phasor: np.ndarray, temperature_c: float) -> np.ndarray:
         """Phasors ``A exp(-1j phi)`` (n_f, H, W) -> with the drift's phase added.
