@@ -36,19 +36,25 @@ def edge_mask(range_m: np.ndarray, valid: np.ndarray, jump_m: float = EDGE_JUMP_
         raise InvalidInputError("width_px", f"got {width_px!r}; allowed: 0 to 20 px")
     ok = np.asarray(valid, bool) & np.isfinite(range_m)
     r = np.where(ok, range_m, np.nan)
-    jump = np.zeros(r.shape, bool)
+    # NaN (an invalid neighbour) counts as a jump: the silhouette of what is measured
+    return _both_sides(lambda axis: ~(np.abs(np.diff(r, axis=axis)) <= jump_m), r.shape,
+                       width_px) & ok
+
+
+def _both_sides(differs, shape: tuple[int, ...], width_px: int) -> np.ndarray:
+    """Both pixels of every 4-neighbour pair ``differs(axis)`` flags (a bool image one shorter
+    along ``axis``), widened by ``width_px`` (binary dilation), (H, W) bool."""
+    marked = np.zeros(shape, bool)
     for axis in (0, 1):
-        d = np.abs(np.diff(r, axis=axis))
-        # NaN (an invalid neighbour) counts as a jump: the silhouette of what is measured
-        big = ~(d <= jump_m)
+        flagged = differs(axis)
         lo = [slice(None)] * 2
         hi = [slice(None)] * 2
         lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-        jump[tuple(lo)] |= big
-        jump[tuple(hi)] |= big
+        marked[tuple(lo)] |= flagged
+        marked[tuple(hi)] |= flagged
     if width_px > 0:
-        jump = ndimage.binary_dilation(jump, iterations=width_px)
-    return jump & ok
+        marked = ndimage.binary_dilation(marked, iterations=width_px)
+    return marked
 
 
 def object_edge_mask(object_id: np.ndarray, width_px: int = 1) -> np.ndarray:
@@ -67,17 +73,7 @@ def object_edge_mask(object_id: np.ndarray, width_px: int = 1) -> np.ndarray:
                                 "allowed: a 2-D integer image")
     if not (isinstance(width_px, int) and 0 <= width_px <= 20):
         raise InvalidInputError("width_px", f"got {width_px!r}; allowed: 0 to 20 px")
-    edge = np.zeros(ids.shape, bool)
-    for axis in (0, 1):
-        change = np.diff(ids, axis=axis) != 0
-        lo = [slice(None)] * 2
-        hi = [slice(None)] * 2
-        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-        edge[tuple(lo)] |= change
-        edge[tuple(hi)] |= change
-    if width_px > 0:
-        edge = ndimage.binary_dilation(edge, iterations=width_px)
-    return edge
+    return _both_sides(lambda axis: np.diff(ids, axis=axis) != 0, ids.shape, width_px)
 
 
 @dataclass(frozen=True)
