@@ -254,6 +254,19 @@ class RigCalibrationPlan:
         return tuple(i * self.warmup_interval_s for i in range(self.warmup_captures))
 
 
+def stage_counts(*, warmup: bool = True, settling: bool = True) -> dict[str, int]:
+    """The plan's counts of the two optional stages: the default's, or 0 for a stage left out
+    (a camera already warm needs no warm-up stage; a turntable whose ringing is known, no
+    settling stage). The effect keys of a stage left out stay unmeasured, each named in the
+    verdicts as not determined.
+
+    >>> stage_counts(warmup=False)
+    {'warmup_captures': 0, 'settling_frames': 90}
+    """
+    return {"warmup_captures": RigCalibrationPlan.warmup_captures if warmup else 0,
+            "settling_frames": RigCalibrationPlan.settling_frames if settling else 0}
+
+
 def build_rig_plan(
     *,
     fixtures: Sequence[str] | None = None,

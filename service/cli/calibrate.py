@@ -116,6 +116,17 @@ def rig_command(
                            "the frames do not determine the solar simulator's scale.",
                       allowed=ranges.REFERENCE_SUNS),
     ] = None,
+    warmup: Annotated[
+        bool, typer.Option("--warmup/--no-warmup", help="Run the warm-up stage first (about 18 "
+                           "minutes of a fixed target after power-on: the depth's temperature "
+                           "drift); --no-warmup for a camera already warm, its drift then "
+                           "unmeasured.")
+    ] = True,
+    settling: Annotated[
+        bool, typer.Option("--settling/--no-settling", help="Run the settling stage (frames "
+                           "right after one move: the turntable's ringing); --no-settling "
+                           "leaves it unmeasured.")
+    ] = True,
     camera_spp: CameraSppOption = 32,
     seed: CameraSeedOption = 0,
     quiet: QuietOption = False,
@@ -127,7 +138,7 @@ def rig_command(
     """Run the whole calibration sequence and write DIR/calibration.yaml, DIR/verdicts.json
     (determined, not determined or unexplained, per key) and its report."""
     from calibration.report import write_report
-    from calibration.rig_sequence import build_rig_plan, rig_capture_plan
+    from calibration.rig_sequence import build_rig_plan, rig_capture_plan, stage_counts
     from service.lab.acquisition import run_rig_calibration
 
     try:
@@ -135,7 +146,8 @@ def rig_command(
         # the service's builder (POST /calibrations): the same plan for the same inputs
         plan = build_rig_plan(sweep_from_deg=sweep_from_deg, sweep_to_deg=sweep_to_deg,
                               sweep_step_deg=sweep_step_deg, frames_per_view=frames_per_view,
-                              solar_reference_suns=solar_reference_suns, fields=SWEEP_OPTIONS)
+                              solar_reference_suns=solar_reference_suns, fields=SWEEP_OPTIONS,
+                              **stage_counts(warmup=warmup, settling=settling))
         if print_plan:
             typer.echo(json.dumps(plan.summary(), indent=2))
             return

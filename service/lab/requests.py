@@ -39,6 +39,7 @@ from calibration.rig_sequence import (
     SOLAR_LEVELS_COUNT,
     RigCalibrationPlan,
     build_rig_plan,
+    stage_counts,
 )
 from calibration.solar import REFERENCE_SUNS_RANGE, check_reference_suns
 from sim_core.adaptive import NOISE_FRACTION_RANGE
@@ -339,6 +340,13 @@ class CalibrationCreate(RequestBody):
                                  "maximum": REFERENCE_SUNS_RANGE[1]}),
         AfterValidator(_reference_suns),
     ] | None = None
+    warmup_stage: StrictBool = Field(
+        True, description="Run the warm-up stage first (about 18 minutes of a fixed target "
+        "after power-on, measuring the depth's temperature drift); off for a camera already "
+        "warm, whose drift the calibration then leaves unmeasured.")
+    settling_stage: StrictBool = Field(
+        True, description="Run the settling stage (frames right after one move, measuring "
+        "the turntable's ringing); off leaves the settling unmeasured.")
     activate: StrictBool = Field(
         False, description="Make the result the active calibration when the job is done.")
 
@@ -358,4 +366,5 @@ class CalibrationCreate(RequestBody):
             sweep_to_deg=self.sweep.to_deg, sweep_step_deg=self.sweep.step_deg,
             frames_per_view=self.frames_per_view, noise_frames=self.noise_frames,
             solar_levels_suns=self.solar_levels_suns, solar_frames=self.solar_frames,
-            solar_reference_suns=self.solar_reference_suns)
+            solar_reference_suns=self.solar_reference_suns,
+            **stage_counts(warmup=self.warmup_stage, settling=self.settling_stage))

@@ -501,13 +501,17 @@ def test_a_full_calibration_job_on_the_simulated_lab_activates_its_result(make_c
     """The whole sequence (six fixtures, -55..55 deg, 4 frames a view, the solar simulator) at a
     coarser sweep (every 10 deg, as tests/service/cli/test_calibrate.py runs the command; the
     round trips, tests/calibration/test_rig_roundtrip.py, run the default plan on random
-    realities), with ``activate``."""
+    realities, the warm-up and settling stages too), with ``activate``; the camera counted
+    warm and the table's ringing known (no warm-up or settling stage: their 150 frames are the
+    round trips' to test, and the real-rig job's in the fast suite runs them through the
+    service)."""
     reality = tmp_path / "reality.yaml"
     reality.write_text("turntable: {zero_offset_deg: 0.6}\ncamera: {cx_px: 113.0}\n")
     client = make_client(tmp_path / "data", reality=reality, camera_spp=32,
                          camera_integrator="direct")
     res = client.post("/api/v1/calibrations", headers=AUTH,
-                      json={"activate": True, "sweep": {"step_deg": 10.0}})
+                      json={"activate": True, "sweep": {"step_deg": 10.0},
+                            "warmup_stage": False, "settling_stage": False})
     assert res.status_code == 201, res.text
     status = wait_job(client, res.json()["id"], timeout_s=840)
     assert status["state"] == "done", status

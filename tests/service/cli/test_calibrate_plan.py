@@ -24,7 +24,7 @@ REFUSED = "refused"
 
 
 def cli_plan(out, sweep_from=None, sweep_to=None, sweep_step=None, frames_per_view=None,
-             solar_reference_suns=None) -> dict | str:
+             solar_reference_suns=None, warmup=None, settling=None) -> dict | str:
     """The plan ``toftwin calibrate rig --print-plan`` prints, or REFUSED (exit code 2)."""
     args = ["calibrate", "rig", "--simulated", "--out", str(out), "--print-plan"]
     for option, v in (("--sweep-from", sweep_from), ("--sweep-to", sweep_to),
@@ -32,6 +32,9 @@ def cli_plan(out, sweep_from=None, sweep_to=None, sweep_step=None, frames_per_vi
                       ("--solar-reference-suns", solar_reference_suns)):
         if v is not None:
             args += [option, repr(v)]
+    for name, on in (("warmup", warmup), ("settling", settling)):
+        if on is not None:
+            args.append(f"--{'' if on else 'no-'}{name}")
     res = CliRunner().invoke(app, args)
     if res.exit_code == 2:
         return REFUSED
@@ -40,12 +43,14 @@ def cli_plan(out, sweep_from=None, sweep_to=None, sweep_step=None, frames_per_vi
 
 
 def service_plan(sweep_from=None, sweep_to=None, sweep_step=None, frames_per_view=None,
-                 solar_reference_suns=None) -> dict | str:
+                 solar_reference_suns=None, warmup=None, settling=None) -> dict | str:
     """The plan of ``POST /calibrations`` with the same inputs, or REFUSED (a 422)."""
     sweep = {k: v for k, v in (("from_deg", sweep_from), ("to_deg", sweep_to),
                                ("step_deg", sweep_step)) if v is not None}
     body = {k: v for k, v in (("sweep", sweep or None), ("frames_per_view", frames_per_view),
-                              ("solar_reference_suns", solar_reference_suns)) if v is not None}
+                              ("solar_reference_suns", solar_reference_suns),
+                              ("warmup_stage", warmup), ("settling_stage", settling))
+            if v is not None}
     try:
         plan = CalibrationCreate.model_validate(json.loads(json.dumps(body))).plan()
     except (ValidationError, InvalidInputError):
@@ -67,11 +72,17 @@ def service_plan(sweep_from=None, sweep_to=None, sweep_step=None, frames_per_vie
     {"solar_reference_suns": 0.005},  # the CLI took it, the service refused
     {"solar_reference_suns": 7.0},  # the service took it, the sequence refused it at its end
     {"frames_per_view": 65},
+    {"warmup": False},  # a camera already warm: no warm-up stage
+    {"settling": False, "warmup": True},
+    {"warmup": False, "settling": False, "sweep_step": 10.0},
 ])
 def test_the_cli_and_the_service_give_the_same_plan(tmp_path, inputs):
     from_cli = cli_plan(tmp_path / "out", **inputs)
     assert from_cli == service_plan(**inputs)
     assert not (tmp_path / "out").exists()  # --print-plan writes nothing
+    if from_cli != REFUSED:  # a stage left out has no captures; one kept, the default's
+        assert (from_cli["warmup_captures"] == 0) == (inputs.get("warmup") is False)
+        assert (from_cli["settling_frames"] == 0) == (inputs.get("settling") is False)
 
 
 finite = {"allow_nan": False, "allow_infinity": False}
