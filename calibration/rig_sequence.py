@@ -84,7 +84,13 @@ from calibration.rig_verdicts import (
     rig_verdicts,
     unexplained_views,
 )
-from calibration.solar import check_reference_suns, fit_solar_scale
+from calibration.solar import (
+    SolarScaleResult,
+    check_reference_suns,
+    fit_solar_scale,
+    response_pixels,
+)
+from calibration.solar_stray_light import SolarStrayLightFit, fit_solar_stray_light
 from calibration.twin_prediction import CameraUseCase, mounted_spec, predict_view
 from calibration.verdicts import Verdict, Verdicts
 from sim_core.errors import InvalidInputError
@@ -342,13 +348,11 @@ NOISE_STEPS = ("noise/dark", "noise/solar")
 WARMUP_ANGLE_DEG = 0.0
 
 
-#: the stray light's keys: no stage of the sequence measures them yet (a bright patch beside a
-#: dark view needs a scene with nothing else within range and taps on a pedestal:
-#: calibration.stray_light)
+#: the stray light's keys on a rig without a solar simulator: the stray light is measured from
+#: the solar stage's frames (:mod:`calibration.solar_stray_light`)
 STRAY_LIGHT_NOT_MEASURED = {
-    key: Verdict("not determined", None, "the rig calibration has no stray-light stage yet "
-                 "(calibration.stray_light needs a bright patch beside a dark view and the "
-                 "dark pixels' taps on a pedestal): no key written")
+    key: Verdict("not determined", None, "the stray light is measured from the solar stage's "
+                 "frames, and this rig has no solar simulator: no key written")
     for key in ("camera.stray_light.fraction", "camera.stray_light.kernel_radius_px")}
 #: the settling stage's captures: at rest, then right after the move
 SETTLING_STEPS = ("settling/rest", "settling/moved")
@@ -539,28 +543,45 @@ def fit_rig_calibration(
     pred = predict_view(twin_spec, base, partial, stack.turntable_angle_deg)
     power = fit_source_power(stack.amplitude, pred.frame().image.amplitude, nominal_power)
     results["photometry"] = power
-    # 7. solar simulator -------------------------------------------------------------------
-    solar = None
+    # 7. solar simulator, and the camera's stray light from the same frames ------------------
+    solar, stray = None, None
+    stray_verdicts = STRAY_LIGHT_NOT_MEASURED
     if spec.ambient.solar_simulator is not None:
         progress(done, total, "solar simulator scale")
-        levels = _solar_levels(plan)
-        caps = [captures[_solar_step(i)] for i in range(len(levels))]
-        lit = TwinParameters(camera=partial.camera, turntable=partial.turntable,
-                             illumination=IlluminationParameters(power_w=power.power_w))
-        sun1 = predict_view(twin_spec, base, lit, caps[0].turntable_angle_deg, solar_suns=1.0)
-        solar = fit_solar_scale(
-            levels, [c.intensity for c in caps],
-            [c.intensity_std / np.sqrt(c.n_frames) for c in caps],
-            lambda true_suns: sun1.frame(ambient_scale=true_suns).raw.intensity.astype(float),
-            reference_cell_suns=plan.solar_reference_suns,
-        )
+        caps = [captures[_solar_step(i)] for i in range(len(_solar_levels(plan)))]
+        solar = _solar_scale(plan, caps, twin_spec, base, partial, power.power_w)
+        if solar.method == "frames":
+            progress(done, total, "stray light")
+            stray = _solar_stray_light(plan, caps, twin_spec, base, partial, power.power_w,
+                                       solar)
+            if stray.significant:
+                # The source power's white squares lose the stray light's share too: the power
+                # again through the optics as fitted, then the scale and the stray light at it.
+                power = fit_source_power(
+                    stack.amplitude,
+                    pred.with_stray_light(stray.stray_light()).frame().image.amplitude,
+                    nominal_power)
+                results["photometry"] = power
+                stray = _solar_stray_light(plan, caps, twin_spec, base, partial, power.power_w,
+                                           solar, start=stray)
+            results["stray_light"] = stray
+            stray_verdicts = dict(stray.verdicts().items())
+            if stray.significant:
+                solar = stray.solar_result()
+        else:
+            stray_verdicts = {key: Verdict(
+                "not determined", None, "the stray light is measured from the solar stage's "
+                "frames, which do not determine the solar scale here: no key written")
+                for key in STRAY_LIGHT_NOT_MEASURED}
         results["solar"] = solar
     progress(total, total, "done")
 
     cal = CalibrationFile(
         camera=CameraParameters(**_camera_keys(intr), depth=depth.depth_errors,
                                 sensor=noise.to_sensor_overrides(),
-                                temperature=warm.temperature),
+                                temperature=warm.temperature,
+                                stray_light=stray.stray_light_key()
+                                if stray is not None and stray.significant else None),
         illumination=IlluminationParameters(power_w=power.power_w),
         turntable=_turntable_keys(axis, settle.settling),
         solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
@@ -578,15 +599,51 @@ def fit_rig_calibration(
         std=stage["std"], spread=spread, basis=axis.basis, fx_px=intr.intrinsics.fx_px,
         fy_px=intr.intrinsics.fy_px, corner_radius=corner_radius(views, intr))
     keys = calibration_keys(cal)
+    effects = {**warm.verdicts, **settle.verdicts, **stray_verdicts}
     verdicts = rig_verdicts(keys, evidence, depth_evidence(depth, use_case.frequencies_hz),
-                            {**other_verdicts(noise, power, solar), **warm.verdicts,
-                             **settle.verdicts})
+                            {**other_verdicts(noise, power, solar), **effects})
     # the effects' keys not written (not determined), judged all the same: verdicts.json says
     # why the file has no such key
-    verdicts.update_from({k: v for k, v in {**warm.verdicts, **settle.verdicts}.items()
-                          if k not in keys})
-    verdicts.update_from(STRAY_LIGHT_NOT_MEASURED)
+    verdicts.update_from({k: v for k, v in effects.items() if k not in keys})
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
+
+def _solar_prediction(caps, twin_spec, base, partial: TwinParameters, power_w: float):
+    """The twin's view of the solar stage at 1 sun, with the calibrated camera, turntable and
+    ``power_w``, without stray light."""
+    lit = TwinParameters(camera=partial.camera, turntable=partial.turntable,
+                         illumination=IlluminationParameters(power_w=power_w))
+    return predict_view(twin_spec, base, lit, caps[0].turntable_angle_deg, solar_suns=1.0)
+
+
+def _solar_inputs(plan, caps):
+    """The solar stage's levels, mean intensities and their standard errors."""
+    return (_solar_levels(plan), [c.intensity for c in caps],
+            [c.intensity_std / np.sqrt(c.n_frames) for c in caps])
+
+
+def _solar_scale(plan, caps, twin_spec, base, partial, power_w) -> SolarScaleResult:
+    """The solar scale alone (:func:`calibration.solar.fit_solar_scale`)."""
+    sun1 = _solar_prediction(caps, twin_spec, base, partial, power_w)
+    return fit_solar_scale(*_solar_inputs(plan, caps), _intensity_at(sun1),
+                           reference_cell_suns=plan.solar_reference_suns)
+
+
+def _solar_stray_light(plan, caps, twin_spec, base, partial, power_w, solar: SolarScaleResult,
+                       start: SolarStrayLightFit | None = None) -> SolarStrayLightFit:
+    """The solar scale and the stray light together (:mod:`calibration.solar_stray_light`),
+    on the pixels the scale alone used, from ``start``'s scale (else ``solar``'s)."""
+    sun1 = _solar_prediction(caps, twin_spec, base, partial, power_w)
+    levels, meas, std = _solar_inputs(plan, caps)
+    meas, std, use = response_pixels(levels, meas, std, _intensity_at(sun1))
+    return fit_solar_stray_light(
+        levels, meas, std, use, sun1,
+        start.irradiance_scale if start is not None else solar.irradiance_scale)
+
+
+def _intensity_at(prediction):
+    """``true_suns -> `` the prediction's noise-free intensity [DN]."""
+    return lambda true_suns: prediction.frame(ambient_scale=true_suns).raw.intensity.astype(float)
+
 
 def _finite_median(arrays) -> float | None:
     """The median of the arrays' finite values; None when there is none."""

@@ -94,6 +94,36 @@ def _flat(image: np.ndarray) -> np.ndarray:
     return span <= FLAT_VARIATION * np.maximum(np.abs(q), 1e-12)
 
 
+def response_pixels(
+    levels: Sequence[float],
+    measured_intensity: Sequence[np.ndarray],
+    intensity_std: Sequence[np.ndarray],
+    predict: Callable[[float], np.ndarray],
+    saturation_dn: float = 4000.0,
+) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """The measured intensities, their standard errors with the twin's own error as a floor,
+    and the pixels that carry the solar simulator's level: finite, unsaturated, off the
+    prediction's edges, and responding to the level by more than three times the noise (the
+    solar scale's fit and the stray light's, :mod:`calibration.solar_stray_light`, use the
+    same pixels)."""
+    meas = [np.asarray(m, dtype=np.float64) for m in measured_intensity]
+    # The twin's own error (gain, power: a per cent or so) bounds how well a pixel can agree,
+    # however many frames were averaged: without the floor a few bright pixels near SBI or
+    # saturation, where a small gain error changes the response most, would decide the fit.
+    std = [np.hypot(np.asarray(s, dtype=np.float64), MODEL_ERROR_REL * np.abs(m))
+           for s, m in zip(intensity_std, meas, strict=True)]
+    # Pixels the beam reaches: the prediction at the highest level differs from the lowest.
+    pred_lo, pred_hi = predict(min(levels)), predict(max(levels))
+    reach = np.abs(pred_hi - pred_lo)
+    finite = np.all([np.isfinite(m) & np.isfinite(s) & (s > 0) & (m < saturation_dn)
+                     for m, s in zip(meas, std, strict=True)], axis=0)
+    noise = float(np.median(np.concatenate([s[finite] for s in std]))) if finite.any() else 0.0
+    # Pixels on an edge of the prediction (a board square's border, an object's outline) are
+    # left out: a fraction of a pixel of geometry error changes them more than the level does.
+    flat = _flat(pred_lo) & _flat(pred_hi)
+    return meas, std, finite & flat & (reach > 3.0 * noise)
+
+
 def fit_solar_scale(
     set_suns: Sequence[float],
     measured_intensity: Sequence[np.ndarray],
@@ -133,23 +163,8 @@ def fit_solar_scale(
     if len({round(s, 6) for s in levels}) < 2:
         raise InvalidInputError(
             "set_suns", f"got the levels {levels}; at least two different ones are needed")
-    meas = [np.asarray(m, dtype=np.float64) for m in measured_intensity]
-    # The twin's own error (gain, power: a per cent or so) bounds how well a pixel can agree,
-    # however many frames were averaged: without the floor a few bright pixels near SBI or
-    # saturation, where a small gain error changes the response most, would decide the fit.
-    std = [np.hypot(np.asarray(s, dtype=np.float64), MODEL_ERROR_REL * np.abs(m))
-           for s, m in zip(intensity_std, meas, strict=True)]
-    # Pixels the beam reaches: the prediction at the highest level differs from the lowest.
-    lo, hi = min(levels), max(levels)
-    pred_lo, pred_hi = predict(lo), predict(hi)
-    reach = np.abs(pred_hi - pred_lo)
-    finite = np.all([np.isfinite(m) & np.isfinite(s) & (s > 0) & (m < saturation_dn)
-                     for m, s in zip(meas, std, strict=True)], axis=0)
-    noise = float(np.median(np.concatenate([s[finite] for s in std]))) if finite.any() else 0.0
-    # Pixels on an edge of the prediction (a board square's border, an object's outline) are
-    # left out: a fraction of a pixel of geometry error changes them more than the level does.
-    flat = _flat(pred_lo) & _flat(pred_hi)
-    use = finite & flat & (reach > 3.0 * noise)
+    meas, std, use = response_pixels(levels, measured_intensity, intensity_std, predict,
+                                     saturation_dn)
     n = int(np.count_nonzero(use))
 
     def cost(scale: float) -> float:

@@ -13,7 +13,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
 
-from sim_core.pipeline import RenderedLight, SimulatedFrame, expose_light, render_light
+import numpy as np
+
+from sim_core.optics import StrayLight
+from sim_core.pipeline import (
+    RenderedLight,
+    SimulatedFrame,
+    expose_light,
+    mean_intensities,
+    render_light,
+)
+from sim_core.plan import Effect
 from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene, build_scene
@@ -63,6 +73,24 @@ class Prediction:
                                      dc_ambient=rendered.light_field.dc_ambient * ambient_scale)
             rendered = dataclasses.replace(rendered, light_field=lf)
         return expose_light(self.scene, rendered, noise=False)
+
+    def intensities(self, ambient_scales: Sequence[float]) -> list[np.ndarray]:
+        """The noise-free frames' intensity [DN] at each ambient scale
+        (:func:`sim_core.pipeline.mean_intensities`: ``frame(k).raw.intensity`` for each ``k``,
+        the optics applied once)."""
+        return mean_intensities(self.scene, self.rendered, ambient_scales)
+
+    def with_stray_light(self, stray: StrayLight | None) -> Prediction:
+        """The same rendered light seen through optics with ``stray`` (None: none): the stray
+        light acts after the render (:func:`sim_core.pipeline.expose_light`), so a fit of its
+        fraction and radius re-exposes one render instead of rendering again."""
+        effects = tuple(e for e in self.rendered.plan.effects if e.name != "stray_light")
+        effects += (Effect("stray_light", stray is not None,
+                           "the calibration's stray-light fit" if stray is not None
+                           else "no stray light"),)
+        plan = dataclasses.replace(self.rendered.plan, effects=effects)
+        return Prediction(dataclasses.replace(self.scene, stray_light=stray),
+                          dataclasses.replace(self.rendered, plan=plan))
 
 
 def predict_view(

@@ -281,6 +281,23 @@ def expose_light(
     )
 
 
+def mean_intensities(scene: Scene, rendered: RenderedLight,
+                     ambient_scales: Sequence[float]) -> list[np.ndarray]:
+    """The sensor's mean intensity [DN] (the raw frame's tap sum, seed eq. 6) of ``rendered``
+    with its ambient light scaled by each of ``ambient_scales`` (each >= 0): what
+    :func:`expose_light` with ``noise=False`` gives as ``raw.intensity``, frame by frame, with
+    the optics applied once (they are linear in the light, and their clamp at zero commutes
+    with a non-negative scale) and the sensor per scale (SBI and saturation are not linear).
+    A fit that varies the ambient level and the optics' stray light calls it many times."""
+    if any(not k >= 0.0 for k in ambient_scales):
+        raise ValueError(f"ambient_scales: {list(ambient_scales)}; each must be >= 0")
+    dc_active, dc_ambient, phasor = _optics(scene, rendered.plan, rendered.light_field, False)
+    sensor = dataclasses.replace(scene.sensor, sbi_enabled=rendered.plan.enabled("sbi"))
+    return [expose(mean_electrons(dc_active, dc_ambient * k, phasor, scene.camera, sensor),
+                   scene.camera, sensor, None).intensity.astype(np.float64)
+            for k in ambient_scales]
+
+
 def render_in_motion(
     scene_at: Callable[[float], Scene],
     angles_deg: np.ndarray,

@@ -135,6 +135,7 @@ def explained_context(camp: Any, first: list[dict[str, Any]]) -> dict[str, Any]:
     return {"fitted": True, "position_m": off.get("position_m"),
             "rotation_deg": off.get("rotation_deg"), "scales": scales,
             "verdicts": report.get("verdicts") or {},
+            "dropped_views": report.get("dropped_views") or [],
             "report": json.dumps(report, indent=1)[:20000],
             "plots": [Markup(plot_svg(p, first)) for p in EXPLAINED_PLOTS],
             "rows": rows, "medians": medians, "summary": unexplained_summary(first)}

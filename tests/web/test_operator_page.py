@@ -326,9 +326,12 @@ def test_a_calibration_job_started_from_the_page_is_followed_to_its_end(server, 
     # detector: the job runs its captures, then fails saying why and what to do.
     page.load("calibration")
     page.enter_token()
+    page.click("#calibration-form input[name=warmup_stage]")  # the camera counted warm
     page.click("#calibration-start")
     page.wait(lambda: page.find("#calibration-job").is_displayed(), "the job's progress")
     page.wait(lambda: page.text("#cj-state") == "failed", "the job to end")
+    plan = server.api.get("/api/v1/calibrations").json()[0]["plan"]
+    assert plan["warmup_stage"] is False and plan["settling_stage"] is True, plan
     assert "steps)" in page.text("#cj-message")
     error = page.text("#cj-error")
     job = server.api.get("/api/v1/calibrations").json()[0]

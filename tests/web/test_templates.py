@@ -91,3 +91,17 @@ def test_a_campaign_within_the_ceiling_says_so():
     assert unexplained_summary(first) == (
         "no unexplained residual: all 3 poses within the noise ceiling")
     assert unexplained_summary([]) is None
+
+
+def test_the_views_the_object_fit_left_out_are_listed_with_why():
+    dropped = [{"turntable_angle_deg": -27.0, "reason": "163 usable pixels < 300 <i>"},
+               {"turntable_angle_deg": 0.5, "reason": "reduced chi-square 7.26"}]
+    html = environment().get_template("_explained_fragment.html").render(
+        rows=[], medians=None, fit_verdicts={}, dropped_views=dropped)
+    items = [li.split("</li>")[0] for li in html.split("<li>")[1:]]
+    assert items == ["-27 deg: 163 usable pixels &lt; 300 &lt;i&gt;",
+                     "0.5 deg: reduced chi-square 7.26"]
+    # none left out: nothing said
+    html = environment().get_template("_explained_fragment.html").render(
+        rows=[], medians=None, fit_verdicts={}, dropped_views=[])
+    assert "left out" not in html

@@ -110,7 +110,8 @@ def explained_fragment(request: Request, campaign_id: CampaignId,
     rows, medians = explained_rows([r for r in first if r["metrics"].get("explained")])
     return templates.TemplateResponse(request, "_explained_fragment.html", {
         "rows": rows, "medians": medians if rows else None, "summary": unexplained_summary(first),
-        "fit_verdicts": report.get("verdicts") or {}})
+        "fit_verdicts": report.get("verdicts") or {},
+        "dropped_views": report.get("dropped_views") or []})
 
 
 @router.get("/ui/calibrations/{job_id}/verdicts", response_class=HTMLResponse)

@@ -541,6 +541,8 @@ async function startCalibration(event) {
     fixtures: ["tilt+30@200mm", "tilt-30@200mm"],
     sweep: formBody(form, ["from_deg", "to_deg", "step_deg"]),
     ...formBody(form, ["frames_per_view", "noise_frames"]),
+    warmup_stage: form.elements.warmup_stage.checked,
+    settling_stage: form.elements.settling_stage.checked,
     activate: form.elements.activate.checked,
   };
   const res = await call("POST", `${API}/calibrations`, body);
