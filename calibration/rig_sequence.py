@@ -354,8 +354,11 @@ STRAY_LIGHT_NOT_MEASURED = {
     key: Verdict("not determined", None, "the stray light is measured from the solar stage's "
                  "frames, and this rig has no solar simulator: no key written")
     for key in ("camera.stray_light.fraction", "camera.stray_light.kernel_radius_px")}
-#: the settling stage's captures: at rest, then right after the move
+#: the settling stage's captures: at rest (taken last, at the moved angle), right after the move
 SETTLING_STEPS = ("settling/rest", "settling/moved")
+#: the wait between the frames right after the move and the frames at rest [s]: a ringing of
+#: 1 Hz damped at 0.02 falls from 1 deg to a hundredth of it in 37 s
+SETTLING_REST_WAIT_S = 120.0
 
 
 def _warmup_step(index: int) -> str:
@@ -408,21 +411,25 @@ def _warmup_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
 
 
 def _settling_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
-    """The settling stage (:mod:`calibration.rig_settling`): the first fixture's board at rest
-    (mounted here unless the warm-up has mounted it), then one move and frames at once after
-    it, NOT waiting for the table to settle; none with ``settling_frames`` 0."""
+    """The settling stage (:mod:`calibration.rig_settling`): the first fixture's board (mounted
+    here unless the warm-up has mounted it), one move and frames at once after it, NOT waiting
+    for the table to settle; then, after :data:`SETTLING_REST_WAIT_S`, frames of the board at
+    rest at the same angle (the board's pixels and its yaw noise where the ringing was seen);
+    none with ``settling_frames`` 0."""
     if plan.settling_frames == 0:
         return []
     steps: list[Step] = [] if plan.warmup_captures else [
         _mount_board(plan, plan.fixtures[0], spec)]
+    angle = WARMUP_ANGLE_DEG + plan.settling_move_deg
     return [*steps,
-            CaptureStep(SETTLING_STEPS[0], WARMUP_ANGLE_DEG, 0.0, False,
-                        plan.settling_rest_frames, keep_frames=True,
-                        message="settling: the board at rest"),
-            CaptureStep(SETTLING_STEPS[1], WARMUP_ANGLE_DEG + plan.settling_move_deg, 0.0,
-                        False, plan.settling_frames, keep_frames=True, settle=False,
+            CaptureStep(SETTLING_STEPS[1], angle, 0.0, False, plan.settling_frames,
+                        keep_frames=True, settle=False,
                         message="settling: frames right after a move, the table not waited "
-                                "for")]
+                                "for"),
+            WaitStep(SETTLING_REST_WAIT_S, f"settling: waiting {SETTLING_REST_WAIT_S:g} s for "
+                     "the table to come to rest"),
+            CaptureStep(SETTLING_STEPS[0], angle, 0.0, False, plan.settling_rest_frames,
+                        keep_frames=True, message="settling: the board at rest")]
 
 
 def _mount_board(plan: RigCalibrationPlan, fixture: BoardFixture, spec: SceneSpec) -> MountStep:

@@ -1,9 +1,12 @@
 """The rig calibration's settling stage: the turntable's ringing after a move (issue 27).
 
-Procedure (:func:`calibration.rig_sequence.rig_capture_plan`): the first fixture's board, at
-rest, a stack of frames (the board's yaw noise); then one move of :data:`SETTLING_MOVE_DEG` and
-frames captured at once after it, NOT waiting for the table to settle
-(:attr:`calibration.capture_plan.CaptureStep.settle` False). Each frame's time is its own
+Procedure (:func:`calibration.rig_sequence.rig_capture_plan`): the first fixture's board, one
+move of the plan's ``settling_move_deg`` and frames captured at once after it, NOT waiting for
+the table to settle (:attr:`calibration.capture_plan.CaptureStep.settle` False); then, after a
+wait, a stack of frames at rest at the same angle: the board's pixels and its yaw noise where
+the series was taken (a stack before the move would put the mask where the board was: on a
+table that does not ring, the yaw of frames through that mask spread 5 deg, chi-square 500 and
+more against the noise at rest). Each frame's time is its own
 timestamp (the camera's, ``RawFrame.timestamp_s``), each frame's board yaw the plane through
 the board's bright pixels (its white squares) in the camera frame at the calibrated intrinsics
 (:func:`calibration.settling.plane_yaw_deg`); :func:`calibration.settling.fit_settling` fits the

@@ -117,13 +117,16 @@ def test_the_plans_settling_stage_on_a_table_that_settles_at_once_writes_no_key(
                                                                         spp=1), effects="auto"),
                            reality=parse_reality({"turntable": {"settling": TRUTH.model_dump()}}))
     plan = RigCalibrationPlan(warmup_captures=0, settling_frames=24, settling_rest_frames=8)
-    stage = CapturePlan(rig_capture_plan(plan, spec).steps[:3])
-    assert [c.name for c in stage.captures] == list(SETTLING_STEPS)
+    stage = CapturePlan(rig_capture_plan(plan, spec).steps[:4])  # mount, moved, wait, rest
+    assert [c.name for c in stage.captures] == list(reversed(SETTLING_STEPS))
     with simulated_rig(frame_source=world, seed=5, lab_wait=world.clock.wait) as rig:
         caps = acquire(rig, SimulatedOperator(world), stage)
     out = fit_rig_settling(caps[SETTLING_STEPS[0]], caps[SETTLING_STEPS[1]],
                            build_camera(spec).intrinsics)
     assert out.summary["board_px"] > 500 and out.summary["yaw_noise_deg"] < 0.2
     assert out.settling is None, out.summary
+    # the series is noise about the angle at rest: explained, just no ringing in it (the frames
+    # at rest once came from before the move, their mask off the moved board: unexplained)
+    assert out.summary["reduced_chi2"] < 2.0, out.summary
     for key in SETTLING_KEYS:
-        assert not out.verdicts[key].determined and out.verdicts[key].reason
+        assert out.verdicts[key].verdict == "not determined" and out.verdicts[key].reason

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from calibration.capture_plan import CapturePlan, CaptureStep, MountStep, WaitStep, mount
-from calibration.rig_sequence import RigCalibrationPlan, rig_capture_plan
+from calibration.rig_sequence import SETTLING_REST_WAIT_S, RigCalibrationPlan, rig_capture_plan
 from drivers.rig import Rig
 from drivers.sim.rig import simulated_rig
 from drivers.sim.world import SimulatedWorld
@@ -113,13 +113,18 @@ def test_the_rig_sequences_plan_captures_what_it_counts_in_the_order_it_fits():
     assert cp.n_captures == n_warm + 2 + 2 * 3 + 2 + 3 + 1
     assert [s.name for s in cp.captures][:n_warm] == [f"warmup/{i}" for i in range(n_warm)]
     assert all(c.keep_frames and c.turntable_angle_deg == 0.0 for c in cp.captures[:n_warm])
-    assert cp.waited_s == (n_warm - 1) * plan.warmup_interval_s
+    assert cp.waited_s == (n_warm - 1) * plan.warmup_interval_s + SETTLING_REST_WAIT_S
     assert isinstance(cp.steps[2], WaitStep) and cp.steps[1].name == "warmup/0"
-    # then the settling stage: the board at rest, a move, frames at once after it
-    rest, moved = cp.captures[n_warm:n_warm + 2]
+    # then the settling stage: a move from the warm-up's angle, frames at once after it, a
+    # wait, and frames at rest at the same angle (the board's pixels and yaw noise there)
+    moved, rest = cp.captures[n_warm:n_warm + 2]
     assert (rest.name, moved.name) == ("settling/rest", "settling/moved")
-    assert rest.settle and not moved.settle and moved.keep_frames
-    assert moved.turntable_angle_deg - rest.turntable_angle_deg == plan.settling_move_deg
+    assert rest.settle and not moved.settle and moved.keep_frames and rest.keep_frames
+    assert moved.turntable_angle_deg - cp.captures[n_warm - 1].turntable_angle_deg == (
+        plan.settling_move_deg)
+    assert rest.turntable_angle_deg == moved.turntable_angle_deg
+    i = cp.steps.index(moved)
+    assert isinstance(cp.steps[i + 1], WaitStep) and cp.steps[i + 2] == rest
     cold = rig_capture_plan(dataclasses.replace(plan, warmup_captures=0, settling_frames=0),
                             spec)
     assert cp.captures[n_warm + 2:] == cold.captures and cold.waited_s == 0.0
@@ -196,7 +201,7 @@ def test_a_settling_stage_out_of_range_names_its_field():
     only = rig_capture_plan(RigCalibrationPlan(warmup_captures=0),
                             load_scene_spec(EXAMPLES / "satellite_ground_test.yaml"))
     assert isinstance(only.steps[0], MountStep)  # the settling stage mounts its own board
-    assert [c.name for c in only.captures[:2]] == ["settling/rest", "settling/moved"]
+    assert [c.name for c in only.captures[:2]] == ["settling/moved", "settling/rest"]
 
 
 def test_a_capture_that_does_not_settle_lifts_the_turntables_wait_for_its_move_only(rig):
