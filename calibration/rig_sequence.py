@@ -563,14 +563,12 @@ def fit_rig_calibration(
                                        solar)
             if stray.significant:
                 # The source power's white squares lose the stray light's share too: the power
-                # again through the optics as fitted, then the scale and the stray light at it.
+                # again, through the optics as fitted.
                 power = fit_source_power(
                     stack.amplitude,
                     pred.with_stray_light(stray.stray_light()).frame().image.amplitude,
                     nominal_power)
                 results["photometry"] = power
-                stray = _solar_stray_light(plan, caps, twin_spec, base, partial, power.power_w,
-                                           solar, start=stray)
             results["stray_light"] = stray
             stray_verdicts = dict(stray.verdicts().items())
             if stray.significant:
@@ -635,16 +633,15 @@ def _solar_scale(plan, caps, twin_spec, base, partial, power_w) -> SolarScaleRes
                            reference_cell_suns=plan.solar_reference_suns)
 
 
-def _solar_stray_light(plan, caps, twin_spec, base, partial, power_w, solar: SolarScaleResult,
-                       start: SolarStrayLightFit | None = None) -> SolarStrayLightFit:
-    """The solar scale and the stray light together (:mod:`calibration.solar_stray_light`),
-    on the pixels the scale alone used, from ``start``'s scale (else ``solar``'s)."""
+def _solar_stray_light(plan, caps, twin_spec, base, partial, power_w,
+                       solar: SolarScaleResult) -> SolarStrayLightFit:
+    """The solar scale, the camera's own light and the stray light together
+    (:mod:`calibration.solar_stray_light`), on the pixels the scale alone used, from its
+    scale."""
     sun1 = _solar_prediction(caps, twin_spec, base, partial, power_w)
     levels, meas, std = _solar_inputs(plan, caps)
     meas, std, use = response_pixels(levels, meas, std, _intensity_at(sun1))
-    return fit_solar_stray_light(
-        levels, meas, std, use, sun1,
-        start.irradiance_scale if start is not None else solar.irradiance_scale)
+    return fit_solar_stray_light(levels, meas, std, use, sun1, solar.irradiance_scale)
 
 
 def _intensity_at(prediction):

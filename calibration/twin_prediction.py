@@ -74,11 +74,12 @@ class Prediction:
             rendered = dataclasses.replace(rendered, light_field=lf)
         return expose_light(self.scene, rendered, noise=False)
 
-    def intensities(self, ambient_scales: Sequence[float]) -> list[np.ndarray]:
-        """The noise-free frames' intensity [DN] at each ambient scale
-        (:func:`sim_core.pipeline.mean_intensities`: ``frame(k).raw.intensity`` for each ``k``,
-        the optics applied once)."""
-        return mean_intensities(self.scene, self.rendered, ambient_scales)
+    def intensities(self, ambient_scales: Sequence[float],
+                    active_scale: float = 1.0) -> list[np.ndarray]:
+        """The noise-free frames' intensity [DN] at each ambient scale, the camera's own light
+        scaled by ``active_scale`` (:func:`sim_core.pipeline.mean_intensities`:
+        ``frame(k).raw.intensity`` for each ``k``, the optics applied once)."""
+        return mean_intensities(self.scene, self.rendered, ambient_scales, active_scale)
 
     def with_stray_light(self, stray: StrayLight | None) -> Prediction:
         """The same rendered light seen through optics with ``stray`` (None: none): the stray

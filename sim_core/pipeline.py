@@ -281,17 +281,22 @@ def expose_light(
     )
 
 
-def mean_intensities(scene: Scene, rendered: RenderedLight,
-                     ambient_scales: Sequence[float]) -> list[np.ndarray]:
+def mean_intensities(scene: Scene, rendered: RenderedLight, ambient_scales: Sequence[float],
+                     active_scale: float = 1.0) -> list[np.ndarray]:
     """The sensor's mean intensity [DN] (the raw frame's tap sum, seed eq. 6) of ``rendered``
     with its ambient light scaled by each of ``ambient_scales`` (each >= 0): what
     :func:`expose_light` with ``noise=False`` gives as ``raw.intensity``, frame by frame, with
     the optics applied once (they are linear in the light, and their clamp at zero commutes
     with a non-negative scale) and the sensor per scale (SBI and saturation are not linear).
-    A fit that varies the ambient level and the optics' stray light calls it many times."""
+    ``active_scale`` (>= 0) scales the camera's own light alike (its DC and phasors: a source
+    power other than the render's). A fit that varies the levels and the optics' stray light
+    calls it many times."""
     if any(not k >= 0.0 for k in ambient_scales):
         raise ValueError(f"ambient_scales: {list(ambient_scales)}; each must be >= 0")
+    if not active_scale >= 0.0:
+        raise ValueError(f"active_scale: {active_scale!r}; must be >= 0")
     dc_active, dc_ambient, phasor = _optics(scene, rendered.plan, rendered.light_field, False)
+    dc_active, phasor = dc_active * active_scale, phasor * active_scale
     sensor = dataclasses.replace(scene.sensor, sbi_enabled=rendered.plan.enabled("sbi"))
     return [expose(mean_electrons(dc_active, dc_ambient * k, phasor, scene.camera, sensor),
                    scene.camera, sensor, None).intensity.astype(np.float64)
