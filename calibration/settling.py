@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from calibration.verdicts import Verdict, Verdicts, judge
+from calibration.verdicts import CHI2_UNEXPLAINED, Verdict, Verdicts, honest_std, judge
 from sim_core.errors import InvalidInputError
 from sim_core.twin_file import TurntableSettling
 
@@ -36,6 +36,8 @@ __all__ = ["SettlingFit", "fit_settling", "plane_yaw_deg"]
 FREQUENCY_LIMIT = 0.02
 DAMPING_LIMIT = 0.3
 AMPLITUDE_LIMIT = 0.2
+#: a ringing is seen when its amplitude stands this many standard deviations above zero
+RINGING_SIGMAS = 3.0
 #: fewest frames per damped period the series must have (Nyquist is 2; a fit needs more)
 MIN_SAMPLES_PER_PERIOD = 4.0
 KEY = "turntable.settling"
@@ -127,6 +129,17 @@ def fit_settling(t_s: np.ndarray, angle_deg: np.ndarray, angle_std_deg: float) -
     where = f"the series of {t.size} frames after the move"
     verdicts = Verdicts()
     amp_abs = abs(amp)
+    amp_std = honest_std(float(std[1]), chi2)
+    explained = math.isfinite(chi2) and chi2 <= CHI2_UNEXPLAINED  # else judge says unexplained
+    if explained and not (math.isfinite(amp_std) and amp_abs > RINGING_SIGMAS * amp_std):
+        # No ringing the series can tell from its noise: the frequency and damping of a
+        # ringing that is not there are the noise's (a table that settled at once gave
+        # "determined" frequencies with 2 % errors bars in the rig's round trips).
+        reason = (f"{where}: no ringing above the yaw's noise (amplitude {amp_abs:.2g} +- "
+                  f"{amp_std:.2g} deg, less than {RINGING_SIGMAS:g} standard deviations)")
+        for key in ("amplitude_deg", "frequency_hz", "damping_ratio"):
+            verdicts.add(f"{KEY}.{key}", Verdict("not determined", None, reason))
+        return SettlingFit(None, verdicts, chi2, t0, offset, _estimate(amp_abs, f, zeta))
     samples_per_period = 1.0 / (f * float(np.median(np.diff(t))))
     if samples_per_period < MIN_SAMPLES_PER_PERIOD:
         reason = (f"{samples_per_period:.2g} frames per period of the {f:.3g} Hz found; at least "

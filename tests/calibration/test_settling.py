@@ -51,6 +51,20 @@ def test_a_ringing_below_the_noise_is_not_determined():
     assert all(fit.verdicts[k].reason for k in KEYS if not fit.verdicts[k].determined)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_a_table_that_does_not_ring_determines_no_frequency(seed):
+    """Noise alone: the fit still finds some frequency, but no key of a ringing that is not
+    there is determined (the rig's round trips once got "determined" frequencies from a table
+    that had settled at once)."""
+    t = np.arange(90) / 11.0
+    y = 20.0 + np.random.default_rng(seed).normal(0.0, 0.04, t.size)
+    fit = fit_settling(t, y, 0.04)
+    assert fit.settling is None
+    for k in KEYS:
+        assert fit.verdicts[k].verdict == "not determined", fit.verdicts[k]
+        assert "no ringing above the yaw's noise" in fit.verdicts[k].reason
+
+
 def test_a_series_the_model_does_not_explain_is_unexplained():
     truth = TurntableSettling(amplitude_deg=0.2, frequency_hz=2.5, damping_ratio=0.06)
     t, y = _series(truth, 0.005, 2)
