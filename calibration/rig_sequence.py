@@ -556,11 +556,12 @@ def fit_rig_calibration(
     if spec.ambient.solar_simulator is not None:
         progress(done, total, "solar simulator scale")
         caps = [captures[_solar_step(i)] for i in range(len(_solar_levels(plan)))]
-        solar = _solar_scale(plan, caps, twin_spec, base, partial, power.power_w)
+        sun1 = _solar_prediction(caps, twin_spec, base, partial, power.power_w)
+        solar = fit_solar_scale(*_solar_inputs(plan, caps), _intensity_at(sun1),
+                                reference_cell_suns=plan.solar_reference_suns)
         if solar.method == "frames":
             progress(done, total, "stray light")
-            stray = _solar_stray_light(plan, caps, twin_spec, base, partial, power.power_w,
-                                       solar)
+            stray = _solar_stray_light(plan, caps, sun1, solar)
             if stray.significant:
                 # The source power's white squares lose the stray light's share too: the power
                 # again, through the optics as fitted.
@@ -626,19 +627,10 @@ def _solar_inputs(plan, caps):
             [c.intensity_std / np.sqrt(c.n_frames) for c in caps])
 
 
-def _solar_scale(plan, caps, twin_spec, base, partial, power_w) -> SolarScaleResult:
-    """The solar scale alone (:func:`calibration.solar.fit_solar_scale`)."""
-    sun1 = _solar_prediction(caps, twin_spec, base, partial, power_w)
-    return fit_solar_scale(*_solar_inputs(plan, caps), _intensity_at(sun1),
-                           reference_cell_suns=plan.solar_reference_suns)
-
-
-def _solar_stray_light(plan, caps, twin_spec, base, partial, power_w,
-                       solar: SolarScaleResult) -> SolarStrayLightFit:
+def _solar_stray_light(plan, caps, sun1, solar: SolarScaleResult) -> SolarStrayLightFit:
     """The solar scale, the camera's own light and the stray light together
-    (:mod:`calibration.solar_stray_light`), on the pixels the scale alone used, from its
-    scale."""
-    sun1 = _solar_prediction(caps, twin_spec, base, partial, power_w)
+    (:mod:`calibration.solar_stray_light`) against ``sun1`` (the scale's own prediction), on
+    the pixels the scale alone used, from its scale."""
     levels, meas, std = _solar_inputs(plan, caps)
     meas, std, use = response_pixels(levels, meas, std, _intensity_at(sun1))
     return fit_solar_stray_light(levels, meas, std, use, sun1, solar.irradiance_scale)
