@@ -97,7 +97,8 @@ def compare_twins(
     """Compare each pose's captures of :func:`comparison_capture_plan` (module docstring).
 
     The comparison mask is the pixels the calibrated twin sees on the turntable's objects,
-    inside both frames' valid pixels.
+    inside both frames' valid pixels. The calibrated twin is simulated at the illumination
+    temperature the first frame reports (its warm-up drift, issue 27).
     """
     settings = settings or RenderSettings(integrator="path", spp=spec.render.spp,
                                           max_bounces=spec.render.max_bounces)
@@ -109,9 +110,12 @@ def compare_twins(
         first, second = cap.frames
         twins = {}
         for name, twin in (("nominal", None), ("calibrated", calibration)):
+            # the calibrated twin drifts as the camera reported itself warm for this frame
+            # (its ``camera.temperature``, if any); the nominal twin knows of no drift
             scene = build_scene(spec, base_dir, turntable_deg=cap.turntable_angle_deg,
                                 solar_suns=cap.solar_suns if cap.shutter_open else 0.0,
-                                twin=twin)
+                                twin=twin, illumination_temperature_c=(
+                                    None if twin is None else first.illumination_temperature_c))
             frame = simulate(scene, RenderRequest(dataclasses.replace(settings, seed=1000 + k)))
             twins[name] = (scene, frame)
         scene, frame = twins["calibrated"]

@@ -147,10 +147,25 @@ def render_light(
     )
 
 
-def _optics(scene: Scene, plan: EffectPlan, lf: LightField,
-            ideal: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The light after the MTF chain and the camera's phase errors: DC active, DC ambient (H, W)
-    and phasors (n_f, H, W)."""
+@dataclass(frozen=True)
+class SensorLight:
+    """The light on the sensor of one rendered light field: what of the optics does not change
+    from frame to frame (:func:`sensor_light`). Exposing the same render many times (a world's
+    repeated frames of one rig state) computes it once."""
+
+    #: DC of the camera's own light and of the ambient light (H, W) [W m^-2 sr^-1]
+    dc_active: np.ndarray
+    dc_ambient: np.ndarray
+    #: the phasors (n_f, H, W), after the camera's phase errors unless ``ideal``
+    phasor: np.ndarray
+    ideal: bool
+
+
+def sensor_light(scene: Scene, plan: EffectPlan, lf: LightField, ideal: bool) -> SensorLight:
+    """The light after the MTF chain, the stray light and (unless ``ideal``) the camera's own
+    phase errors: DC active, DC ambient and phasors. All of it is noise-free and fixed for a
+    given render; the warm-up's drift, which follows each frame's temperature, is not in it
+    (:func:`_optics` adds it)."""
     comps = plan.mtf_components(scene)
     # Ringing of the MTF can leave tiny negative radiance next to a bright edge: clamp DC.
     dc_active = np.maximum(apply_mtf(lf.dc_active, comps), 0.0)
@@ -165,13 +180,23 @@ def _optics(scene: Scene, plan: EffectPlan, lf: LightField,
     if not ideal and scene.depth_errors is not None:
         # The camera's own phase errors act on each pixel's correlation, after the optics.
         phasor = scene.depth_errors.apply_to_phasor(phasor)
+    return SensorLight(dc_active, dc_ambient, phasor, ideal)
+
+
+def _optics(scene: Scene, plan: EffectPlan, lf: LightField, ideal: bool,
+            light: SensorLight | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The light after the MTF chain and the camera's phase errors: DC active, DC ambient (H, W)
+    and phasors (n_f, H, W). ``light``: :func:`sensor_light` of this render, if kept."""
+    if light is None or light.ideal != ideal:
+        light = sensor_light(scene, plan, lf, ideal)
+    phasor = light.phasor
     if (not ideal and scene.temperature_drift is not None
             and scene.illumination_temperature_c is not None
             and plan.enabled("temperature_drift")):
         # The warm-up drift: a phase offset per frequency at the frame's temperature.
         phasor = scene.temperature_drift.apply_to_phasor(phasor,
                                                          scene.illumination_temperature_c)
-    return dc_active, dc_ambient, phasor
+    return light.dc_active, light.dc_ambient, phasor
 
 
 def _stacked_steps(scene: Scene, plan: EffectPlan, steps: Sequence[RenderedLight],
@@ -217,6 +242,7 @@ def expose_light(
     noise_rng: np.random.Generator | None = None,
     noise: bool = True,
     steps: Sequence[RenderedLight] | None = None,
+    light: SensorLight | None = None,
 ) -> SimulatedFrame:
     """Optics, depth errors, sensor and reconstruction of a rendered light field.
 
@@ -224,13 +250,15 @@ def expose_light(
     what a calibration compares averaged frames with. ``steps``: when the scene moved during
     the frame, the light of each phase step (``4 n_f``, frequency by frequency, each rendered
     at its time: :func:`simulate_in_motion`); ``rendered`` is then the first of them.
+    ``light``: :func:`sensor_light` of ``rendered`` for ``scene`` when the caller keeps it (it
+    exposes the same render again); computed here when None.
     """
     t0 = time.perf_counter()
     timings = dict(rendered.timings_s)
     lf, plan, run = rendered.light_field, rendered.plan, rendered.settings
     t = time.perf_counter()
     if steps is None:
-        dc_active, dc_ambient, phasor = _optics(scene, plan, lf, ideal)
+        dc_active, dc_ambient, phasor = _optics(scene, plan, lf, ideal, light)
     else:
         dc_active, dc_ambient, phasor = _stacked_steps(scene, plan, steps, ideal)
     timings["optics"] = time.perf_counter() - t

@@ -22,7 +22,8 @@ import numpy as np
 from sim_core.errors import InvalidInputError
 from sim_core.twin_file import TurntableSettling
 
-__all__ = ["damped_frequency_hz", "envelope_deg", "ringing_deg", "settle_time_s"]
+__all__ = ["damped_frequency_hz", "envelope_deg", "ringing_deg", "ringing_of_moves_deg",
+           "settle_time_s"]
 
 
 def damped_frequency_hz(settling: TurntableSettling) -> float:
@@ -60,6 +61,24 @@ def ringing_deg(settling: TurntableSettling, t_s: np.ndarray | float) -> np.ndar
     t = np.asarray(t_s, dtype=np.float64)
     omega_d = 2.0 * math.pi * damped_frequency_hz(settling)
     return envelope_deg(settling, t) * np.cos(omega_d * np.maximum(t, 0.0))
+
+
+def ringing_of_moves_deg(settling: TurntableSettling, t_s: float,
+                         ends_s: np.ndarray, signs: np.ndarray) -> float:
+    """The table's angle off its commanded one at ``t_s`` from every move that ended [deg].
+
+    ``ends_s`` are the moves' end times and ``signs`` their directions (+1, -1; 0 for a move
+    that ended at rest): the free responses add (the system is linear), each from its own end.
+
+    >>> s = TurntableSettling(amplitude_deg=0.2, frequency_hz=2.0, damping_ratio=0.05)
+    >>> ringing_of_moves_deg(s, 5.0, np.array([5.0, 9.0]), np.array([-1.0, 1.0]))
+    -0.2
+    """
+    ends = np.asarray(ends_s, dtype=np.float64)
+    if ends.size == 0:
+        return 0.0
+    return float(np.sum(np.asarray(signs, dtype=np.float64)
+                        * ringing_deg(settling, float(t_s) - ends)))
 
 
 def settle_time_s(settling: TurntableSettling | None, tolerance_deg: float) -> float:

@@ -58,7 +58,7 @@ from drivers.turntable import (
     READY_STATES,
     TE_ERRORS,
 )
-from sim_core.settling import envelope_deg, ringing_deg
+from sim_core.settling import envelope_deg, ringing_of_moves_deg
 from sim_core.twin_file import TurntableSettling
 
 __all__ = ["FOLLOWING_ERROR_BIT", "Smc100Config", "Smc100Sim"]
@@ -318,9 +318,8 @@ class Smc100Sim:
             settling = self.settling
             if settling is None or not rings:
                 return motor_deg
-            ends_s = np.array([r[0] for r in rings])
-            signs = np.array([r[1] for r in rings])
-            return motor_deg + float(np.sum(signs * ringing_deg(settling, t_s - ends_s)))
+            return motor_deg + ringing_of_moves_deg(
+                settling, t_s, np.array([r[0] for r in rings]), np.array([r[1] for r in rings]))
 
     # -- time evolution ----------------------------------------------------------------------
     def _ring_of(self, motion: _Motion) -> tuple[float, float]:

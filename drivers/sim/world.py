@@ -41,7 +41,7 @@ import numpy as np
 
 from drivers.sim.lab_clock import LabClock
 from drivers.sim.usb_camera import CameraRequest
-from sim_core.pipeline import RenderedLight, expose_light, render_light
+from sim_core.pipeline import RenderedLight, SensorLight, expose_light, render_light, sensor_light
 from sim_core.raw import RawFrame
 from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
@@ -56,6 +56,17 @@ CACHE_STATES = 4
 #: how a world renders unless told otherwise: few samples, two bounces, every effect
 DEFAULT_RENDER = RenderRequest(RenderSettings(integrator="path", spp=8, max_bounces=2),
                                effects="all")
+
+
+@dataclasses.dataclass
+class _Rendered:
+    """One rig state's render, kept for the frames that follow: the scene, its light field and
+    the light on the sensor (the optics' fixed part, :func:`sim_core.pipeline.sensor_light`,
+    computed at the first frame that exposes it whole)."""
+
+    scene: Scene
+    light: RenderedLight
+    on_sensor: SensorLight | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,7 +133,7 @@ class SimulatedWorld:
         self.reality = reality if reality is not None else default_reality(spec)
         self._mounted: tuple[ObjectSpec, ...] | None = None
         self._generation = 0
-        self._cache: OrderedDict[tuple, tuple[Scene, RenderedLight]] = OrderedDict()
+        self._cache: OrderedDict[tuple, _Rendered] = OrderedDict()
         self._lock = threading.Lock()
         #: whether the last frame was rendered per phase step (the table moved during it);
         #: for tests and diagnostics: a frame's own metadata says only what a camera reports
@@ -186,7 +197,7 @@ class SimulatedWorld:
         angles = phase_step_angles_deg(ahead, uc.n_frequencies, uc.exposure_s)
         return angles if moves_during_frame(angles) else None
 
-    def _rendered(self, request: CameraRequest, state: WorldState) -> tuple[Scene, RenderedLight]:
+    def _rendered(self, request: CameraRequest, state: WorldState) -> _Rendered:
         uc = request.use_case
         suns = state.solar_suns if state.shutter_open and state.solar_suns > 0.0 else 0.0
         key = (self._generation, round(state.turntable_angle_deg, 9), round(suns, 6), uc.name,
@@ -205,7 +216,7 @@ class SimulatedWorld:
         scene = build_scene(spec, self.base_dir, turntable_deg=state.turntable_angle_deg,
                             solar_suns=suns, twin=reality)
         render = self.render.with_seed(request.seed * 1_000_003 + self._generation)
-        entry = (scene, render_light(scene, render))
+        entry = _Rendered(scene, render_light(scene, render))
         self._cache[key] = entry
         while len(self._cache) > CACHE_STATES:
             self._cache.popitem(last=False)
@@ -217,16 +228,21 @@ class SimulatedWorld:
         with self._lock:  # one render at a time; the camera thread and tests may both ask
             self.last_rendered_per_step = step_angles is not None
             temperature_c = self._illumination_temperature_c(request, state)
+            on_sensor = steps = None
             if step_angles is None:
-                scene, rendered = self._rendered(request, state)
-                steps = None
+                entry = self._rendered(request, state)
+                if entry.on_sensor is None:  # the optics' fixed part, once per render
+                    entry.on_sensor = sensor_light(entry.scene, entry.light.plan,
+                                                   entry.light.light_field, ideal=False)
+                on_sensor = entry.on_sensor
             else:
-                lights = [self._rendered(request, dataclasses.replace(
+                entries = [self._rendered(request, dataclasses.replace(
                     state, turntable_angle_deg=float(a))) for a in step_angles.ravel()]
-                scene, rendered = lights[0]
-                steps = [light for _, light in lights]
-            scene = dataclasses.replace(scene, illumination_temperature_c=temperature_c)
-            frame = expose_light(scene, rendered, noise_rng=request.rng(), steps=steps)
+                entry = entries[0]
+                steps = [e.light for e in entries]
+            scene = dataclasses.replace(entry.scene, illumination_temperature_c=temperature_c)
+            frame = expose_light(scene, entry.light, noise_rng=request.rng(), steps=steps,
+                                 light=on_sensor)
         raw = frame.raw
         # Nothing about the reality goes into the frame: only what a camera would report.
         meta = {"source": "rendered", "frame_index": request.frame_index,

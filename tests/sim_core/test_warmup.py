@@ -101,3 +101,31 @@ def test_a_frame_at_a_warmer_temperature_reads_the_drift_farther():
     assert diff_mm == pytest.approx(16 * 0.5, abs=0.3)  # 16 degC x 0.5 mm/degC
     with pytest.raises(InvalidInputError, match="illumination_temperature_c"):
         build_scene(spec, twin=twin, illumination_temperature_c=500.0)
+
+
+def test_a_kept_sensor_light_exposes_the_same_frame_as_the_optics_run_again():
+    """The world keeps each render's light on the sensor (MTF, stray light, the camera's phase
+    errors) and exposes every frame from it at that frame's temperature: the same frame, bit
+    for bit, as running the whole optics again."""
+    from sim_core.pipeline import expose_light, render_light, sensor_light
+
+    spec = parse_scene_spec(wall_spec())
+    twin = parse_reality({"camera": {
+        "temperature": WARM.model_dump(),
+        "stray_light": {"fraction": 0.05, "kernel_radius_px": 12.0},
+        "depth": {"phase_offset_rad": [0.01],
+                  "wiggling": [{"harmonic": 4, "amplitude_rad": 0.02, "phase_rad": 0.4}]}}})
+    scene = build_scene(spec, twin=twin)
+    rendered = render_light(scene, RenderRequest(RenderSettings(integrator="direct", spp=2,
+                                                                seed=3), effects="all"))
+    kept = sensor_light(scene, rendered.plan, rendered.light_field, ideal=False)
+    for temperature_c in (25.0, 38.5):
+        warm = build_scene(spec, twin=twin, illumination_temperature_c=temperature_c)
+        again = expose_light(warm, rendered, noise_rng=np.random.default_rng(9))
+        from_kept = expose_light(warm, rendered, noise_rng=np.random.default_rng(9), light=kept)
+        np.testing.assert_array_equal(from_kept.raw.phase_images, again.raw.phase_images)
+        np.testing.assert_array_equal(from_kept.raw.intensity, again.raw.intensity)
+    # an ideal exposure never takes a light with the camera's phase errors in it
+    ideal = expose_light(scene, rendered, ideal=True, light=kept)
+    np.testing.assert_array_equal(ideal.image.range_m,
+                                  expose_light(scene, rendered, ideal=True).image.range_m)
