@@ -394,6 +394,18 @@ def rig_capture_plan(plan: RigCalibrationPlan, spec: SceneSpec) -> CapturePlan:
     return CapturePlan(tuple(steps))
 
 
+def split_after_settling(plan: CapturePlan) -> tuple[CapturePlan, CapturePlan]:
+    """``plan`` up to its settling stage's frames at rest, and the rest (with the plan's
+    ``restore`` mount): the service fits the table's ringing in between and waits it out after
+    every later move (:func:`service.lab.acquisition.run_rig_calibration`). A plan without a
+    settling stage: nothing, then all of it."""
+    names = [getattr(s, "name", None) for s in plan.steps]
+    if SETTLING_STEPS[0] not in names:
+        return CapturePlan(()), plan
+    cut = names.index(SETTLING_STEPS[0]) + 1
+    return CapturePlan(plan.steps[:cut]), CapturePlan(plan.steps[cut:], plan.restore)
+
+
 def _warmup_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
     """Step 0: the first fixture mounted, nothing moves, captures from power-on with the plan's
     waits between them (:mod:`calibration.rig_warmup`); none with ``warmup_captures`` 0."""

@@ -35,7 +35,8 @@ from sim_core.raw import RawFrame
 from sim_core.tof import phase_from_phasor
 from sim_core.twin_file import TurntableSettling
 
-__all__ = ["SETTLING_KEYS", "RigSettling", "board_yaw_deg", "fit_rig_settling", "no_settling"]
+__all__ = ["SETTLING_KEYS", "RigSettling", "board_yaw_deg", "fit_rig_settling", "no_settling",
+           "settling_to_wait_out"]
 
 #: the keys of ``turntable.settling``
 SETTLING_KEYS = tuple(f"{KEY}.{k}" for k in ("amplitude_deg", "frequency_hz", "damping_ratio"))
@@ -51,6 +52,8 @@ AMPLITUDE_REASON = (
     "period earlier with the opposite sign fits the same series with a larger amplitude; the "
     "value is the fit's at its own move end (the frequency and damping are what the series "
     "pins down)")
+#: the largest ringing amplitude a settling key holds [deg]
+MAX_WAIT_AMPLITUDE_DEG = 5.0
 #: the least yaw noise taken [deg]: keeps the fit's weights finite for noise-free frames
 MIN_YAW_STD_DEG = 1e-6
 
@@ -150,3 +153,23 @@ def fit_rig_settling(rest: AveragedCapture, moved: AveragedCapture,
                     "ringing_over_noise": (math.nan if est is None
                                            else est.amplitude_deg / noise_deg)})
     return RigSettling(settling, verdicts, summary)
+
+
+def settling_to_wait_out(rest: AveragedCapture, moved: AveragedCapture,
+                         intrinsics: Intrinsics) -> TurntableSettling | None:
+    """The ringing to wait out after the moves that follow the settling stage, fitted as soon
+    as its frames are in (at the nominal ``intrinsics``: the board's yaw scales with them, the
+    ringing's frequency and damping do not); None when not determined (the driver's own wait).
+
+    Its amplitude is the fit's at the first frame, which a move end half a damped period
+    earlier would exceed by ``exp(pi zeta / sqrt(1 - zeta^2))`` (:data:`AMPLITUDE_REASON`): the
+    wait is for that larger one (at most the key's largest, 5 deg). ``zeta <= 0.9`` (the key's
+    range) keeps the square root's argument at least 0.19.
+    """
+    fit = fit_rig_settling(rest, moved, intrinsics)
+    if fit.settling is None:
+        return None
+    zeta = fit.settling.damping_ratio
+    margin = math.exp(math.pi * zeta / math.sqrt(1.0 - zeta**2))
+    return fit.settling.model_copy(update={
+        "amplitude_deg": min(fit.settling.amplitude_deg * margin, MAX_WAIT_AMPLITUDE_DEG)})

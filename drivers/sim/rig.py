@@ -25,6 +25,7 @@ from drivers.camera import UsbCamera, UsbCameraSettings
 from drivers.rig import Rig, RigState
 from drivers.sim import SimClock
 from drivers.sim.pty_server import SimHandle, start_simulator
+from drivers.sim.smc100 import Smc100Sim
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
 from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
 from drivers.turntable import SMC100_SETTINGS, Turntable
@@ -45,6 +46,9 @@ class SimulatedRigState(RigState):
 
     table_angle_after_deg: Callable[[float], float] | None = field(
         default=None, compare=False, repr=False)
+    #: the stage rings on its own clock (a settling, and a stage that moves in time): a world
+    #: that would ring an instant stage's table on the lab's clock leaves it to the stage
+    stage_rings: bool = field(default=False, compare=False)
 
 
 def simulated_rig(
@@ -61,7 +65,7 @@ def simulated_rig(
     camera_faults: Iterable[str] = (),
     camera_settings: UsbCameraSettings | None = None,
     turntable_settling: TurntableSettling | None = None,
-    lab_wait: Callable[[float], None] | None = None,
+    lab_wait: Callable[..., None] | None = None,
 ) -> Rig:
     """Start the three simulators and return a rig with real drivers connected to them.
 
@@ -99,7 +103,10 @@ def simulated_rig(
     lab_wait : callable or None
         How the rig's :meth:`~drivers.rig.Rig.wait` lets time pass: the simulated lab's clock
         (``world.clock.wait`` of a :class:`drivers.sim.world.SimulatedWorld`, whose warm-up
-        follows it); None: at once (an instant rig) or asleep in scaled real time.
+        and a table's ringing follow it); None: at once (an instant rig) or asleep in scaled
+        real time. An instant stage's post-move wait passes on it too,
+        ``lab_wait(seconds, turntable_angle_deg=...)`` with where the stage stopped (the move
+        ends before the wait: :meth:`drivers.sim.lab_clock.LabClock.wait`).
 
     Examples
     --------
@@ -136,10 +143,15 @@ def simulated_rig(
             settings=dataclasses.replace(
                 SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
             ),
-            sleep=_clock_sleep(tt_sim.models["turntable"].clock),
+            sleep=(_lab_sleep(lab_wait, tt_sim.models["turntable"])
+                   if lab_wait is not None and tt_instant
+                   else _clock_sleep(tt_sim.models["turntable"].clock)),
         )
         turntable.connect()
         started.append(turntable.close)
+        if lab_wait is not None and tt_instant:
+            # the lab's clock knows where the stage starts: its first move is timed from there
+            lab_wait(0.0, turntable_angle_deg=tt_sim.models["turntable"].current_position())
         solar = SolarSimulator(
             *solar_sim.ports,
             warmup_s=0.0 if instant else 1800.0 / time_scale,
@@ -194,9 +206,20 @@ def _physical_state(tt_sim: SimHandle, solar_sim: SimHandle) -> Callable[[], Rig
             solar_suns=max(0.0, suns),
             shutter_open=bool(solar.shutter.is_open),
             table_angle_after_deg=lambda dt_s: smc.table_angle_deg(now_s + dt_s),
+            stage_rings=smc.settling is not None and not smc.clock.instant,
         )
 
     return state
+
+
+def _lab_sleep(lab_wait: Callable[..., None], smc: Smc100Sim) -> Callable[[float], None]:
+    """An instant stage's post-move wait on the simulated lab's clock: the move the stage just
+    made (its motor's position) ends, then ``seconds`` pass."""
+
+    def sleep(seconds: float) -> None:
+        lab_wait(seconds, turntable_angle_deg=smc.current_position())
+
+    return sleep
 
 
 def _clock_sleep(clock: SimClock) -> Callable[[float], None]:

@@ -662,8 +662,10 @@ class SimulatedUsbCamera:
                 f"{raw.shape} for {request!r}; expected ({uc.n_frequencies}, 4, {uc.height}, "
                 f"{uc.width}) and {uc.shape}",
             )
-        # the frame's reported illumination temperature travels in the header (wire version 2)
-        data = encode_raw_frame(raw, use_case=uc, sequence=seq, timestamp_us=int(now_s * 1e6))
+        # the frame's reported illumination temperature travels in the header (wire version 2);
+        # its time is the frame source's (a world on the lab's clock stamps its own), or now
+        stamp_s = raw.timestamp_s if raw.timestamp_s > 0.0 else now_s
+        data = encode_raw_frame(raw, use_case=uc, sequence=seq, timestamp_us=int(stamp_s * 1e6))
         if self.faults.fire("corrupt") is not None:
             buf = bytearray(data)
             for k in range(64 + 7, len(buf), max(1, len(buf) // 7)):

@@ -27,14 +27,18 @@ A table that moves during a frame (turning, or still ringing after a move: the r
 ``table_angle_after_deg``, :class:`drivers.sim.rig.SimulatedRigState`) is rendered at its
 physical angle at each phase step's time (:mod:`sim_core.subframes`), so the frame smears as a
 camera's does; a table that moves less than the tolerance during the frame is rendered once.
+An instant stage has no time to ring in: a world made with ``rings_on_lab_clock`` rings its
+table on the lab's clock instead, from the end of every move the clock saw, and stamps each
+frame with the lab's time (the settling stage of a calibration times the ringing by them).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import threading
+import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +51,8 @@ from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
 from sim_core.scene import Scene, build_scene
 from sim_core.scene_spec import ObjectPose, ObjectSpec, SceneSpec
-from sim_core.subframes import moves_during_frame, phase_step_angles_deg
+from sim_core.settling import envelope_deg, ringing_of_moves_deg
+from sim_core.subframes import MOTION_TOLERANCE_DEG, moves_during_frame, phase_step_angles_deg
 from sim_core.twin_file import MountParameters, ObjectParameters, RealityFile, TurntableParameters
 from sim_core.warmup import illumination_temperature_c
 
@@ -116,6 +121,14 @@ class SimulatedWorld:
         match it).
     reality : RealityFile, optional
         How the world differs from ``spec``; :func:`default_reality` if not given.
+    rings_on_lab_clock : bool
+        The reality's ``turntable.settling`` rings the table on the lab's clock (and each frame
+        is stamped with the lab's time, ``RawFrame.timestamp_s``): the simulated lab of an
+        instant stage, whose own clock has no time for a ringing (a stage that runs in time
+        rings on its own clock, :mod:`drivers.sim.smc100`, and the world then leaves it to
+        it). Off by default, and an instant stage's table then stops dead: on, every frame of
+        a ringing table is a render of its own, so a run that never waits for the table (a
+        campaign without the settling calibrated) renders each of its frames anew.
     """
 
     def __init__(
@@ -124,6 +137,7 @@ class SimulatedWorld:
         base_dir: str | Path,
         render: RenderRequest = DEFAULT_RENDER,
         reality: RealityFile | None = None,
+        rings_on_lab_clock: bool = False,
     ) -> None:
         if render.effects not in ("all", "auto"):
             raise ValueError(f"effects must be 'all' or 'auto', got {render.effects!r}")
@@ -140,6 +154,10 @@ class SimulatedWorld:
         self.last_rendered_per_step = False
         #: the simulated lab's time since the service's start (the illumination's warm-up)
         self.clock = LabClock()
+        self.rings_on_lab_clock = rings_on_lab_clock
+        #: the wall time the lab's clock started at: frames stamped on the lab's clock read as
+        #: times since the epoch, as a camera's do
+        self._epoch_s = time.time()
         # Fail now, not at the first frame, if the reality does not fit the scene.
         build_scene(spec, self.base_dir, twin=self.reality)
 
@@ -186,15 +204,38 @@ class SimulatedWorld:
         sim = self.spec.ambient.solar_simulator
         return WorldState(angle, sim.irradiance_suns if sim else 0.0, sim is not None)
 
+    def _table_angle_after_deg(self, request: CameraRequest, state: WorldState,
+                               t_s: float) -> Callable[[float], float] | None:
+        """The table's angle ``dt`` seconds after this frame's start, or None for a table at
+        rest: the stage's own motion (``table_angle_after_deg`` of the rig state), plus the
+        ringing on the lab's clock when the world keeps it (``rings_on_lab_clock``) and it is
+        above :data:`sim_core.subframes.MOTION_TOLERANCE_DEG` (below it, the table is at
+        rest: one render, "simulate only the effects a scene calls for")."""
+        stage = getattr(request.rig_state, "table_angle_after_deg", None)
+        settling = self.reality.turntable.settling
+        if (not self.rings_on_lab_clock or settling is None
+                or getattr(request.rig_state, "stage_rings", False)):
+            return stage
+        ends_s, signs = self.clock.moves()
+        if float(np.sum(envelope_deg(settling, t_s - ends_s))) < MOTION_TOLERANCE_DEG:
+            return stage
+        commanded_deg = state.turntable_angle_deg
+
+        def angle_after_deg(dt_s: float) -> float:
+            base = commanded_deg if stage is None else float(stage(dt_s))
+            return base + ringing_of_moves_deg(settling, t_s + dt_s, ends_s, signs)
+
+        return angle_after_deg
+
     @staticmethod
-    def _step_angles_deg(request: CameraRequest, state: WorldState) -> np.ndarray | None:
+    def _step_angles_deg(request: CameraRequest,
+                         angle_after_deg: Callable[[float], float] | None) -> np.ndarray | None:
         """The table's angle at each phase step, (n_f, 4), when it moves during the frame by
         more than the tolerance; None when it holds still (one render)."""
-        ahead = getattr(request.rig_state, "table_angle_after_deg", None)
-        if ahead is None:
+        if angle_after_deg is None:
             return None
         uc = request.use_case
-        angles = phase_step_angles_deg(ahead, uc.n_frequencies, uc.exposure_s)
+        angles = phase_step_angles_deg(angle_after_deg, uc.n_frequencies, uc.exposure_s)
         return angles if moves_during_frame(angles) else None
 
     def _rendered(self, request: CameraRequest, state: WorldState) -> _Rendered:
@@ -224,10 +265,18 @@ class SimulatedWorld:
 
     def __call__(self, request: CameraRequest) -> RawFrame:
         state = self._state(request)
-        step_angles = self._step_angles_deg(request, state)
         with self._lock:  # one render at a time; the camera thread and tests may both ask
+            t_s = self.clock.frame_time_s(state.turntable_angle_deg,
+                                          request.use_case.frame_rate_hz)
+            angle_after_deg = self._table_angle_after_deg(request, state, t_s)
+            step_angles = self._step_angles_deg(request, angle_after_deg)
+            if angle_after_deg is not None and step_angles is None:
+                # still during the frame, where it is at the frame's start (its ringing too)
+                state = dataclasses.replace(state,
+                                            turntable_angle_deg=float(angle_after_deg(0.0)))
             self.last_rendered_per_step = step_angles is not None
-            temperature_c = self._illumination_temperature_c(request, state)
+            warm = self.reality.camera.temperature
+            temperature_c = None if warm is None else illumination_temperature_c(t_s, warm)
             on_sensor = steps = None
             if step_angles is None:
                 entry = self._rendered(request, state)
@@ -247,13 +296,6 @@ class SimulatedWorld:
         # Nothing about the reality goes into the frame: only what a camera would report.
         meta = {"source": "rendered", "frame_index": request.frame_index,
                 "rig": dataclasses.asdict(state)}
-        return dataclasses.replace(raw, timestamp_s=request.timestamp_s, meta=meta,
+        stamp_s = self._epoch_s + t_s if self.rings_on_lab_clock else request.timestamp_s
+        return dataclasses.replace(raw, timestamp_s=stamp_s, meta=meta,
                                    illumination_temperature_c=temperature_c)
-
-    def _illumination_temperature_c(self, request: CameraRequest,
-                                    state: WorldState) -> float | None:
-        """The illumination's temperature at this frame on the lab's clock (the reality's
-        warm-up), as the camera reports it; None without a ``camera.temperature``."""
-        t_s = self.clock.frame_time_s(state.turntable_angle_deg, request.use_case.frame_rate_hz)
-        warm = self.reality.camera.temperature
-        return None if warm is None else illumination_temperature_c(t_s, warm)

@@ -27,18 +27,22 @@ from calibration.rig_material import (
     material_capture_plan,
 )
 from calibration.rig_sequence import (
+    SETTLING_STEPS,
     RigCalibration,
     RigCalibrationPlan,
     fit_rig_calibration,
     rig_capture_plan,
+    split_after_settling,
 )
+from calibration.rig_settling import settling_to_wait_out
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
 from drivers.rig import Rig, RigState
 from service.lab.settling import settled_moves, unsettled_moves
 from sim_core.materials import Material
 from sim_core.render import RenderSettings
+from sim_core.scene import build_camera
 from sim_core.scene_spec import SceneSpec
-from sim_core.twin_file import TwinParameters
+from sim_core.twin_file import TurntableParameters, TwinParameters
 
 
 def acquire(
@@ -115,10 +119,24 @@ def run_rig_calibration(
     on ``rig``, fitted by :func:`calibration.rig_sequence.fit_rig_calibration`.
 
     ``spec`` is the nominal scene (camera pose, turntable, solar simulator); its mounted objects
-    are swapped for the board during the sequence and mounted again at the end.
+    are swapped for the board during the sequence and mounted again at the end. The table's
+    ringing, measured by the settling stage, is fitted as soon as its frames are in and waited
+    out after every later move (:func:`calibration.rig_settling.settling_to_wait_out`): a lab
+    that knows how its table rings does not capture the board sweep while it still does.
     """
     plan = plan or RigCalibrationPlan()
-    captures = acquire(rig, operator, rig_capture_plan(plan, spec), progress)
+    capture_plan = rig_capture_plan(plan, spec)
+    first, rest = split_after_settling(capture_plan)
+    captures = acquire(rig, operator, first, progress, total=capture_plan.n_captures)
+    ringing = (settling_to_wait_out(captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]],
+                                    build_camera(spec).intrinsics)
+               if all(name in captures for name in SETTLING_STEPS) else None)
+    settle_for = None if ringing is None else TwinParameters(
+        turntable=TurntableParameters(settling=ringing))
+    done = len(captures)
+    captures |= acquire(rig, operator, rest,
+                        lambda k, n, text: progress(done + k, n, text),
+                        total=capture_plan.n_captures, settle_for=settle_for)
     return fit_rig_calibration(captures, spec, base_dir, plan, rig.camera.use_case, progress,
                                rig_name)
 

@@ -24,9 +24,12 @@ def test_a_turning_campaign_reports_rates_and_edge_errors(tmp_path, monkeypatch)
     assert r["turning_poses_per_min"] > r["stop_and_go_poses_per_min"] > 0
     assert r["settle_wait_s"] > 0
     for pose in r["poses_detail"]:
-        # each frame was taken as the table passed its pose, moving at 10 deg/s: at most a
-        # poll and a frame request later (a few ms here; 0.5 deg would be 50 ms)
-        assert 0.0 <= pose["frame_start_deg"] - pose["turntable_deg"] < 0.5
+        # each frame was taken after the table passed its pose, moving at 10 deg/s, and before
+        # the next pose (10 deg on): the recorded angle is the frame's start, whatever the
+        # latency. That is a poll and a frame request, plus whatever render the simulated
+        # camera has in hand (its frames come at render pace: a few ms on a quiet machine,
+        # 176 ms once with CI's two workers and an install beside it)
+        assert 0.0 <= pose["frame_start_deg"] - pose["turntable_deg"] < 5.0
         assert pose["edges"]["edge_pixels"] > 0 and pose["edges"]["interior_pixels"] > 0
         same = pose["edges_same_pixels"]
         assert same["at_rest"]["edge_pixels"] == same["with_subframes"]["edge_pixels"]

@@ -60,3 +60,39 @@ def test_frames_of_a_ringing_table_differ_until_it_has_settled():
         settled = rendered[-1]
         assert settled["per_step"] is False
         assert settled["rig"]["turntable_angle_deg"] == pytest.approx(5.0, abs=1e-5)
+
+
+def test_an_instant_stage_rings_on_the_lab_clock_until_a_wait_has_settled_it():
+    """A world that rings on the lab's clock (an instant stage): a frame right after a move is
+    rendered per phase step and stamped with the lab's time, the frame period after the last;
+    after a wait on that clock the table is at rest (one render); a stage that rings on its own
+    clock is left to it."""
+    settling = TurntableSettling(amplitude_deg=0.5, frequency_hz=3.0, damping_ratio=0.1)
+    reality = RealityFile(turntable=TurntableParameters(settling=settling))
+    world = _world(reality)
+    world.rings_on_lab_clock = True
+
+    def frame(index: int, angle: float, **state):
+        return world(CameraRequest(UC, index, seed=3, timestamp_s=1.0,
+                                   rig_state=SimulatedRigState(angle, 0.0, False, **state)))
+
+    first = frame(0, 0.0)
+    assert world.last_rendered_per_step is False
+    moved = frame(1, 20.0)  # the move's end is this frame's start: the full amplitude
+    assert world.last_rendered_per_step is True
+    ends_s, signs = world.clock.moves()
+    assert signs.tolist() == [1.0]
+    assert moved.timestamp_s - world._epoch_s == pytest.approx(ends_s[0], abs=1e-6)
+    assert moved.timestamp_s - first.timestamp_s == pytest.approx(
+        1.0 / UC.frame_rate_hz + world.clock.move_duration_s(0.0, 20.0))
+    # a stage with a ringing of its own: the world adds none
+    frame(2, 20.0, stage_rings=True)
+    assert world.last_rendered_per_step is False
+    world.clock.wait(settle_time_s(settling, 1e-4), turntable_angle_deg=20.0)
+    frame(3, 20.0)
+    assert world.last_rendered_per_step is False  # below 1e-3 deg: at rest, one render
+    # a move registered by a wait ends before the wait does
+    world.clock.wait(0.5, turntable_angle_deg=-10.0)
+    assert world.clock.moves()[0][-1] == pytest.approx(world.clock.now_s - 0.5)
+    frame(4, -10.0)
+    assert world.last_rendered_per_step is True  # 0.5 s after the move: still ringing
