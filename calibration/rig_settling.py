@@ -33,7 +33,7 @@ from sim_core.camera import Intrinsics, pixel_to_camera_direction
 from sim_core.errors import InvalidInputError
 from sim_core.raw import RawFrame
 from sim_core.tof import phase_from_phasor
-from sim_core.twin_file import TurntableSettling
+from sim_core.twin_file import MAX_SETTLING_AMPLITUDE_DEG, TurntableSettling
 
 __all__ = ["SETTLING_KEYS", "RigSettling", "board_yaw_deg", "fit_rig_settling", "no_settling",
            "settling_to_wait_out"]
@@ -52,8 +52,6 @@ AMPLITUDE_REASON = (
     "period earlier with the opposite sign fits the same series with a larger amplitude; the "
     "value is the fit's at its own move end (the frequency and damping are what the series "
     "pins down)")
-#: the largest ringing amplitude a settling key holds [deg]
-MAX_WAIT_AMPLITUDE_DEG = 5.0
 #: the least yaw noise taken [deg]: keeps the fit's weights finite for noise-free frames
 MIN_YAW_STD_DEG = 1e-6
 
@@ -172,4 +170,4 @@ def settling_to_wait_out(rest: AveragedCapture, moved: AveragedCapture,
     zeta = fit.settling.damping_ratio
     margin = math.exp(math.pi * zeta / math.sqrt(1.0 - zeta**2))
     return fit.settling.model_copy(update={
-        "amplitude_deg": min(fit.settling.amplitude_deg * margin, MAX_WAIT_AMPLITUDE_DEG)})
+        "amplitude_deg": min(fit.settling.amplitude_deg * margin, MAX_SETTLING_AMPLITUDE_DEG)})

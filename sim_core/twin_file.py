@@ -272,6 +272,10 @@ class IlluminationParameters(_Strict):
     power_w: Annotated[float, Field(gt=0.0, le=1000.0, allow_inf_nan=False)] | None = None
 
 
+#: the largest ringing amplitude ``turntable.settling`` holds [deg]
+MAX_SETTLING_AMPLITUDE_DEG = 5.0
+
+
 class TurntableSettling(_Strict):
     """The table's ringing after every move (issue 27): a damped oscillation of its angle.
 
@@ -281,7 +285,8 @@ class TurntableSettling(_Strict):
     ratio in (0, 1) rings and decays; 0 would ring for ever, 1 and above would not ring.
     """
 
-    amplitude_deg: Annotated[float, Field(ge=0.0, le=5.0, allow_inf_nan=False)]
+    amplitude_deg: Annotated[float, Field(ge=0.0, le=MAX_SETTLING_AMPLITUDE_DEG,
+                                          allow_inf_nan=False)]
     frequency_hz: Annotated[float, Field(ge=0.05, le=500.0, allow_inf_nan=False)]
     damping_ratio: Annotated[float, Field(ge=0.001, le=0.9, allow_inf_nan=False)]
 

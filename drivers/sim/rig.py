@@ -117,6 +117,7 @@ def simulated_rig(
     started: list[Callable[[], None]] = []
     try:
         tt_instant = instant if turntable_instant is None else turntable_instant
+        lab_stage = lab_wait is not None and tt_instant  # an instant stage on the lab's clock
         serial_sims = []
         for device, faults, device_instant in (("turntable", turntable_faults, tt_instant),
                                                ("solar-simulator", solar_faults, instant)):
@@ -143,13 +144,12 @@ def simulated_rig(
             settings=dataclasses.replace(
                 SMC100_SETTINGS, timeout_s=0.5, reconnect_timeout_s=3.0
             ),
-            sleep=(_lab_sleep(lab_wait, tt_sim.models["turntable"])
-                   if lab_wait is not None and tt_instant
+            sleep=(_lab_sleep(lab_wait, tt_sim.models["turntable"]) if lab_stage
                    else _clock_sleep(tt_sim.models["turntable"].clock)),
         )
         turntable.connect()
         started.append(turntable.close)
-        if lab_wait is not None and tt_instant:
+        if lab_stage:
             # the lab's clock knows where the stage starts: its first move is timed from there
             lab_wait(0.0, turntable_angle_deg=tt_sim.models["turntable"].current_position())
         solar = SolarSimulator(
