@@ -7,10 +7,22 @@ and gain calibrated, the twin predicts the amplitude of every pixel for the nomi
 is then ``P / P0``. The power found is *effective*: it absorbs whatever else scales the signal
 and is not calibrated separately (quantum efficiency, fill factor, lens transmittance, the board's
 albedo), which is what the twin needs to reproduce the camera's amplitudes.
+
+Whether the twin explains the squares is judged square by square (:func:`region_agreement`):
+their ratios must agree within their pixels' spread. The twin's geometry is calibrated to a
+tenth of a pixel, not to nothing, and where a square's predicted amplitude has a gradient (the
+illumination's fall-off, the optics' blur near the mask's edge) a tenth of a pixel moves that
+square's ratio by a few 1e-4: as much as its noise. The fit is therefore given the prediction's
+change for a small shift of the image (``image_shift_modes``: the twin rendered with the
+principal point moved), and each mode's pattern over the squares is fitted out before the
+chi-square is taken, one degree of freedom each: a calibration error within its error bars is
+not a model that fails to explain the data, while what no image shift explains (a smooth
+gradient of unmodelled stray light, a wrong reflectance) still is.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +66,9 @@ class SourcePowerResult:
     regions_std_error : float
         Standard error of ``ratio`` from the regions' spread (their standard deviation over
         sqrt(regions)); NaN with fewer than two regions.
+    regions_dof : int
+        The degrees of freedom of ``regions_reduced_chi2``: the regions less one, less one for
+        each image-shift mode fitted out (0 with fewer than two regions).
     """
 
     power_w: float
@@ -64,13 +79,14 @@ class SourcePowerResult:
     n_regions: int = 0
     regions_reduced_chi2: float = float("nan")
     regions_std_error: float = float("nan")
+    regions_dof: int = 0
 
     def to_dict(self) -> dict:
         return {"power_w": self.power_w, "ratio": self.ratio,
                 "ratio_std_error": self.ratio_std_error,
                 "residual_rel_rms": self.residual_rel_rms, "n_pixels": self.n_pixels,
                 "n_regions": self.n_regions, "regions_reduced_chi2": self.regions_reduced_chi2,
-                "regions_std_error": self.regions_std_error}
+                "regions_std_error": self.regions_std_error, "regions_dof": self.regions_dof}
 
 
 def white_square_mask(predicted_amplitude: np.ndarray) -> np.ndarray:
@@ -94,6 +110,7 @@ def fit_source_power(
     predicted_amplitude: np.ndarray,
     nominal_power_w: float,
     mask: np.ndarray | None = None,
+    image_shift_modes: Sequence[np.ndarray] = (),
 ) -> SourcePowerResult:
     """Effective power from measured and predicted amplitudes (both DN, same geometry).
 
@@ -108,6 +125,9 @@ def fit_source_power(
         Source power the prediction was made with [W].
     mask : (H, W) bool, optional
         Pixels to use; default :func:`white_square_mask` of the prediction.
+    image_shift_modes : sequence of (H, W) float
+        The predicted amplitude's change [DN] for a small shift of the image each (module
+        docstring), fitted out of the regions' ratios before their chi-square; none by default.
 
     Raises
     ------
@@ -136,28 +156,40 @@ def fit_source_power(
     if not ratio > 0.0:
         raise InvalidInputError("photometry", "the measured amplitude on the white squares is 0")
     mad = float(np.median(np.abs(r - ratio)))
-    n_regions, chi2, regions_se = region_agreement(m / np.where(use, p, 1.0), use, ratio)
+    relative_modes = [np.asarray(d, dtype=np.float64) / np.where(use, p, 1.0)
+                      for d in image_shift_modes]
+    n_regions, chi2, regions_se, dof = region_agreement(m / np.where(use, p, 1.0), use, ratio,
+                                                        relative_modes)
     return SourcePowerResult(
         power_w=nominal_power_w * ratio,
         ratio=ratio,
         ratio_std_error=1.4826 * mad / np.sqrt(n),
         residual_rel_rms=float(np.sqrt(np.mean((r / ratio - 1.0) ** 2))),
         n_pixels=n, n_regions=n_regions, regions_reduced_chi2=chi2,
-        regions_std_error=regions_se,
+        regions_std_error=regions_se, regions_dof=dof,
     )
 
 
-def region_agreement(ratio_image: np.ndarray, use: np.ndarray, ratio: float
-                     ) -> tuple[int, float, float]:
+def region_agreement(ratio_image: np.ndarray, use: np.ndarray, ratio: float,
+                     relative_modes: Sequence[np.ndarray] = ()
+                     ) -> tuple[int, float, float, int]:
     """How the connected regions of ``use`` agree on ``ratio``: their count, the reduced
     chi-square of their medians about it (each median's standard error 1.4826 MAD / sqrt(n),
-    1.2533 sigma / sqrt(n) for a median of Gaussian values) and the standard error of the ratio
-    from their spread. Regions under :data:`MIN_REGION_PIXELS` pixels are left out; with fewer
-    than two regions the last two are NaN."""
+    1.2533 sigma / sqrt(n) for a median of Gaussian values), the standard error of the ratio
+    from their spread, and the chi-square's degrees of freedom. Regions under
+    :data:`MIN_REGION_PIXELS` pixels are left out; with fewer than two regions the chi-square
+    and the standard error are NaN (0 degrees of freedom).
+
+    ``relative_modes``: patterns of the prediction's relative change (each (H, W), taken as a
+    region's median) fitted out of the medians by weighted least squares before the chi-square,
+    one degree of freedom each; a mode is left out when the regions are too few to leave a
+    degree of freedom after it.
+    """
     labels, n_labels = ndimage.label(use)
-    meds, ses = [], []
+    meds, ses, cols = [], [], []
     for k in range(1, n_labels + 1):
-        r = ratio_image[labels == k]
+        inside = labels == k
+        r = ratio_image[inside]
         if r.size < MIN_REGION_PIXELS:
             continue
         med = float(np.median(r))
@@ -165,8 +197,21 @@ def region_agreement(ratio_image: np.ndarray, use: np.ndarray, ratio: float
         meds.append(med)
         # a region of identical values has MAD 0: its error is that of the ratio's last digit
         ses.append(max(1.2533 * 1.4826 * mad / np.sqrt(r.size), 1e-12 * max(abs(med), 1.0)))
+        # the ratio measured / (predicted + b mode) moves by -ratio b (mode / predicted)
+        cols.append([ratio * float(np.median(mode[inside])) for mode in relative_modes])
     if len(meds) < 2:
-        return len(meds), float("nan"), float("nan")
+        return len(meds), float("nan"), float("nan"), 0
     med_a, se_a = np.asarray(meds), np.asarray(ses)
-    chi2 = float(np.sum(((med_a - ratio) / se_a) ** 2) / (med_a.size - 1))
-    return med_a.size, chi2, float(np.std(med_a, ddof=1) / np.sqrt(med_a.size))
+    resid = med_a - ratio
+    n_modes = min(len(relative_modes), med_a.size - 2)
+    if n_modes > 0:
+        a = np.asarray(cols)[:, :n_modes] / se_a[:, None]
+        finite = np.all(np.isfinite(a), axis=0)
+        a = a[:, finite]
+        if a.shape[1]:
+            coef, *_ = np.linalg.lstsq(a, resid / se_a, rcond=None)
+            resid = resid - (a @ coef) * se_a
+        n_modes = a.shape[1]
+    dof = med_a.size - 1 - n_modes
+    chi2 = float(np.sum((resid / se_a) ** 2) / dof)
+    return med_a.size, chi2, float(np.std(med_a, ddof=1) / np.sqrt(med_a.size)), dof

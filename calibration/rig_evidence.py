@@ -141,8 +141,9 @@ def other_verdicts(noise, power, solar) -> dict[str, Verdict]:
     out["illumination.power_w"] = relative_verdict(
         power.power_w, power.power_w * math.hypot(ratio_rel, gain_rel), POWER_REL,
         StageEvidence(chi2, f"the source power: {power.n_regions} white squares' ratios of "
-                            "measured to predicted amplitude against one another",
-                      dof=max(power.n_regions - 1, 1)), " W")
+                            "measured to predicted amplitude against one another (a small "
+                            "shift of the twin's image fitted out)",
+                      dof=max(power.regions_dof, 1)), " W")
     if solar is not None:
         if solar.method == "frames":
             scale = solar.irradiance_scale

@@ -560,7 +560,9 @@ def fit_rig_calibration(
     progress(done, total, "source power")
     nominal_power = spec.illumination.power_w
     pred = predict_view(twin_spec, base, partial, stack.turntable_angle_deg)
-    power = fit_source_power(stack.amplitude, pred.frame().image.amplitude, nominal_power)
+    shifted = _image_shifted_predictions(twin_spec, base, partial, stack.turntable_angle_deg)
+    power = fit_source_power(stack.amplitude, pred.frame().image.amplitude, nominal_power,
+                             image_shift_modes=_shift_modes(pred, shifted))
     results["photometry"] = power
     # 7. solar simulator, and the camera's stray light from the same frames ------------------
     solar, stray = None, None
@@ -577,10 +579,12 @@ def fit_rig_calibration(
             if stray.significant:
                 # The source power's white squares lose the stray light's share too: the power
                 # again, through the optics as fitted.
+                optics = stray.stray_light()
                 power = fit_source_power(
-                    stack.amplitude,
-                    pred.with_stray_light(stray.stray_light()).frame().image.amplitude,
-                    nominal_power)
+                    stack.amplitude, pred.with_stray_light(optics).frame().image.amplitude,
+                    nominal_power, image_shift_modes=_shift_modes(
+                        pred.with_stray_light(optics),
+                        [p.with_stray_light(optics) for p in shifted]))
                 results["photometry"] = power
             results["stray_light"] = stray
             stray_verdicts = dict(stray.verdicts().items())
@@ -624,6 +628,27 @@ def fit_rig_calibration(
     # why the file has no such key
     verdicts.update_from({k: v for k, v in effects.items() if k not in keys})
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
+
+#: the principal point's step for the source power's image-shift modes [px]: a few times the
+#: calibration's error, small enough for the amplitude to change linearly
+SHIFT_MODE_STEP_PX = 0.25
+
+
+def _image_shifted_predictions(twin_spec, base, partial: TwinParameters, angle_deg: float):
+    """The power view predicted with the image moved by :data:`SHIFT_MODE_STEP_PX` along x and
+    along y (the principal point moved; the same render seed, so the render noise cancels in
+    the difference): :func:`calibration.photometry.fit_source_power`'s image-shift modes."""
+    cam = partial.camera
+    return [predict_view(twin_spec, base, partial.model_copy(update={"camera": cam.model_copy(
+        update={name: getattr(cam, name) + SHIFT_MODE_STEP_PX})}), angle_deg)
+        for name in ("cx_px", "cy_px")]
+
+
+def _shift_modes(pred, shifted) -> list[np.ndarray]:
+    """The predicted amplitude's change [DN] for each image shift."""
+    a = pred.frame().image.amplitude
+    return [p.frame().image.amplitude - a for p in shifted]
+
 
 def _solar_prediction(caps, twin_spec, base, partial: TwinParameters, power_w: float):
     """The twin's view of the solar stage at 1 sun, with the calibrated camera, turntable and

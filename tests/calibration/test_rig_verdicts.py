@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from calibration.board_detection import refine_saddle, saddle_std_px
 from calibration.depth import DepthView, fit_depth_errors
@@ -275,9 +276,49 @@ def test_regions_of_identical_values_are_no_division_by_zero():
     use = np.zeros((10, 30), bool)
     use[2:8, 2:10] = True
     use[2:8, 15:25] = True
-    n, chi2, se = region_agreement(np.ones(use.shape), use, 1.0)
-    assert n == 2 and chi2 == 0.0 and se == 0.0
+    n, chi2, se, dof = region_agreement(np.ones(use.shape), use, 1.0)
+    assert n == 2 and chi2 == 0.0 and se == 0.0 and dof == 1
+    # a mode would leave no degree of freedom: it is not fitted
+    n, chi2, se, dof = region_agreement(np.ones(use.shape), use, 1.0, [np.ones(use.shape)])
+    assert n == 2 and chi2 == 0.0 and dof == 1
     one = use.copy()
     one[:, 12:] = False
-    n, chi2, se = region_agreement(np.ones(use.shape), one, 1.0)
-    assert n == 1 and math.isnan(chi2) and math.isnan(se)
+    n, chi2, se, dof = region_agreement(np.ones(use.shape), one, 1.0)
+    assert n == 1 and math.isnan(chi2) and math.isnan(se) and dof == 0
+
+
+def _blurred_board(shift_px: float, gradient: float = 0.0) -> np.ndarray:
+    """A board of 8 white squares under a lamp's fall-off, blurred by the optics (sigma 1.2
+    px), its image moved right by ``shift_px`` (a quarter pixel's steps), times a vertical
+    gradient of ``gradient`` over the image (unmodelled stray light's kind of shading)."""
+    up = 4
+    r, c = np.mgrid[0: 60 * up, 0: 80 * up] / up
+    white = np.zeros(r.shape, bool)
+    for i in range(8):
+        row, col = divmod(i, 4)
+        white |= ((r >= 6 + 24 * row) & (r < 24 + 24 * row)
+                  & (c >= 4 + 19 * col - shift_px) & (c < 18 + 19 * col - shift_px))
+    falloff = 1.0 - 0.4 * ((c - 20) ** 2 + (r - 30) ** 2) / 2500.0
+    img = ndimage.gaussian_filter(np.where(white, 100.0, 4.0) * falloff, 1.2 * up)
+    img = img.reshape(60, up, 80, up).mean(axis=(1, 3))
+    return img * (1.0 + gradient * (np.arange(60)[:, None] - 30) / 30)
+
+
+def test_a_calibrated_image_shift_is_fitted_out_and_stray_shading_is_not():
+    """The twin's image a fifth of a pixel off (a calibration within its error bars): the
+    squares disagree beyond their noise until the prediction's shift modes are fitted out;
+    a vertical gradient (unexplained shading) stays unexplained with them."""
+    rng = np.random.default_rng(3)
+    pred = _blurred_board(0.0)
+    modes = [_blurred_board(0.25) - pred]
+    noise = rng.normal(0.0, 0.05, pred.shape)
+    meas = _blurred_board(-0.25) + noise
+    plain = fit_source_power(meas, pred, 1.0)
+    fitted = fit_source_power(meas, pred, 1.0, image_shift_modes=modes)
+    assert plain.regions_reduced_chi2 > chi2_limit_for(plain.regions_dof)
+    assert fitted.regions_dof == plain.regions_dof - 1
+    assert fitted.regions_reduced_chi2 < chi2_limit_for(fitted.regions_dof)
+    assert fitted.power_w == plain.power_w  # the estimate is the pixels' median either way
+    shaded = fit_source_power(_blurred_board(0.0, gradient=0.01) + noise, pred, 1.0,
+                              image_shift_modes=modes)
+    assert shaded.regions_reduced_chi2 > chi2_limit_for(shaded.regions_dof)
