@@ -5,8 +5,10 @@ Code under test never sees these: it gets frames from the simulated lab built wi
 
 from __future__ import annotations
 
+import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -190,3 +192,23 @@ def with_world_effects(reality: RealityFile, seed: int) -> RealityFile:
     data = with_camera_effects(reality, seed).model_dump(mode="json", exclude_defaults=True)
     data.setdefault("turntable", {})["settling"] = random_settling(seed)
     return parse_reality(data)
+
+
+def resumable_sweep(seeds: str, out: Path, run_seed: Callable[[int, Path], dict],
+                    table: Callable[[list[dict]], str]) -> list[dict]:
+    """Issue 27's sweeps (``tests.calibration.verdict_sweep``, ``rig_sweep``): ``run_seed`` for
+    every seed of ``seeds`` (seeds and ranges, as :func:`reality_seeds` reads them) into
+    ``out/<seed>``, each line of ``table`` printed as its seed ends; a seed whose
+    ``summary.json`` exists is read, not run again. The summaries, in the seeds' order."""
+    summaries: list[dict] = []
+    os.environ["TOFTWIN_SWEEP_SEEDS"] = seeds
+    for seed in reality_seeds([], variable="TOFTWIN_SWEEP_SEEDS"):
+        path = out / str(seed) / "summary.json"
+        if path.exists():
+            summaries.append(json.loads(path.read_text()))
+        else:
+            summaries.append(run_seed(seed, out / str(seed)))
+        print(table(summaries[-1:]).splitlines()[-1], flush=True)
+    print(table(summaries))
+    return summaries
+

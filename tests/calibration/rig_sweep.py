@@ -20,14 +20,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from tests.calibration.realities import random_reality, reality_seeds, with_world_effects
+from tests.calibration.realities import random_reality, resumable_sweep, with_world_effects
 from tests.calibration.rig_truth import EFFECT_TARGETS_REL, key_figures
 
 #: beyond this many standard deviations a determined key must be within its target
@@ -116,16 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", default="201-220", help="seeds and ranges, e.g. 201-220,230")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
-    os.environ["TOFTWIN_SWEEP_SEEDS"] = args.seeds
-    summaries = []
-    for seed in reality_seeds([], variable="TOFTWIN_SWEEP_SEEDS"):
-        path = args.out / str(seed) / "summary.json"
-        if path.exists():
-            summaries.append(json.loads(path.read_text()))
-        else:
-            summaries.append(run_seed(seed, args.out / str(seed)))
-        print(table(summaries[-1:]).splitlines()[-1], flush=True)
-    print(table(summaries))
+    summaries = resumable_sweep(args.seeds, args.out, run_seed, table)
     bad = any(confident_wrong(r) or effect_off_target(r) for s in summaries for r in s["rows"])
     return 1 if bad else 0
 

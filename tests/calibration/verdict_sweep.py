@@ -32,7 +32,7 @@ from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import (
     perfect_calibration,
     random_reality,
-    reality_seeds,
+    resumable_sweep,
     with_world_effects,
 )
 from tests.sim_core.scenes import EXAMPLES
@@ -159,16 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--toftwin", default=str(Path(sys.executable).with_name("toftwin")))
     args = parser.parse_args(argv)
-    os.environ["TOFTWIN_SWEEP_SEEDS"] = args.seeds
-    summaries = []
-    for seed in reality_seeds([], variable="TOFTWIN_SWEEP_SEEDS"):
-        path = args.out / str(seed) / "summary.json"
-        if path.exists():
-            summaries.append(json.loads(path.read_text()))
-        else:
-            summaries.append(run_seed(seed, args.out / str(seed), args.toftwin))
-        print(table(summaries[-1:]).splitlines()[-1], flush=True)
-    print(table(summaries))
+    summaries = resumable_sweep(args.seeds, args.out,
+                                lambda seed, out: run_seed(seed, out, args.toftwin), table)
     return 1 if any(confident_wrong(r) for s in summaries for r in s["rows"]) else 0
 
 
