@@ -561,8 +561,8 @@ def fit_rig_calibration(
     nominal_power = spec.illumination.power_w
     pred = predict_view(twin_spec, base, partial, stack.turntable_angle_deg)
     shifted = _image_shifted_predictions(twin_spec, base, partial, stack.turntable_angle_deg)
-    power = fit_source_power(stack.amplitude, pred.frame().image.amplitude, nominal_power,
-                             image_shift_modes=_shift_modes(pred, shifted))
+    amplitude, modes = _power_prediction(pred, shifted)
+    power = fit_source_power(stack.amplitude, amplitude, nominal_power, image_shift_modes=modes)
     results["photometry"] = power
     # 7. solar simulator, and the camera's stray light from the same frames ------------------
     solar, stray = None, None
@@ -580,11 +580,10 @@ def fit_rig_calibration(
                 # The source power's white squares lose the stray light's share too: the power
                 # again, through the optics as fitted.
                 optics = stray.stray_light()
-                power = fit_source_power(
-                    stack.amplitude, pred.with_stray_light(optics).frame().image.amplitude,
-                    nominal_power, image_shift_modes=_shift_modes(
-                        pred.with_stray_light(optics),
-                        [p.with_stray_light(optics) for p in shifted]))
+                amplitude, modes = _power_prediction(
+                    pred.with_stray_light(optics), [p.with_stray_light(optics) for p in shifted])
+                power = fit_source_power(stack.amplitude, amplitude, nominal_power,
+                                         image_shift_modes=modes)
                 results["photometry"] = power
             results["stray_light"] = stray
             stray_verdicts = dict(stray.verdicts().items())
@@ -629,6 +628,7 @@ def fit_rig_calibration(
     verdicts.update_from({k: v for k, v in effects.items() if k not in keys})
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
 
+
 #: the principal point's step for the source power's image-shift modes [px]: a few times the
 #: calibration's error, small enough for the amplitude to change linearly
 SHIFT_MODE_STEP_PX = 0.25
@@ -644,10 +644,11 @@ def _image_shifted_predictions(twin_spec, base, partial: TwinParameters, angle_d
         for name in ("cx_px", "cy_px")]
 
 
-def _shift_modes(pred, shifted) -> list[np.ndarray]:
-    """The predicted amplitude's change [DN] for each image shift."""
+def _power_prediction(pred, shifted) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The power view's predicted amplitude [DN] and its change for each image shift (each
+    prediction exposed once)."""
     a = pred.frame().image.amplitude
-    return [p.frame().image.amplitude - a for p in shifted]
+    return a, [p.frame().image.amplitude - a for p in shifted]
 
 
 def _solar_prediction(caps, twin_spec, base, partial: TwinParameters, power_w: float):

@@ -39,8 +39,15 @@ def reality_seeds(default: Sequence[int], variable: str = SEEDS_VARIABLE) -> lis
     [1, 2]
     """
     text = os.environ.get(variable, "").strip()
-    if not text:
-        return list(default)
+    return parse_seeds(text, variable) if text else list(default)
+
+
+def parse_seeds(text: str, field: str = "--seeds") -> list[int]:
+    """Seeds and ranges (``151-160,171``) as a list; an error naming ``field`` otherwise.
+
+    >>> parse_seeds("3-5,9")
+    [3, 4, 5, 9]
+    """
     seeds: list[int] = []
     for part in text.split(","):
         lo, _, hi = part.strip().partition("-")
@@ -48,9 +55,9 @@ def reality_seeds(default: Sequence[int], variable: str = SEEDS_VARIABLE) -> lis
             first, last = int(lo), int(hi or lo)
         except ValueError:
             raise ValueError(
-                f"{variable}: {part!r} is not a seed or a range like 151-160") from None
+                f"{field}: {part!r} is not a seed or a range like 151-160") from None
         if not 0 <= first <= last or last - first > 10_000:
-            raise ValueError(f"{variable}: {part!r} is not an increasing range of seeds >= 0")
+            raise ValueError(f"{field}: {part!r} is not an increasing range of seeds >= 0")
         seeds.extend(range(first, last + 1))
     return seeds
 
@@ -197,12 +204,11 @@ def with_world_effects(reality: RealityFile, seed: int) -> RealityFile:
 def resumable_sweep(seeds: str, out: Path, run_seed: Callable[[int, Path], dict],
                     table: Callable[[list[dict]], str]) -> list[dict]:
     """Issue 27's sweeps (``tests.calibration.verdict_sweep``, ``rig_sweep``): ``run_seed`` for
-    every seed of ``seeds`` (seeds and ranges, as :func:`reality_seeds` reads them) into
+    every seed of ``seeds`` (seeds and ranges, :func:`parse_seeds`) into
     ``out/<seed>``, each line of ``table`` printed as its seed ends; a seed whose
     ``summary.json`` exists is read, not run again. The summaries, in the seeds' order."""
     summaries: list[dict] = []
-    os.environ["TOFTWIN_SWEEP_SEEDS"] = seeds
-    for seed in reality_seeds([], variable="TOFTWIN_SWEEP_SEEDS"):
+    for seed in parse_seeds(seeds):
         path = out / str(seed) / "summary.json"
         if path.exists():
             summaries.append(json.loads(path.read_text()))
@@ -211,4 +217,3 @@ def resumable_sweep(seeds: str, out: Path, run_seed: Callable[[int, Path], dict]
         print(table(summaries[-1:]).splitlines()[-1], flush=True)
     print(table(summaries))
     return summaries
-

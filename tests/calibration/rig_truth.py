@@ -159,7 +159,7 @@ def _depth_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
     sum acts in the twin, so both sides are held to one convention, the plain mean over the
     pixels seen, before they are compared. (Moving only the truth's mean charged a faint
     camera's fit, reality 201, 1.2 mm of a weighting convention: its total depth error over the
-    pixels seen was 0.2 mm mid-span.)"""
+    pixels seen was about 0.1 mm mid-span.)"""
     depth = result.results["depth"]
     v = result.verdicts
     seen = depth.pixels_seen
