@@ -5,6 +5,7 @@ Code under test never sees these: it gets frames from the simulated lab built wi
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 from collections.abc import Callable, Sequence
@@ -217,3 +218,20 @@ def resumable_sweep(seeds: str, out: Path, run_seed: Callable[[int, Path], dict]
         print(table(summaries[-1:]).splitlines()[-1], flush=True)
     print(table(summaries))
     return summaries
+
+
+def sweep_main(argv: list[str] | None, description: str, table: Callable[[list[dict]], str],
+               failed: Callable[[dict], bool],
+               run_seed_of: Callable[[argparse.Namespace], Callable[[int, Path], dict]],
+               more_arguments: Callable[[argparse.ArgumentParser], None] | None = None) -> int:
+    """A sweep's command line (``--seeds``, ``--out`` and ``more_arguments``'s):
+    :func:`resumable_sweep` with the seed runner ``run_seed_of`` makes from the arguments; exit
+    status 1 when ``failed`` holds for any row of any seed."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--seeds", default="201-220", help="seeds and ranges, e.g. 201-220,230")
+    parser.add_argument("--out", type=Path, required=True)
+    if more_arguments is not None:
+        more_arguments(parser)
+    args = parser.parse_args(argv)
+    summaries = resumable_sweep(args.seeds, args.out, run_seed_of(args), table)
+    return 1 if any(failed(r) for s in summaries for r in s["rows"]) else 0

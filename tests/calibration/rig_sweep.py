@@ -17,7 +17,6 @@ Not a test (each seed takes 5-8 minutes): a command, ``python -m tests.calibrati
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import time
@@ -26,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from tests.calibration.realities import random_reality, resumable_sweep, with_world_effects
+from tests.calibration.realities import random_reality, sweep_main, with_world_effects
 from tests.calibration.rig_truth import EFFECT_TARGETS_REL, key_figures
 
 #: beyond this many standard deviations a determined key must be within its target
@@ -111,14 +110,8 @@ def table(summaries: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="201-220", help="seeds and ranges, e.g. 201-220,230")
-    parser.add_argument("--out", type=Path, required=True)
-    args = parser.parse_args(argv)
-    summaries = resumable_sweep(args.seeds, args.out, run_seed, table)
-    bad = any(confident_wrong(r) or effect_off_target(r) for s in summaries for r in s["rows"])
-    return 1 if bad else 0
-
+    return sweep_main(argv, __doc__.splitlines()[0], table,
+                      lambda r: confident_wrong(r) or effect_off_target(r), lambda args: run_seed)
 
 if __name__ == "__main__":
     raise SystemExit(main())

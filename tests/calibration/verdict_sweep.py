@@ -32,7 +32,7 @@ from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import (
     perfect_calibration,
     random_reality,
-    resumable_sweep,
+    sweep_main,
     with_world_effects,
 )
 from tests.sim_core.scenes import EXAMPLES
@@ -154,15 +154,12 @@ def table(summaries: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="201-220", help="seeds and ranges, e.g. 201-220,230")
-    parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--toftwin", default=str(Path(sys.executable).with_name("toftwin")))
-    args = parser.parse_args(argv)
-    summaries = resumable_sweep(args.seeds, args.out,
-                                lambda seed, out: run_seed(seed, out, args.toftwin), table)
-    return 1 if any(confident_wrong(r) for s in summaries for r in s["rows"]) else 0
+    def toftwin_argument(parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--toftwin", default=str(Path(sys.executable).with_name("toftwin")))
 
+    return sweep_main(argv, __doc__.splitlines()[0], table, confident_wrong,
+                      lambda args: lambda seed, out: run_seed(seed, out, args.toftwin),
+                      toftwin_argument)
 
 if __name__ == "__main__":
     raise SystemExit(main())
