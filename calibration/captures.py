@@ -11,11 +11,12 @@ needs them (the noise stacks).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from sim_core.errors import InvalidInputError
+from sim_core.optics import StrayLight
 from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.tof import phase_from_phasor
 from sim_core.twin_file import CameraTemperature
@@ -118,6 +119,28 @@ def average_frames(frames: list[RawFrame], keep_frames: bool = False) -> Average
         frames=tuple(frames) if keep_frames else (),
         illumination_temperature_c=_mean_temperature_c(frames),
     )
+
+
+def without_stray_light(capture: AveragedCapture, stray: StrayLight) -> AveragedCapture:
+    """The capture with the calibrated stray light taken out of its phasors
+    (:meth:`sim_core.optics.StrayLight.remove` on each frequency's ``C0 - C2`` and ``C3 - C1``,
+    each pair's sum kept), its amplitude and phase again from them (seed eqs. 4-5).
+
+    The pixels' DN are proportional to the irradiance on the sensor, where the light scatters,
+    so the images are unweighted. The camera's own phase errors act after the stray light
+    (:func:`sim_core.pipeline.sensor_light`); a phase common to all pixels (offset, warm-up drift)
+    commutes with it, the rest (wiggling, fixed pattern) only as far as it varies over the
+    kernel: the stray light's share is removed to first order in that variation. The intensity,
+    the noise's own measure, stays as measured."""
+    c = np.asarray(capture.phase_images, dtype=np.float64)  # (n_f, 4, H, W)
+    real = stray.remove(c[:, 0] - c[:, 2])
+    imag = stray.remove(c[:, 3] - c[:, 1])
+    mean02, mean13 = 0.5 * (c[:, 0] + c[:, 2]), 0.5 * (c[:, 3] + c[:, 1])
+    cleaned = np.stack([mean02 + 0.5 * real, mean13 - 0.5 * imag, mean02 - 0.5 * real,
+                        mean13 + 0.5 * imag], axis=1)
+    phasor = real - 1j * imag
+    return replace(capture, phase_images=cleaned, amplitude=0.5 * np.abs(phasor[0]),
+                   phase_rad=phase_from_phasor(phasor))
 
 
 def _mean_temperature_c(frames: list[RawFrame]) -> float | None:

@@ -259,3 +259,40 @@ class StrayLight:
         norm = gy.sum(axis=0)[:, None] * gx.sum(axis=0)[None, :]
         spread = gy @ (image * (weight / norm)) @ gx / weight  # weight > 0: checked above
         return (1.0 - self.fraction) * image + self.fraction * spread
+
+    def remove(self, image: np.ndarray, to_irradiance: np.ndarray | None = None) -> np.ndarray:
+        """``image`` (..., H, W), real or complex, with the stray light taken out: the exact
+        inverse of :meth:`apply` (same ``to_irradiance``), for a fraction below 1.
+
+        As irradiance ``J = image * to_irradiance``, :meth:`apply` is ``J' = (1 - f) J + f A J B``
+        with ``A = G_y D_y^-1`` and ``B = D_x^-1 G_x`` (``D`` the diagonal of the column sums
+        ``N``). Each is similar to the symmetric ``D^-1/2 G D^-1/2``, whose eigenvalues lie in
+        [0, 1] (a Gaussian kernel's Gram matrix is positive semi-definite and ``A`` is column
+        stochastic), so in their eigenbases ``J'`` is ``J`` times ``(1 - f) + f a_i b_j >= 1 - f``
+        element by element: the division is safe for every fraction below 1, and a fraction of 1
+        (every pixel's own light gone) is refused.
+        """
+        if self.fraction == 0.0 or self.radius_px == 0.0:
+            return image  # apply() leaves such an image as it is
+        if self.fraction >= 1.0:
+            raise ValueError("stray light fraction = 1 cannot be removed: no pixel keeps any of "
+                             "its own light (allowed: [0, 1))")
+        h, w = image.shape[-2:]
+        weight = np.ones((h, w)) if to_irradiance is None else np.asarray(to_irradiance)
+        if weight.shape != (h, w) or not np.all(weight > 0.0):
+            raise ValueError(f"to_irradiance must be a positive ({h}, {w}) array")
+        a_val, p_y, p_y_inv = _column_stochastic_eigen(self.kernel_1d(h))  # A = P_y a P_y^-1
+        b_val, p_x, p_x_inv = _column_stochastic_eigen(self.kernel_1d(w))  # B = P_x^-T b P_x^T
+        k = p_y_inv @ (image * weight) @ p_x_inv.T
+        k = k / ((1.0 - self.fraction) + self.fraction * np.multiply.outer(a_val, b_val))
+        return (p_y @ k @ p_x.T) / weight  # weight > 0: checked above
+
+
+def _column_stochastic_eigen(g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``G D^-1 = P diag(lam) P^-1`` for a symmetric positive semi-definite ``G`` with
+    positive column sums ``D`` (:meth:`StrayLight.kernel_1d`, whose diagonal is 1, so each sum
+    is at least 1): ``(lam, P, P^-1)``, ``lam`` clipped to [0, 1] against rounding."""
+    d = g.sum(axis=0)  # >= g[j, j] = 1
+    root = np.sqrt(d)
+    lam, q = np.linalg.eigh(g / np.outer(root, root))
+    return np.clip(lam, 0.0, 1.0), root[:, None] * q, q.T / root[None, :]

@@ -89,6 +89,32 @@ def test_stray_light_pulls_a_dark_pixels_range_towards_a_bright_one():
     assert np.median(pulled) > 0.02  # tens of mm nearer: towards the panel at ~0.8 m
 
 
+@settings(max_examples=60, deadline=None)
+@given(fraction=st.floats(0.0, 0.95), radius=radii, low=st.floats(1e-3, 1.0),
+       shape=st.tuples(st.integers(1, 12), st.integers(1, 12)), seed=st.integers(0, 2**16))
+def test_removing_the_stray_light_gives_back_the_image_it_was_added_to(fraction, radius, low,
+                                                                       shape, seed):
+    rng = np.random.default_rng(seed)
+    z = rng.exponential(size=(2, *shape)) * np.exp(1j * rng.uniform(0, 6.3, size=(2, *shape)))
+    weight = np.linspace(low, 1.0, z[0].size).reshape(shape)
+    s = StrayLight(fraction, radius)
+    back = s.remove(s.apply(z, weight), weight)
+    assert np.all(np.isfinite(back))
+    # (1 - f) + f a b >= 1 - f: rounding grows at most like 1 / (1 - f)
+    np.testing.assert_allclose(back, z, atol=1e-9 / (1.0 - fraction))
+
+
+def test_removing_refuses_what_cannot_be_undone():
+    img = np.ones((6, 8))
+    assert StrayLight(0.0, 40.0).remove(img) is img
+    assert StrayLight(0.3, 0.0).remove(img) is img
+    # every pixel's light spread away, none of its own left: not invertible
+    with pytest.raises(ValueError, match=r"fraction = 1 .*\[0, 1\)"):
+        StrayLight(1.0, 3.0).remove(img)
+    with pytest.raises(ValueError, match="to_irradiance"):
+        StrayLight(0.1, 3.0).remove(img, np.zeros((6, 8)))
+
+
 @settings(max_examples=40, deadline=None)
 @given(image=images, fraction=st.floats(0.0, 1.0), radius=radii,
        low=st.floats(1e-3, 1.0))
