@@ -32,7 +32,7 @@ import numpy as np
 from sim_core.camera import Camera
 from sim_core.constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
 from sim_core.errors import InvalidInputError
-from sim_core.noise import safe_poisson
+from sim_core.noise import clipped_normal_mean, safe_poisson
 from sim_core.optics import pixel_irradiance_w_m2
 from sim_core.raw import PHASE_OFFSETS_RAD, RawFrame
 
@@ -188,7 +188,8 @@ def expose(
     rng: np.random.Generator | None,
     meta: dict | None = None,
 ) -> RawFrame:
-    """Tap charges with noise, SBI, saturation and ADC; ``rng=None`` gives the noise-free frame.
+    """Tap charges with noise, SBI, saturation and ADC; ``rng=None`` gives the noise-free frame:
+    the noisy frames' mean (the readout's clipping of the noise at 0 included), unquantised.
 
     Returns a :class:`RawFrame` in DN (taps and their differences).
     """
@@ -216,6 +217,13 @@ def expose(
     if rng is not None and sensor.read_noise_e > 0.0:
         a = a + sensor.read_noise_e * rng.standard_normal(a.shape)
         b = b + sensor.read_noise_e * rng.standard_normal(b.shape)
+    elif sensor.read_noise_e > 0.0:
+        # The noise-free frame is the noisy frames' mean: read noise lets a dim tap go below 0,
+        # where the readout clips it, so a dim tap reads more than its charge on average and a
+        # dim pixel's A - B less (3 % of a 28 DN pixel's amplitude at 48 e- read noise). Shot
+        # and read noise as one normal distribution, censored at 0.
+        a = clipped_normal_mean(a, np.sqrt(np.maximum(a, 0.0) + sensor.read_noise_e**2))
+        b = clipped_normal_mean(b, np.sqrt(np.maximum(b, 0.0) + sensor.read_noise_e**2))
     saturated = np.any((a >= sensor.full_well_e) | (b >= sensor.full_well_e), axis=(0, 1))
     a = np.clip(a, 0.0, sensor.full_well_e)
     b = np.clip(b, 0.0, sensor.full_well_e)

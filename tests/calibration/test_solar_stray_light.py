@@ -140,8 +140,12 @@ def test_the_intensities_at_several_levels_are_the_frames_own(sun1):
     for bad in (-0.5, math.nan):
         with pytest.raises(ValueError, match="active_scale"):
             seen.intensities([1.0], bad)
-    # the camera's own light doubled, no ambient: twice its share of the intensity (the dark
-    # signal stays; below saturation)
-    zero, one, two = (seen.intensities([0.0], a)[0] for a in (0.0, 1.0, 2.0))
-    low = (one - zero > 5.0) & (two < 0.5 * 4095)
-    assert np.allclose(two[low] - zero[low], 2.0 * (one[low] - zero[low]), rtol=1e-3)
+    # the camera's own light, no ambient, in equal steps: equal steps of the intensity (below
+    # saturation, and above the dim taps whose read noise the readout clips at 0: with no light
+    # at all a pixel reads the clipped noise's mean, not its dark signal)
+    zero, one, two, three = (seen.intensities([0.0], a)[0] for a in (0.0, 1.0, 2.0, 3.0))
+    bright = (one - zero > 100.0) & (three < 0.5 * 4095)
+    assert bright.sum() > 100
+    assert np.allclose(three[bright] - two[bright], two[bright] - one[bright], rtol=1e-3)
+    read_noise_dn = seen.scene.sensor.read_noise_e / seen.scene.sensor.adc_gain_e_per_dn
+    assert np.all(zero >= read_noise_dn / np.sqrt(2.0 * np.pi) - 1e-9)

@@ -18,7 +18,7 @@ from hypothesis.extra import numpy as hnp
 
 from sim_core.camera import F_60_24_MHZ
 from sim_core.constants import SPEED_OF_LIGHT_M_S
-from sim_core.noise import NORMAL_APPROX_MEAN, safe_poisson
+from sim_core.noise import NORMAL_APPROX_MEAN, clipped_normal_mean, safe_poisson
 from sim_core.raw import reconstruct_raw
 from sim_core.sensor import PixelElectrons, SensorParams, expose
 from tests.hard_cases.helpers import build, camera
@@ -86,6 +86,31 @@ def test_safe_poisson_of_any_finite_mean_is_finite_nonnegative_and_zero_for_no_l
 # -------------------------------------------------------------------------------------------
 electron_counts = st.floats(0.0, 1e15) | st.sampled_from([0.0, 5e-324, 36_500.0, 1e5, 5e5])
 
+
+
+@settings(max_examples=200, deadline=None)
+@given(mean=st.floats(-1e12, 1e12), std=st.one_of(st.just(0.0), st.floats(1e-300, 1e12)))
+def test_the_clipped_readouts_mean_is_finite_and_bounded_at_every_edge(mean, std):
+    m = float(clipped_normal_mean(np.array(mean), np.array(std)))
+    assert math.isfinite(m)
+    # never below the charge or 0, never above either by more than the noise's own mean |X|
+    assert m >= max(mean, 0.0) * (1 - 1e-12)
+    assert m <= max(mean, 0.0) + std / math.sqrt(2 * math.pi) * (1 + 1e-9) + 1e-300
+
+
+@pytest.mark.parametrize(("mean", "std"), [(0.0, 1.0), (1.5, 2.0), (-3.0, 2.0), (40.0, 48.0)])
+def test_the_clipped_readouts_mean_is_the_sampled_one(mean, std):
+    x = np.random.default_rng(1).normal(mean, std, 1_000_000)
+    assert float(clipped_normal_mean(np.array(mean), np.array(std))) == pytest.approx(
+        np.maximum(x, 0.0).mean(), abs=4 * std / 1000)
+    assert float(clipped_normal_mean(np.array(0.0), np.array(std))) == pytest.approx(
+        std / math.sqrt(2 * math.pi), rel=1e-12)
+
+
+@pytest.mark.parametrize("std", [-1.0, math.inf, math.nan])
+def test_the_clipped_readouts_mean_refuses_a_bad_noise(std):
+    with pytest.raises(ValueError, match="standard deviations"):
+        clipped_normal_mean(np.array(1.0), np.array(std))
 
 @st.composite
 def pixel_electrons(draw) -> PixelElectrons:

@@ -61,6 +61,27 @@ def test_noise_free_frame_reconstructs_the_exact_range(camera):
 
 
 
+@pytest.mark.parametrize("active_e", [60.0, 250.0, 1000.0])
+def test_the_noise_free_frame_is_the_noisy_frames_mean_for_dim_pixels_too(active_e, camera):
+    # 48 e- of read noise: the dim taps go below 0 often, where the readout clips them
+    s = SensorParams(read_noise_e=48.0)
+    e = electrons(active_e, shape=(16, 16))
+    clean = expose(e, camera, s, None)
+    frames = repeat(e, camera, s, 400, seed=3)
+    mean = np.mean([f.phase_images.astype(np.float64) for f in frames], axis=0)
+    mean_taps = np.mean([f.taps.astype(np.float64) for f in frames], axis=0)
+    # the standard error of a mean over 400 frames x 256 pixels, a few times over
+    tap_sem = np.std([f.taps for f in frames]) / np.sqrt(400 * 256)
+    np.testing.assert_allclose(mean_taps.mean(axis=(-2, -1)), clean.taps.mean(axis=(-2, -1)),
+                               atol=5 * tap_sem + 0.02)
+    np.testing.assert_allclose(mean.mean(axis=(-2, -1)), clean.phase_images.mean(axis=(-2, -1)),
+                               atol=7 * tap_sem + 0.02)
+    # the clipping takes a dim pixel's amplitude down: the charges' own A - B is larger
+    unclipped = expose(e, camera, SensorParams(read_noise_e=0.0), None)
+    if active_e < 500.0:
+        assert np.abs(clean.phasor()).mean() < np.abs(unclipped.phasor()).mean()
+
+
 # (from tests/hard_cases: the same behaviour as the test above, over a range sweep and with
 # the SBI compensation active at 4e4 e-)
 @pytest.mark.parametrize("active_e", [1e4, 4e4])
