@@ -85,3 +85,36 @@ def test_the_pivot_parameters_and_the_offset_are_inverse(position_m, rotation_de
     back = offset_of(pivot_parameters(offset, lever), lever)
     np.testing.assert_allclose(back[:3], np.asarray(position_m) * 1e3, atol=1e-9)
     np.testing.assert_allclose(back[3:], rotation_deg, atol=1e-12)
+
+
+class Jittery(Quadratic):
+    """:class:`Quadratic` plus a jitter far finer than a difference step: the sample coverage
+    of the silhouettes, which moves in steps as the pose moves."""
+
+    fitted = ("a", "b")
+
+    def __init__(self, a: np.ndarray, x_true: np.ndarray, jitter: float, seed: int) -> None:
+        super().__init__(a, x_true)
+        rng = np.random.default_rng(seed)
+        self.jitter = jitter
+        self.freq = rng.uniform(2e3, 4e3, size=(a.shape[0], a.shape[1]))
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        return super().residual(x) + self.jitter * np.sin(self.freq @ x)
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        return refine._Problem.jacobian(self, x)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_wide_central_differences_do_not_read_a_fine_jitter_as_information(seed):
+    base = _problem(seed)
+    prob = Jittery(base.a, base.x_true, jitter=2e-3, seed=seed)
+    x = base.x_true + 0.01
+    exact = np.diag(base.a.T @ base.a)[:6]
+    narrow = np.diag(prob.jacobian(x).T @ prob.jacobian(x))[:6]
+    wide_j = refine._Problem.wide_jacobian(prob, x)
+    wide = np.diag(wide_j.T @ wide_j)[:6]
+    # the forward differences add the jitter's slope to J^T J; the wide central ones far less
+    assert np.all(np.abs(wide - exact) < np.abs(narrow - exact))
+    np.testing.assert_allclose(wide_j[:, 6:], prob.jacobian(x)[:, 6:])  # the scales as before
