@@ -220,7 +220,7 @@ def expose(
     elif sensor.read_noise_e > 0.0:
         # The noise-free frame is the noisy frames' mean: read noise lets a dim tap go below 0,
         # where the readout clips it, so a dim tap reads more than its charge on average and a
-        # dim pixel's A - B less (3 % of a 28 DN pixel's amplitude at 48 e- read noise). Shot
+        # dim pixel's A - B less (3.3 % of a 28 DN pixel's amplitude at 48 e- read noise). Shot
         # and read noise as one normal distribution, censored at 0.
         a = clipped_normal_mean(a, np.sqrt(np.maximum(a, 0.0) + sensor.read_noise_e**2))
         b = clipped_normal_mean(b, np.sqrt(np.maximum(b, 0.0) + sensor.read_noise_e**2))
