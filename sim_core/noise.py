@@ -10,6 +10,9 @@ from scipy import special
 #: Poisson sampler rejects means above ~9.2e18 (int64) and is slow for huge means, while the
 #: relative error of the normal approximation at 1e7 is below 1e-4 in every moment we use.
 NORMAL_APPROX_MEAN = 1e7
+#: standard deviations above 0 beyond which a clipped readout's mean is its charge's
+#: (:func:`clipped_normal_mean`)
+CENSORED_T = 8.5
 
 
 def safe_poisson(rng: np.random.Generator, mean: np.ndarray) -> np.ndarray:
@@ -44,19 +47,24 @@ def clipped_normal_mean(mean: np.ndarray, std: np.ndarray) -> np.ndarray:
 
     (the mean of a normal distribution censored at 0; ``Phi`` and ``phi`` the standard normal
     distribution and density). It is at least ``max(mu, 0)``, equals ``s / sqrt(2 pi)`` at
-    ``mu = 0`` and tends to ``mu`` once ``mu`` is a few ``s`` above 0. ``std`` 0 gives
-    ``max(mu, 0)`` (no division by it); a negative or non-finite ``std`` is an error.
+    ``mu = 0`` and is ``mu`` to double precision once ``mu`` is :data:`CENSORED_T` ``s`` above 0.
+    ``std`` 0 gives ``max(mu, 0)``; a negative or non-finite ``std`` is an error.
 
     >>> float(clipped_normal_mean(np.array(0.0), np.array(1.0)))  # 1 / sqrt(2 pi)
     0.3989422804014327
     """
-    mu = np.asarray(mean, dtype=np.float64)
-    s = np.asarray(std, dtype=np.float64)
+    mu, s = np.broadcast_arrays(np.asarray(mean, dtype=np.float64),
+                                np.asarray(std, dtype=np.float64))
     if not (np.all(np.isfinite(s)) and np.all(s >= 0.0)):
         raise ValueError("standard deviations must be finite and >= 0")
-    positive = s > 0.0
-    with np.errstate(over="ignore"):  # t = +-inf, t^2 = inf far from 0: Phi 0 or 1, phi 0
-        t = np.where(positive, mu / np.where(positive, s, 1.0), 0.0)
-        density = np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi)
-    censored = mu * special.ndtr(t) + s * density
-    return np.where(positive, np.maximum(censored, np.maximum(mu, 0.0)), np.maximum(mu, 0.0))
+    out = np.array(np.maximum(mu, 0.0), dtype=np.float64)  # an array, 0-d too
+    # Only where mu is less than CENSORED_T standard deviations above 0 does the clipping show
+    # (beyond, s phi(t) - mu (1 - Phi(t)) < 1e-16 mu). There s = 0 only below 0: t = -inf.
+    near = mu < CENSORED_T * s
+    if np.any(near):
+        mu_n, s_n = mu[near], s[near]
+        with np.errstate(over="ignore", divide="ignore"):  # t = -inf, t^2 = inf: Phi, phi 0
+            t = mu_n / s_n
+            density = np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi)
+        out[near] = np.maximum(mu_n * special.ndtr(t) + s_n * density, out[near])
+    return out
