@@ -322,3 +322,20 @@ def test_a_calibrated_image_shift_is_fitted_out_and_stray_shading_is_not():
     shaded = fit_source_power(_blurred_board(0.0, gradient=0.01) + noise, pred, 1.0,
                               image_shift_modes=modes)
     assert shaded.regions_reduced_chi2 > chi2_limit_for(shaded.regions_dof)
+
+
+def test_a_key_predicted_through_a_gain_that_is_not_determined_claims_no_more_than_it():
+    from calibration.rig_evidence import through_gain
+    from calibration.verdicts import Verdict
+
+    power = Verdict("determined", 0.002)
+    bad_gain = Verdict("unexplained", 0.01, "the photon transfer line: reduced chi-square 1.43e+03")
+    out = through_gain(power, bad_gain)
+    assert out.verdict == "unexplained" and out.std == 0.002
+    assert "camera.sensor.adc_gain_e_per_dn" in out.reason and "1.43e+03" in out.reason
+    assert through_gain(power, Verdict("not determined", None, "too few bins")).verdict == (
+        "not determined")
+    # a determined gain leaves the key's own verdict, and a key not determined stays so
+    assert through_gain(power, Verdict("determined", 0.01)) is power
+    own = Verdict("unexplained", 0.002, "its squares disagree")
+    assert through_gain(own, bad_gain) is own
