@@ -76,6 +76,7 @@ from calibration.rig_evidence import (
     corner_radius,
     corner_std_px,
     depth_evidence,
+    depth_through_drift,
     free_stage_chi2,
     other_verdicts,
     reprojection_stage,
@@ -633,6 +634,7 @@ def fit_rig_calibration(
     # the effects' keys not written (not determined), judged all the same: verdicts.json says
     # why the file has no such key
     verdicts.update_from({k: v for k, v in effects.items() if k not in keys})
+    verdicts = depth_through_drift(verdicts)
     return RigCalibration(cal, results, [v for v, _, _ in views], frames_used, verdicts)
 
 

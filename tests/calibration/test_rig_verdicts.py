@@ -339,3 +339,23 @@ def test_a_key_predicted_through_a_gain_that_is_not_determined_claims_no_more_th
     assert through_gain(power, Verdict("determined", 0.01)) is power
     own = Verdict("unexplained", 0.002, "its squares disagree")
     assert through_gain(own, bad_gain) is own
+
+
+def test_the_depth_keys_claim_nothing_while_the_drift_they_are_fitted_without_is_unexplained():
+    from calibration.rig_evidence import depth_through_drift
+    from calibration.verdicts import Verdict, Verdicts
+    from calibration.warmup import DRIFT_KEY
+
+    depth = {"camera.depth.phase_offset_rad": Verdict("determined", 0.03),
+             "camera.depth.wiggling": Verdict("determined", 0.03),
+             "camera.fx_px": Verdict("determined", 0.1)}
+    out = depth_through_drift(Verdicts({**depth, DRIFT_KEY: Verdict(
+        "unexplained", 0.01, "the warm-up sequence: reduced chi-square 3.01")}))
+    assert out["camera.depth.phase_offset_rad"].verdict == "unexplained"
+    assert DRIFT_KEY in out["camera.depth.wiggling"].reason
+    assert out["camera.fx_px"].determined  # not fitted through the drift
+    # no drift above the noise: the depth keys keep their own verdicts
+    calm = depth_through_drift(Verdicts({**depth, DRIFT_KEY: Verdict(
+        "not determined", None, "no drift above the noise")}))
+    assert calm["camera.depth.phase_offset_rad"].determined
+    assert depth_through_drift(Verdicts(depth))["camera.depth.wiggling"].determined
