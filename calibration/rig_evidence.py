@@ -152,16 +152,14 @@ def other_verdicts(noise, power, solar) -> dict[str, Verdict]:
     if solar is not None:
         if solar.method == "frames":
             scale = solar.irradiance_scale
-            out["solar_simulator.irradiance_scale"] = relative_verdict(
+            out["solar_simulator.irradiance_scale"] = through_gain(relative_verdict(
                 scale, scale * math.hypot(solar.std_error / scale, gain_rel), SOLAR_REL,
-                StageEvidence(solar.reduced_chi2, "the solar simulator's intensity response"))
+                StageEvidence(solar.reduced_chi2, "the solar simulator's intensity response")),
+                out[GAIN_KEY])
         else:
             out["solar_simulator.irradiance_scale"] = Verdict(
                 "not determined", None, f"the frames do not determine it ({solar.reason}); the "
                 "value is the reference cell's reading, with the cell's own uncertainty")
-        if solar.method == "frames":
-            out["solar_simulator.irradiance_scale"] = through_gain(
-                out["solar_simulator.irradiance_scale"], out[GAIN_KEY])
     out["illumination.power_w"] = through_gain(out["illumination.power_w"], out[GAIN_KEY])
     return out
 

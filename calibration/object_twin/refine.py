@@ -255,27 +255,25 @@ class _Problem:
             start += n
         return out
 
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """Forward differences of :func:`_steps` (a render per parameter): the solves'."""
+    def jacobian(self, x: np.ndarray, wide: bool = False) -> np.ndarray:
+        """Forward differences of :func:`_steps` (a render per parameter): the solves'. ``wide``:
+        the pose's columns by central differences :data:`WIDE_POSE_STEPS` times as wide (two
+        renders each), the scales' as before (the residual is linear in them): the last solve's
+        and the uncertainties' (module docstring)."""
         f0 = self.residual(x)
         steps = _steps(len(self.fitted))
         jac = np.empty((f0.size, x.size))
         for i, h in enumerate(steps):
+            if wide and i < 6:
+                hw = h * WIDE_POSE_STEPS
+                xp, xm = x.copy(), x.copy()
+                xp[i] += hw
+                xm[i] -= hw
+                jac[:, i] = (self.residual(xp) - self.residual(xm)) / (2.0 * hw)
+                continue
             xi = x.copy()
             xi[i] += h
             jac[:, i] = (self.residual(xi) - f0) / h
-        return jac
-
-    def wide_jacobian(self, x: np.ndarray) -> np.ndarray:
-        """The pose's columns by central differences :data:`WIDE_POSE_STEPS` times as wide as
-        :func:`_steps` (two renders each), the scales' as in :meth:`jacobian` (the residual is
-        linear in them): the last solve's and the uncertainties' (module docstring)."""
-        jac = self.jacobian(x)
-        for i, h in enumerate(_steps(len(self.fitted))[:6] * WIDE_POSE_STEPS):
-            xp, xm = x.copy(), x.copy()
-            xp[i] += h
-            xm[i] -= h
-            jac[:, i] = (self.residual(xp) - self.residual(xm)) / (2.0 * h)
         return jac
 
 
@@ -296,15 +294,14 @@ def _levenberg_marquardt(prob: _Problem, x: np.ndarray, max_iter: int, centre: n
     follow into another valley; a step longer than :data:`MAX_STEP` is damped, not cut. No step
     leaves the :data:`REACH` of ``centre``. Returns the
     solution, its residual, its Jacobian, the accepted step lengths (in multiples of the damped
-    step) and whether the solve stopped at the reach's edge. ``wide``: the Jacobian is
-    :meth:`_Problem.wide_jacobian` (the last solve's)."""
-    jacobian = prob.wide_jacobian if wide else prob.jacobian
+    step) and whether the solve stopped at the reach's edge. ``wide``: the Jacobian's pose
+    columns by wide central differences (:meth:`_Problem.jacobian`; the last solve's)."""
     steps = _steps(len(x) - 6)
     cap = np.array([MAX_STEP[0]] * 3 + [MAX_STEP[1]] * 3 + [MAX_STEP[2]] * (len(x) - 6))
     reach = np.array([REACH[0]] * 3 + [REACH[1]] * 3)
     r = prob.residual(x)
     cost = float(r @ r)
-    jac = jacobian(x)
+    jac = prob.jacobian(x, wide)
     taken = []
     at_edge = False
     damping = DAMPING[0]
@@ -361,7 +358,7 @@ def _levenberg_marquardt(prob: _Problem, x: np.ndarray, max_iter: int, centre: n
         log.debug("step %.3g (damping %.2g): chi2/n %.4g at %s", a, damping, cost / r.size,
                   np.array2string(x, precision=4))
         damping = max(DAMPING[0], damping / DAMPING[1] ** 2)
-        jac = jacobian(x)
+        jac = prob.jacobian(x, wide)
         if at_edge or np.all(np.abs(a * dx) <= CONVERGED * np.abs(steps)):
             break
     return x, r, jac, taken, at_edge
@@ -516,7 +513,7 @@ def refine_object_twin(
     # the last steps and the uncertainties with the pose's wide central differences
     before = prob.evaluations
     if at_edge:  # the recentres ran out: no more steps
-        jac = prob.wide_jacobian(x)
+        jac = prob.jacobian(x, wide=True)
     else:
         x, r, jac, taken, _ = _levenberg_marquardt(prob, x, WIDE_ITERATIONS, centre, wide=True)
         line_steps.extend(taken)
