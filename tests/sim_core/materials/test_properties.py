@@ -35,9 +35,22 @@ def bounded(lo: float, hi: float, *specials: float) -> st.SearchStrategy[float]:
 
 
 @st.composite
-def seed_microfacets(draw: st.DrawFn) -> SeedMicrofacet:
-    ks = draw(bounded(0.0, 1.0))
-    kd = draw(st.one_of(st.sampled_from([0.0, 1.0 - ks]), st.floats(0.0, 1.0 - ks)))
+def _lobe_weights(draw: st.DrawFn, both_lobes: bool) -> tuple[float, float]:
+    """(ks, kd) with ks + kd <= 1; with ``both_lobes`` both strictly positive (drawn so, not
+    filtered: a filter on ks > 0 and kd > 0 would throw most draws away)."""
+    if not both_lobes:
+        ks = draw(bounded(0.0, 1.0))
+        kd = draw(st.one_of(st.sampled_from([0.0, 1.0 - ks]), st.floats(0.0, 1.0 - ks)))
+        return ks, kd
+    ks = draw(bounded(1e-300, 1.0 - 1e-9, 0.5))
+    kd = draw(st.one_of(st.sampled_from([1.0 - ks, 5e-324]),
+                        st.floats(0.0, 1.0 - ks, exclude_min=True)))
+    return ks, kd
+
+
+@st.composite
+def seed_microfacets(draw: st.DrawFn, both_lobes: bool = False) -> SeedMicrofacet:
+    ks, kd = draw(_lobe_weights(both_lobes))
     return SeedMicrofacet(
         ks=ks,
         kd=kd,
@@ -48,9 +61,10 @@ def seed_microfacets(draw: st.DrawFn) -> SeedMicrofacet:
 
 
 @st.composite
-def cook_torrances(draw: st.DrawFn, fresnel_angle: str | None = None) -> CookTorrance:
-    ks = draw(bounded(0.0, 1.0))
-    kd = draw(st.one_of(st.sampled_from([0.0, 1.0 - ks]), st.floats(0.0, 1.0 - ks)))
+def cook_torrances(
+    draw: st.DrawFn, fresnel_angle: str | None = None, both_lobes: bool = False
+) -> CookTorrance:
+    ks, kd = draw(_lobe_weights(both_lobes))
     angle = fresnel_angle or draw(st.sampled_from(["incidence", "half"]))
     return CookTorrance(
         kd=kd, ks=ks, m=draw(bounded(1e-6, 1.0)), n2=draw(bounded(1.0, 3.0)), fresnel_angle=angle
@@ -337,13 +351,22 @@ def test_lobe_probabilities_are_a_distribution_over_the_lobes_present(
 
 @FAST
 @given(material=microfacets(), woz=st.one_of(st.sampled_from(SPECIAL_Z), st.floats(0.0, 1.0)))
+def test_the_mirror_fresnel_is_a_fraction(
+    material: SeedMicrofacet | CookTorrance, woz: float
+) -> None:
+    fresnel = kn.mirror_fresnel(material.kernel_kind, material.kernel_params(), woz)
+    assert 0.0 <= fresnel <= 1.0
+
+
+@FAST
+@given(material=st.one_of(seed_microfacets(both_lobes=True), cook_torrances(both_lobes=True)),
+       woz=st.one_of(st.sampled_from(SPECIAL_Z), st.floats(0.0, 1.0)))
 def test_lobes_are_chosen_in_proportion_to_their_albedo_at_wo(
     material: SeedMicrofacet | CookTorrance, woz: float
 ) -> None:
     kind, p = material.kernel_kind, material.kernel_params()
     fresnel = kn.mirror_fresnel(kind, p, woz)
-    assert 0.0 <= fresnel <= 1.0
-    assume(material.ks > 0.0 and material.kd > 0.0)
+    assert material.ks > 0.0 and material.kd > 0.0
     p_spec, p_diff = kn.lobe_probabilities(kind, p, woz)
     a_spec, a_diff = material.ks * fresnel, material.kd
     if a_spec >= kn.P_SPEC_MIN / (1.0 - kn.P_SPEC_MIN) * a_diff * (1.0 + 1e-9):
