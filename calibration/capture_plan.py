@@ -46,6 +46,10 @@ class CaptureStep:
         Wait for the turntable to settle after the move before the exposure (the driver's and
         the service's wait); False: capture at once after the move, while the table may still
         ring (the settling stage, :mod:`calibration.rig_settling`).
+    rest_s : float
+        Seconds more, after the move and its wait, before the exposure (finite, 0 to
+        :data:`MAX_WAIT_S`): the table at rest where how it rings is not yet known (the
+        warm-up stage's first capture, before the settling stage has measured the ringing).
     """
 
     name: str
@@ -56,6 +60,7 @@ class CaptureStep:
     keep_frames: bool = False
     message: str = ""
     settle: bool = True
+    rest_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.turntable_angle_deg):
@@ -66,6 +71,9 @@ class CaptureStep:
                                     f"got {self.solar_suns!r}; 0 (lamp off) or a level in suns")
         if self.frames < 1:
             raise InvalidInputError(f"{self.name}.frames", f"got {self.frames}; at least 1")
+        if not (math.isfinite(self.rest_s) and 0.0 <= self.rest_s <= MAX_WAIT_S):
+            raise InvalidInputError(f"{self.name}.rest_s", f"got {self.rest_s!r}; allowed: 0 to "
+                                    f"{MAX_WAIT_S:g} s")
 
 
 @dataclass(frozen=True)

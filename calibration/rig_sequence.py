@@ -421,9 +421,14 @@ def _warmup_steps(plan: RigCalibrationPlan, spec: SceneSpec) -> list[Step]:
         if i > 0:
             steps.append(WaitStep(plan.warmup_interval_s,
                                   f"warm-up: waiting {plan.warmup_interval_s:g} s"))
+        # The first capture follows the move to the warm-up's angle, before the settling
+        # stage has measured how the table rings: it waits as the settling stage's frames at
+        # rest do (a board still swinging moves the patch's range: the rig sweep's reality 204,
+        # 0.7 deg at 4 Hz, put its first capture 4-7 std off the drift's line).
         steps.append(CaptureStep(_warmup_step(i), WARMUP_ANGLE_DEG, 0.0, False,
                                  plan.warmup_frames, keep_frames=True,
-                                 message=f"warm-up capture {i + 1} of {plan.warmup_captures}"))
+                                 message=f"warm-up capture {i + 1} of {plan.warmup_captures}",
+                                 rest_s=SETTLING_REST_WAIT_S if i == 0 else 0.0))
     return steps
 
 

@@ -203,10 +203,11 @@ def fit_object(
     rig_name : str
         Recorded in the provenance.
     drop_unfit_views : bool
-        When the fit does not explain its data (reduced chi-square above
-        :data:`calibration.verdicts.CHI2_UNEXPLAINED`) and some views explain theirs, fit again
+        When the fit does not explain some views (their reduced chi-square above
+        :data:`calibration.verdicts.CHI2_UNEXPLAINED`) and other views explain theirs, fit again
         without the others (at least two views kept); the report's ``dropped_views`` names
-        them with their chi-square. Otherwise every key is ``unexplained``.
+        them with their chi-square. With fewer than two views explained every key is
+        ``unexplained``.
 
     Raises
     ------
@@ -272,8 +273,9 @@ def fit_object(
     angles = [c.turntable_angle_deg for c in captures]
     verdicts = object_verdicts(refined, pixels, angles)
     unfit = unfit_views(refined.chi2_per_view)
-    if (drop_unfit_views and refined.chi2_after > CHI2_UNEXPLAINED and unfit
-            and len(captures) - len(unfit) >= 2):
+    # A view above the limit is not explained, however well the others (with more pixels,
+    # or more of them) pull the fit's chi-square as a whole below it.
+    if drop_unfit_views and unfit and len(captures) - len(unfit) >= 2:
         kept = [c for i, c in enumerate(captures) if i not in unfit]
         again = fit_object(spec, base, calibration, kept, render_settings=render_settings,
                            min_valid_pixels=min_valid_pixels, min_amplitude_dn=min_amplitude_dn,

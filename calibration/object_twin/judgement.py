@@ -7,8 +7,8 @@ fitted object's ``objects.<name>.reflectance_scale``. Each gets its verdict
 
 - the goodness of fit: the reduced chi-square of the whitened phasor residuals, overall and per
   view (:class:`calibration.object_twin.refine.RefinedFit`); above
-  :data:`calibration.verdicts.CHI2_UNEXPLAINED` the model does not explain the data and every
-  key is ``unexplained``, naming the views that do not fit;
+  :data:`calibration.verdicts.CHI2_UNEXPLAINED`, overall or in any one view, the model does not
+  explain the data and every key is ``unexplained``, naming the views that do not fit;
 - the error: the Jacobian's standard deviation scaled by the residual (never below it), with
   the spread over the views (the delete-one-view jackknife) as a floor: views that disagree
   beyond their noise widen the error instead of averaging into a confident wrong number;
@@ -26,7 +26,7 @@ import numpy as np
 
 from calibration.object_twin.refine import UNDETERMINED_STD, RefinedFit
 from calibration.object_twin.reflectance import ObjectPixels
-from calibration.verdicts import Verdict, Verdicts, above_limit, judge
+from calibration.verdicts import CHI2_UNEXPLAINED, Verdict, Verdicts, above_limit, judge
 
 POSITION_KEY = "mount.pose_offset.position_m"
 ROTATION_KEY = "mount.pose_offset.rotation_deg"
@@ -77,7 +77,12 @@ def object_verdicts(refined: RefinedFit, pixels: Mapping[str, ObjectPixels],
     mounted objects' pixel reports, ``angles_deg`` the views' turntable angles in the fit's
     order."""
     where = _where(refined, angles_deg)
+    # a view the model does not explain leaves the keys unexplained, however well the others
+    # pull the chi-square of all views together below the limit
     chi2 = refined.chi2_after
+    bad = unfit_views(refined.chi2_per_view)
+    if bad and chi2 <= CHI2_UNEXPLAINED:
+        chi2 = refined.chi2_per_view[bad[0]]  # the worst view's
     out = Verdicts()
     out.add(POSITION_KEY, _judged(refined.std_position_m, refined.jackknife_position_m,
                                   LIMITS[POSITION_KEY], chi2=chi2, unit=" m", where=where))

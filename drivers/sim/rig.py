@@ -172,8 +172,12 @@ def simulated_rig(
             with contextlib.suppress(Exception):
                 stop()
         raise
-    rig = Rig(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop],
-              sleep=lab_wait or _scaled_sleep(0.0 if instant else time_scale))
+    # A wait of the rig's own (a warm-up's pause, a capture's rest) on an instant stage tells
+    # the lab's clock where the stage stands too: a move just made ends before it, and rings
+    # during it, not after it.
+    rig_sleep = (_lab_sleep(lab_wait, tt_sim.models["turntable"]) if lab_stage
+                 else lab_wait or _scaled_sleep(0.0 if instant else time_scale))
+    rig = Rig(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop], sleep=rig_sleep)
     rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
     return rig
 

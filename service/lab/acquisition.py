@@ -101,6 +101,8 @@ def _capture(rig: Rig, step: CaptureStep) -> AveragedCapture:
     with rig.hold():  # nobody moves the rig between the move and the exposure
         with contextlib.nullcontext() if step.settle else unsettled_moves(rig):
             rig.apply(target)
+        if step.rest_s > 0.0:
+            rig.wait(step.rest_s)
         # checked against the target for the whole exposure (Rig.capture)
         frames = rig.capture(step.frames, target=target)
     return average_frames(frames, keep_frames=step.keep_frames)

@@ -53,6 +53,18 @@ def test_a_fit_that_does_not_explain_its_data_names_the_views_that_do_not_fit():
     assert v[POSITION_KEY].std[0] >= 2e-5 * math.sqrt(20.5)
 
 
+def test_one_view_the_model_does_not_explain_leaves_every_key_unexplained_whatever_the_rest():
+    # three views explained pull the chi-square of all four below the limit: the fourth is
+    # still a view the model does not explain
+    v = object_verdicts(_fit(chi2=1.6, per_view=(1.0, 1.1, 0.9, 3.4)), PIXELS, [*ANGLES, 60.0])
+    for key in (POSITION_KEY, ROTATION_KEY, scale_key("body")):
+        assert v[key].verdict == "unexplained"
+        assert "views +60 deg (chi-square 3.4)" in v[key].reason
+    # every view explained: the chi-square of all decides
+    assert object_verdicts(_fit(chi2=1.6, per_view=(1.0, 1.1, 0.9, 1.9)), PIXELS,
+                           [*ANGLES, 60.0])[POSITION_KEY].determined
+
+
 def test_a_key_one_view_alone_determines_is_not_determined_and_says_why():
     v = object_verdicts(_fit(jk_scale=math.inf), PIXELS, ANGLES)
     assert v[scale_key("body")].verdict == "not determined"

@@ -170,6 +170,23 @@ def test_a_wait_lets_the_simulated_labs_clock_run_so_the_illumination_warms_betw
     assert warm - cold > 10.0
 
 
+def test_a_captures_rest_after_its_move_passes_on_the_labs_clock_with_the_move_ended_first():
+    """``CaptureStep.rest_s`` waits after the move: the move ends (and the table rings) before
+    the rest, not when the frames come (the rig sweep's warm-up once rang through its first
+    capture: the rest passed before the lab's clock had heard of the move)."""
+    world = SimulatedWorld(parse_scene_spec(WALL), ".", RenderRequest(
+        RenderSettings(integrator="direct", spp=1), effects="auto"))
+    plan = CapturePlan((CaptureStep("rested", 0.0, 0.0, False, 1, rest_s=120.0),))
+    with simulated_rig(frame_source=world, seed=1, lab_wait=world.clock.wait) as rig:
+        move_s = world.clock.move_duration_s(rig.turntable.position_deg(), 0.0)
+        acquire(rig, RecordingOperator([]), plan)
+    ends_s, _signs = world.clock.moves()
+    assert move_s > 0.0
+    assert ends_s[-1] == pytest.approx(move_s)  # the move ended, then the 120 s of rest
+    with pytest.raises(InvalidInputError, match=r"rested\.rest_s.*0 to 86400 s"):
+        CaptureStep("rested", 0.0, 0.0, False, 1, rest_s=-1.0)
+
+
 def test_a_wait_on_a_rig_without_a_lab_clock_returns_and_a_bad_wait_names_its_field(rig):
     with pytest.raises(InvalidInputError, match=r"wait.seconds.*0 to 86400 s"):
         WaitStep(-1.0)
