@@ -150,8 +150,9 @@ class CapturePlan:
 
     @property
     def waited_s(self) -> float:
-        """The seconds the plan's waits add up to."""
-        return float(sum(s.seconds for s in self.steps if isinstance(s, WaitStep)))
+        """The seconds the plan's waits and its captures' rests add up to."""
+        return float(sum(s.seconds for s in self.steps if isinstance(s, WaitStep))
+                     + sum(s.rest_s for s in self.captures))
 
     @property
     def n_captures(self) -> int:

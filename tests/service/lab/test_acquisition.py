@@ -113,7 +113,11 @@ def test_the_rig_sequences_plan_captures_what_it_counts_in_the_order_it_fits():
     assert cp.n_captures == n_warm + 2 + 2 * 3 + 2 + 3 + 1
     assert [s.name for s in cp.captures][:n_warm] == [f"warmup/{i}" for i in range(n_warm)]
     assert all(c.keep_frames and c.turntable_angle_deg == 0.0 for c in cp.captures[:n_warm])
-    assert cp.waited_s == (n_warm - 1) * plan.warmup_interval_s + SETTLING_REST_WAIT_S
+    # the pauses between warm-up captures, the first one's rest after its move, the settling
+    # stage's wait for the table
+    assert cp.waited_s == (n_warm - 1) * plan.warmup_interval_s + 2 * SETTLING_REST_WAIT_S
+    assert cp.captures[0].rest_s == SETTLING_REST_WAIT_S
+    assert all(c.rest_s == 0.0 for c in cp.captures[1:])
     assert isinstance(cp.steps[2], WaitStep) and cp.steps[1].name == "warmup/0"
     # then the settling stage: a move from the warm-up's angle, frames at once after it, a
     # wait, and frames at rest at the same angle (the board's pixels and yaw noise there)
