@@ -59,15 +59,14 @@ def test_a_view_the_model_cannot_explain_is_left_out_with_its_reason(
     every = report["with_every_view"]["refined"]["reduced_chi2_per_view"]
     assert every[GLITCH] > CHI2_UNEXPLAINED
     assert len(report["refined"]["reduced_chi2_per_view"]) == len(captures) - 1
-    # the three other views give the pose; nothing determined is a confident wrong number
+    # what the refit would claim determined is unexplained: a cause that fails one view may
+    # bias the others too (calibration.object_twin.judgement.after_dropped_views); the
+    # estimate of the three other views is still the target away at most
+    for key in ("mount.pose_offset.position_m", "mount.pose_offset.rotation_deg"):
+        verdict = fit.verdicts[key]
+        assert not verdict.determined
+        assert verdict.verdict == "not determined" or f"{glitch_deg:+g} deg" in verdict.reason
     truth = reality.mount.pose_offset
     pose = fit.object_twin.mount.pose_offset
-    error_mm = np.abs(np.subtract(pose.position_m, truth.position_m)) * 1e3
-    error_deg = np.abs(np.subtract(pose.rotation_deg, truth.rotation_deg))
-    position = fit.verdicts["mount.pose_offset.position_m"]
-    rotation = fit.verdicts["mount.pose_offset.rotation_deg"]
-    if position.determined:
-        assert np.all(error_mm <= np.maximum(3.0 * np.asarray(position.std) * 1e3, 1.0))
-    if rotation.determined:
-        assert np.all(error_deg <= np.maximum(3.0 * np.asarray(rotation.std), 0.2))
-    assert position.determined or rotation.determined, fit.verdicts.to_json()
+    assert np.max(np.abs(np.subtract(pose.position_m, truth.position_m))) < 1e-3
+    assert np.max(np.abs(np.subtract(pose.rotation_deg, truth.rotation_deg))) < 0.2
