@@ -14,6 +14,7 @@ import numpy as np
 
 from calibration import rig_verdicts as targets
 from sim_core.depth_errors import DepthErrorModel, range_to_phase_rad
+from sim_core.warmup import TemperatureDrift
 
 SHAPE = (171, 224)
 
@@ -148,6 +149,25 @@ def effect_figures(result, reality) -> list[KeyFigure]:
     return out
 
 
+def true_depth_at_calibration_start(result, reality, frequencies_hz):
+    """The reality's depth errors (its ``camera.depth``) at the temperature the calibration's
+    depth model holds at: the calibration's ``camera.temperature.illumination_start_c`` (its
+    first warm-up capture's reading, 120 s after the move that starts the warm-up), the
+    reality's drift added from the reality's own start (``sim_core.warmup``: a phase offset
+    per frequency, as the world adds it). The reality itself when either has no drift."""
+    cal_t = result.calibration.camera.temperature
+    true_t = reality.camera.temperature
+    depth = reality.camera.depth
+    if cal_t is None or true_t is None:
+        return depth
+    drift = TemperatureDrift.from_spec(true_t, list(frequencies_hz))
+    extra = drift.phase_offset_rad(cal_t.illumination_start_c)
+    offsets = list(depth.phase_offset_rad) or [0.0]
+    offsets = offsets + [offsets[-1]] * (len(extra) - len(offsets))
+    return depth.model_copy(update={"phase_offset_rad": [
+        float(o + e) for o, e in zip(offsets, extra, strict=False)]})
+
+
 def _depth_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
     """The global model (offset and wiggling: determined together) over the phases seen, each
     model with its own mean fixed-pattern offset over the pixels seen moved into it; the pixel
@@ -165,7 +185,8 @@ def _depth_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
     seen = depth.pixels_seen
     freqs = list(np.asarray(frequencies_hz, dtype=float).ravel())
     fitted = DepthErrorModel.from_spec(result.calibration.camera.depth, freqs, SHAPE)
-    truth = DepthErrorModel.from_spec(reality.camera.depth, freqs, SHAPE)
+    true_depth = true_depth_at_calibration_start(result, reality, freqs)
+    truth = DepthErrorModel.from_spec(true_depth, freqs, SHAPE)
     true_pix = truth.pixel_offsets_m if truth.pixel_offsets_m is not None else np.zeros(SHAPE)
     fit_pix = fitted.pixel_offsets_m if fitted.pixel_offsets_m is not None else np.zeros(SHAPE)
     mean_true = float(np.mean(true_pix[seen]))
@@ -174,7 +195,7 @@ def _depth_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
     phis = np.linspace(*depth.phase_span_rad, 64)
     worst_rad, worst_mm = [], []
     fit_global = _global_model(result.calibration.camera.depth, freqs)
-    true_global = _global_model(reality.camera.depth, freqs)
+    true_global = _global_model(true_depth, freqs)
     for k, f in enumerate(freqs):
         g_fit = fit_global.phase_error_rad(phis[None, :], k)[0] + float(
             range_to_phase_rad(mean_fit, f))

@@ -26,7 +26,12 @@ from sim_core.render import RenderSettings
 from sim_core.render_request import RenderRequest
 from sim_core.scene_spec import load_scene_spec
 from tests.calibration.realities import random_reality, reality_seeds, with_world_effects
-from tests.calibration.rig_truth import EFFECT_TARGETS_REL, key_figures, table
+from tests.calibration.rig_truth import (
+    EFFECT_TARGETS_REL,
+    key_figures,
+    table,
+    true_depth_at_calibration_start,
+)
 from tests.sim_core.scenes import EXAMPLES
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
@@ -69,7 +74,8 @@ def _depth_model_rms_mm(result, reality) -> float:
     """RMS of (fitted - true) depth error over the board pixels and phases the sweep saw."""
     shape = (171, 224)
     fitted = DepthErrorModel.from_spec(result.calibration.camera.depth, [F_60_24_MHZ], shape)
-    truth = DepthErrorModel.from_spec(reality.camera.depth, [F_60_24_MHZ], shape)
+    truth = DepthErrorModel.from_spec(
+        true_depth_at_calibration_start(result, reality, [F_60_24_MHZ]), [F_60_24_MHZ], shape)
     depth = result.results["depth"]
     seen = depth.pixels_seen
     diffs = []
