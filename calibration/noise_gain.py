@@ -40,8 +40,8 @@ LINEAR_SHARE = 0.5
 #: pixels darker than this [DN] or this share of the range used are left out (tap clipping)
 MIN_INTENSITY_DN = 20.0
 MIN_INTENSITY_SHARE = 0.05
-#: a pixel enters the curve when its mean C_i changes across it by at most this many of its
-#: temporal standard deviations (:func:`flat_pixels`)
+#: a pixel enters the curve when its mean C_i changes across it by at most this many standard
+#: deviations of the noise at its intensity (:func:`flat_pixels`)
 FLAT_GRADIENT_SIGMAS = 3.0
 
 
@@ -126,9 +126,9 @@ def calibrate_noise(stacks: list[list[RawFrame]]) -> NoiseCalibration:
     use[use] = flat_pixels(m[use], v[use], np.concatenate(gradients)[use])
     if np.count_nonzero(use) < 100:
         raise InvalidInputError(
-            "stacks", f"only {np.count_nonzero(use)} pixels have a mean intensity between "
+            "stacks", f"only {np.count_nonzero(use)} flat pixels have a mean intensity between "
             f"{bottom:.0f} and {top:.0f} DN: too few to determine the gain (a view with bright "
-            "and dark areas is needed)")
+            "and dark areas, each wider than a few pixels, is needed)")
     edges = np.unique(np.linspace(bottom, top, BINS + 1))
     if edges.size < 6 or top <= 0 or (edges[-1] - edges[0]) < 50.0:
         raise InvalidInputError(
