@@ -160,12 +160,12 @@ def true_depth_at_calibration_start(result, reality, frequencies_hz):
     depth = reality.camera.depth
     if cal_t is None or true_t is None:
         return depth
-    drift = TemperatureDrift.from_spec(true_t, list(frequencies_hz))
-    extra = drift.phase_offset_rad(cal_t.illumination_start_c)
-    offsets = list(depth.phase_offset_rad) or [0.0]
-    offsets = offsets + [offsets[-1]] * (len(extra) - len(offsets))
+    freqs = list(frequencies_hz)
+    drift = TemperatureDrift.from_spec(true_t, freqs)
+    # the model's own offsets per frequency (a single entry applies to all)
+    offsets = DepthErrorModel.from_spec(depth, freqs, (1, 1)).offsets_rad
     return depth.model_copy(update={"phase_offset_rad": [
-        float(o + e) for o, e in zip(offsets, extra, strict=False)]})
+        float(v) for v in offsets + drift.phase_offset_rad(cal_t.illumination_start_c)]})
 
 
 def _depth_figures(result, reality, frequencies_hz) -> list[KeyFigure]:
