@@ -372,6 +372,20 @@ def _check(result: Any, what: str) -> Any:
     return result
 
 
+def _call(what: str, fn: Callable[..., Any], *args: Any) -> Any:
+    """One roypy call; its failures as :class:`CameraError`.
+
+    roypy reports a failing ``CameraStatus`` by raising ``RuntimeError`` (some calls return the
+    status instead; pupil-labs/pupil-picoflexx ``royale/utils.py`` handles both), which is not a
+    :class:`CameraError`: found by the roypy double (``tests/roypy_double``).
+    """
+    try:
+        result = fn(*args)
+    except RuntimeError as exc:
+        raise CameraError(f"royale {what} failed: {exc}") from exc
+    return _check(result, what)
+
+
 def _strings(values: Any) -> list[str]:
     if values is None:
         return []
@@ -424,6 +438,7 @@ class RoyaleCamera:
         self._streaming = False
         self.dropped = 0
         self.callback_errors: list[str] = []
+        self._opened_id: str | None = None
 
     # -- connection ---------------------------------------------------------------------------
     def connect(self) -> None:
@@ -441,14 +456,28 @@ class RoyaleCamera:
             )
         if self.camera_id is not None and self.camera_id not in ids:
             raise CameraNotFoundError(f"royale camera {self.camera_id!r} not among {ids}")
-        cam = self._manager.createCamera(self.camera_id or ids[0])
+        chosen = self.camera_id or ids[0]
+        cam = _call(f"createCamera({chosen!r})", self._manager.createCamera, chosen)
         if cam is None:
-            raise CameraError(f"royale could not create camera {self.camera_id or ids[0]!r}")
-        _check(cam.initialize(), "initialize")
-        self._cam = cam
-        self._listener, register = self._make_listener(rp)
-        _check(getattr(cam, register)(self._listener), register)
-        self.configure(self._use_case)
+            raise CameraError(f"royale could not create camera {chosen!r}")
+        try:  # a failure leaves nothing half open (a second connect() tries again)
+            _call("initialize", cam.initialize)
+            self._cam, self._opened_id = cam, chosen
+            self._listener, register = self._make_listener(rp)
+            try:
+                _call(register, getattr(cam, register), self._listener)
+            except CameraError as exc:
+                if register != "registerDataListenerExtended":
+                    raise
+                raise CameraError(
+                    f"royale camera {chosen}: {exc}; raw data before royale 5 needs an access "
+                    "code of level 2 (RoyaleCamera(access_code=...) or the environment variable "
+                    "TOFTWIN_ROYALE_ACCESS_CODE)"
+                ) from exc
+            self.configure(self._use_case)
+        except BaseException:
+            self._cam = self._manager = self._listener = None
+            raise
 
     def _make_listener(self, rp: Any) -> tuple[Any, str]:
         on_raw = self._on_raw
@@ -460,10 +489,17 @@ class RoyaleCamera:
 
             return RawListener(), "registerRawDataListener"
 
+        errors = self.callback_errors
+
         class ExtendedListener(rp.IExtendedDataListener):  # type: ignore[misc, name-defined]
             def onNewData(self, data: Any) -> None:  # noqa: N802 - royale's name
-                if data.hasRawData():
-                    on_raw(data.getRawData())
+                try:  # nothing may raise into royale's thread (found by the roypy double)
+                    raw = data.getRawData() if data.hasRawData() else None
+                except Exception as exc:
+                    errors.append(repr(exc))
+                    return
+                if raw is not None:
+                    on_raw(raw)
 
         return ExtendedListener(), "registerDataListenerExtended"
 
@@ -514,7 +550,7 @@ class RoyaleCamera:
     def configure(self, use_case: str | UseCase) -> None:
         uc = get_use_case(use_case)
         cam = self._require()
-        available = _strings(cam.getUseCases())
+        available = _strings(_call("getUseCases", cam.getUseCases))
         if uc.name not in available:
             raise DeviceInputError(
                 "use_case", f"{uc.name!r} is not offered by this camera; it offers {available}"
@@ -522,21 +558,22 @@ class RoyaleCamera:
         was_streaming = self._streaming
         if was_streaming:
             self.stop()
-        _check(cam.setUseCase(uc.name), f"setUseCase({uc.name})")
+        _call(f"setUseCase({uc.name})", cam.setUseCase, uc.name)
         self._use_case = uc
+        self._drain()  # frames of the previous use case (found by the roypy double)
         if was_streaming:
             self.start()
 
     def start(self) -> None:
         cam = self._require()
         if not self._streaming:
-            _check(cam.startCapture(), "startCapture")
+            _call("startCapture", cam.startCapture)
             self._streaming = True
 
     def stop(self) -> None:
         if self._cam is not None and self._streaming:
             self._streaming = False
-            _check(self._cam.stopCapture(), "stopCapture")
+            _call("stopCapture", self._cam.stopCapture)
 
     def _drain(self) -> None:
         with contextlib.suppress(queue.Empty):
@@ -562,10 +599,7 @@ class RoyaleCamera:
                 try:
                     arrived, data = self._queue.get(timeout=self.frame_timeout_s)
                 except queue.Empty:
-                    raise DeviceTimeoutError(
-                        f"royale camera: no raw frame within {self.frame_timeout_s:g} s "
-                        f"({len(frames)} of {n}; callback errors: {self.callback_errors[-3:]})"
-                    ) from None
+                    raise self._no_frame_error(len(frames), n) from None
                 frames.append(
                     royale_to_raw_frame(
                         data,
@@ -582,6 +616,23 @@ class RoyaleCamera:
                 except CameraError as exc:
                     _log.warning("royale camera: stop after capture failed: %s", exc)
         return frames
+
+    def _no_frame_error(self, got: int, n: int) -> CameraError | DeviceTimeoutError:
+        """Why no frame came: a disconnected camera (``isConnected()`` false), else a timeout.
+
+        Both name the camera (royale stops delivering when the camera is unplugged; found by
+        the roypy double).
+        """
+        who = f"royale camera {self._opened_id or self.camera_id or '(first)'}"
+        detail = f"{got} of {n} frames; callback errors: {self.callback_errors[-3:]}"
+        connected: Any = True
+        with contextlib.suppress(Exception):  # a disconnected camera may raise here too
+            connected = self._cam.isConnected() if self._cam is not None else True
+        if connected is False:
+            return CameraError(f"{who}: disconnected (isConnected() is false); {detail}")
+        return DeviceTimeoutError(
+            f"{who}: no raw frame within {self.frame_timeout_s:g} s ({detail})"
+        )
 
     def identity(self) -> CameraIdentity:
         cam = self._require()
