@@ -17,10 +17,10 @@ import pytest
 from drivers.camera import USE_CASES, CameraNotFoundError, CameraProtocol
 from drivers.camera import royale as royale_backend
 from drivers.camera.royale import (
+    RawDataCopy,
     RoyaleCamera,
     RoyaleDataError,
     RoyaleNotInstalledError,
-    RoyaleRawData,
     copy_roypy_raw_data,
     royale_to_raw_frame,
     split_raw_buffer,
@@ -29,6 +29,7 @@ from drivers.camera.wire import quantize_frame, raw_to_wire_values
 from drivers.errors import DeviceInputError, DeviceTimeoutError
 from drivers.sim.usb_camera import CameraRequest, plane_source
 from tests.drivers.helpers import MODE5, MODE9, H, W
+from toftwin_camera_bridge import RawDataLayoutError
 
 pytestmark = pytest.mark.timeout(20)
 
@@ -60,7 +61,7 @@ def _royale_layout(uc, *, grey_last=False, per_group=True, order=(0, 1, 2, 3), i
         mod, exp = group_freqs, [uc.exposure_us] * len(groups)
     else:
         mod, exp = per_frame, [uc.exposure_us] * len(frames)
-    return RoyaleRawData(
+    return RawDataCopy(
         width=W,
         height=H,
         raw_frames=np.stack(frames),
@@ -127,7 +128,7 @@ def test_convention_is_c_equals_raw_minus_2048():
     frames[0] = 777  # grey
     frames[1, 0, 0] = 0
     frames[3, 0, 1] = 4095
-    data = RoyaleRawData(W, H, frames, (60_240_000,) * 5, (500,) * 5)
+    data = RawDataCopy(W, H, frames, (60_240_000,) * 5, (500,) * 5)
     frame = royale_to_raw_frame(data)
     assert frame.phase_images[0, 0, 0, 0] == -2048 and frame.phase_images[0, 2, 0, 1] == 2047
     assert frame.phase_images[0, 1, 5, 5] == 0 and frame.intensity[9, 9] == 777
@@ -137,7 +138,7 @@ def test_convention_is_c_equals_raw_minus_2048():
 
 def test_grey_frame_found_from_the_illumination_flag_without_groups():
     data = _royale_layout(MODE5, grey_last=True)
-    data = RoyaleRawData(
+    data = RawDataCopy(
         W,
         H,
         data.raw_frames,
@@ -156,7 +157,7 @@ def test_grey_frame_found_from_the_illumination_flag_without_groups():
 
 def test_left_aligned_12_bit_words_need_value_shift():
     data = _royale_layout(MODE5)
-    shifted = RoyaleRawData(
+    shifted = RawDataCopy(
         W,
         H,
         data.raw_frames << 4,
@@ -185,14 +186,14 @@ def test_raw_data_that_no_use_case_gives_is_refused(change, match):
         fields["raw_frame_count"] = ()
         fields["modulation_frequencies_hz"] = (60_240_000,) * change["raw_frames"].shape[0]
     with pytest.raises(RoyaleDataError, match=match):
-        royale_to_raw_frame(RoyaleRawData(**fields))
+        royale_to_raw_frame(RawDataCopy(**fields))
 
 
 def test_mixed_frequencies_inside_a_phase_set_are_refused():
     data = _royale_layout(MODE9, per_group=False)
     freqs = list(data.modulation_frequencies_hz)
     freqs[2] = 60_240_000  # second phase frame of the 80.32 MHz set
-    bad = RoyaleRawData(**{**data.__dict__, "modulation_frequencies_hz": tuple(freqs)})
+    bad = RawDataCopy(**{**data.__dict__, "modulation_frequencies_hz": tuple(freqs)})
     with pytest.raises(
         RoyaleDataError, match=r"raw frame 2 at 60240000 Hz inside a four-phase set"
     ):
@@ -214,11 +215,11 @@ def test_flat_buffer_skips_one_pseudo_data_row_per_frame():
     frames = np.arange(2 * 4 * 3, dtype=np.uint16).reshape(2, 4, 3)  # 2 frames, pseudo + 3 rows
     out = split_raw_buffer(frames.ravel(), 2, 3, 3)
     assert np.array_equal(out, frames[:, 1:, :])
-    with pytest.raises(RoyaleDataError, match="has 23 words; 2 raw frames of 3 x 3"):
+    with pytest.raises(RawDataLayoutError, match="has 23 words; 2 raw frames of 3 x 3"):
         split_raw_buffer(frames.ravel()[:-1], 2, 3, 3)
 
 
-def _roypy_like(data: RoyaleRawData, *, with_get_raw_phase=True):
+def _roypy_like(data: RawDataCopy, *, with_get_raw_phase=True):
     """A record with royale's RawData attribute names (as the roypy sample reads them)."""
     n = data.raw_frames.shape[0]
     flat = np.concatenate(
@@ -356,7 +357,7 @@ def test_royale_camera_glue_errors(monkeypatch):
 
 def test_the_illumination_temperature_is_copied_from_raw_data_when_present():
     data = _royale_layout(MODE5)
-    warm = RoyaleRawData(**{**data.__dict__, "illumination_temperature_c": 38.5})
+    warm = RawDataCopy(**{**data.__dict__, "illumination_temperature_c": 38.5})
     assert royale_to_raw_frame(warm, use_case=MODE5).illumination_temperature_c == 38.5
-    cold = RoyaleRawData(**{**data.__dict__, "illumination_temperature_c": None})
+    cold = RawDataCopy(**{**data.__dict__, "illumination_temperature_c": None})
     assert royale_to_raw_frame(cold, use_case=MODE5).illumination_temperature_c is None

@@ -1,0 +1,178 @@
+"""royale's raw data as our :class:`~sim_core.raw.RawFrame` (pure; no roypy needed).
+
+:func:`royale_to_raw_frame` is a pure function of a :class:`~toftwin_camera_bridge.RawDataCopy`
+(a plain copy of ``royale::RawData`` made in royale's callback by
+:func:`toftwin_camera_bridge.copy_roypy_raw_data`, in this process or in the camera bridge): it
+finds the grey frame (the exposure group of one frame, else the one frame with illumination off,
+else the first), groups the other frames in fours by frequency, orders each group by phase
+angle, and applies our convention C = raw - 2048 (12-bit values in 16-bit words; ``value_shift``
+for left-aligned data). A pico flexx use case is a grey raw frame set (one frame, exposure group
+``"gray"``) and one four-phase set (0, 90, 180, 270 degrees) per modulation frequency; royale can
+put the grey frame first or last (``IntensityPhaseOrder``).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from drivers.camera.wire import MAX_RAW, N_PHASES, RAW_OFFSET, UseCase, get_use_case
+from drivers.errors import DeviceInputError, ProtocolError
+from sim_core.raw import RawFrame
+from toftwin_camera_bridge import RawDataCopy
+
+__all__ = ["RoyaleDataError", "royale_to_raw_frame"]
+
+
+class RoyaleDataError(ProtocolError):
+    """Raw data from royale does not have the form a pico flexx use case gives."""
+
+
+def _per_frame(values: tuple[int, ...], counts: tuple[int, ...], n: int, what: str) -> list[int]:
+    """Values given per raw frame or per exposure group, expanded to one per raw frame."""
+    if len(values) == n:
+        return list(values)
+    if counts and len(values) == len(counts) and sum(counts) == n:
+        return [v for v, c in zip(values, counts, strict=True) for _ in range(c)]
+    raise RoyaleDataError(
+        f"{len(values)} {what} for {n} raw frames in exposure groups {list(counts)}: "
+        "neither one per raw frame nor one per exposure group"
+    )
+
+
+def _grey_index(data: RawDataCopy, n: int) -> tuple[int, str]:
+    """Index of the grey raw frame and how it was found."""
+    counts = data.raw_frame_count
+    if counts and sum(counts) == n:
+        singles = [g for g, c in enumerate(counts) if c == 1]
+        if len(singles) == 1:
+            return sum(counts[: singles[0]]), "exposure group of one raw frame"
+    if len(data.illumination_enabled) == n:
+        dark = [i for i, on in enumerate(data.illumination_enabled) if not on]
+        if len(dark) == 1:
+            return dark[0], "illumination disabled"
+    return 0, "assumed first (royale reported no groups or illumination flags)"
+
+
+def royale_to_raw_frame(
+    data: RawDataCopy,
+    *,
+    use_case: str | UseCase | None = None,
+    value_shift: int = 0,
+    timestamp_s: float | None = None,
+    meta: dict[str, Any] | None = None,
+) -> RawFrame:
+    """Convert one copy of royale raw data into a :class:`RawFrame` (pure; no roypy needed).
+
+    Parameters
+    ----------
+    data : RawDataCopy
+        ``1 + 4 n_f`` raw frames of 12-bit values.
+    use_case : name, UseCase or None
+        When given, the frequencies found must be the use case's (same order).
+    value_shift : int
+        Right shift applied to every word first (4 for 12-bit values stored left-aligned).
+    timestamp_s : float or None
+        Used when royale's timestamp could not be read (the host's arrival time).
+    meta : dict or None
+        Merged into the frame's metadata.
+
+    Raises
+    ------
+    RoyaleDataError
+        Shapes, frame counts, frequencies or phase angles that a pico flexx use case cannot
+        produce, or values above 4095 after the shift; the message says which.
+    """
+    if not 0 <= value_shift <= 4:
+        raise DeviceInputError("value_shift", f"got {value_shift!r}; 0..4 bits")
+    frames = np.asarray(data.raw_frames)
+    n = frames.shape[0] if frames.ndim == 3 else -1
+    if frames.ndim != 3 or frames.shape[1:] != (data.height, data.width):
+        raise RoyaleDataError(
+            f"raw frames of shape {frames.shape}; expected (n, {data.height}, {data.width})"
+        )
+    if n < 1 + N_PHASES or (n - 1) % N_PHASES:
+        raise RoyaleDataError(f"{n} raw frames; a use case gives 1 grey + 4 per frequency")
+    words = frames.astype(np.uint16) >> np.uint16(value_shift)
+    if int(words.max()) > MAX_RAW:
+        raise RoyaleDataError(
+            f"raw values up to {int(words.max())} exceed 12 bits (0..{MAX_RAW}); for 12-bit "
+            "values stored left-aligned in 16-bit words pass value_shift=4"
+        )
+    counts = data.raw_frame_count
+    freqs = _per_frame(data.modulation_frequencies_hz, counts, n, "modulation frequencies")
+    exposures = (
+        _per_frame(data.exposure_times_us, counts, n, "exposure times")
+        if data.exposure_times_us
+        else [0] * n
+    )
+    grey, grey_source = _grey_index(data, n)
+    phase_idx = [i for i in range(n) if i != grey]
+    sets: list[list[int]] = []
+    for i in phase_idx:
+        if sets and len(sets[-1]) < N_PHASES:
+            if freqs[i] != freqs[sets[-1][0]]:
+                raise RoyaleDataError(
+                    f"raw frame {i} at {freqs[i]} Hz inside a four-phase set at "
+                    f"{freqs[sets[-1][0]]} Hz (frequencies per frame: {freqs})"
+                )
+            sets[-1].append(i)
+        else:
+            sets.append([i])
+    if len(data.phase_angles_deg) == n:
+        ordered = []
+        for s in sets:
+            angles = [data.phase_angles_deg[i] % 360 for i in s]
+            if sorted(angles) != [0, 90, 180, 270]:
+                raise RoyaleDataError(
+                    f"phase angles {angles} deg of raw frames {s}; expected 0, 90, 180, 270"
+                )
+            ordered.append([i for _, i in sorted(zip(angles, s, strict=True))])
+        sets = ordered
+    set_freqs = tuple(float(freqs[s[0]]) for s in sets)
+    uc = None if use_case is None else get_use_case(use_case)
+    if uc is not None and (
+        len(set_freqs) != uc.n_frequencies
+        or any(abs(a - b) > 1.0 for a, b in zip(set_freqs, uc.frequencies_hz, strict=False))
+    ):
+        raise RoyaleDataError(
+            f"frequencies {list(set_freqs)} Hz do not match use case {uc.name} "
+            f"({list(uc.frequencies_hz)} Hz)"
+        )
+    phases = words[np.array(sets)]  # (n_f, 4, H, W)
+    grey_img = words[grey]
+    saturated = np.any((phases == 0) | (phases == MAX_RAW), axis=(0, 1)) | (grey_img == MAX_RAW)
+    if data.timestamp_us is not None:
+        stamp, stamp_source = data.timestamp_us * 1e-6, "royale"
+    else:
+        stamp = time.time() if timestamp_s is None else timestamp_s
+        stamp_source = "host"
+    info: dict[str, Any] = {
+        "backend": "royale",
+        "use_case": uc.name if uc else None,
+        "grey_index": grey,
+        "grey_index_source": grey_source,
+        "exposure_times_us": [exposures[s[0]] for s in sets],
+        "grey_exposure_us": exposures[grey],
+        "exposure_group_names": list(data.exposure_group_names),
+        "illumination_temperature_c": data.illumination_temperature_c,
+        "timestamp_source": stamp_source,
+        "stream_id": data.stream_id,
+    }
+    info.update(meta or {})
+    exposure_us = exposures[sets[0][0]] or (uc.exposure_us if uc else 0)
+    return RawFrame(
+        phase_images=phases.astype(np.float32) - np.float32(RAW_OFFSET),
+        intensity=grey_img.astype(np.float32),
+        frequencies_hz=np.asarray(set_freqs, dtype=np.float64),
+        saturated=saturated,
+        sbi_limit=np.zeros(grey_img.shape, dtype=bool),
+        exposure_s=exposure_us * 1e-6,
+        timestamp_s=stamp,
+        meta=info,
+        illumination_temperature_c=data.illumination_temperature_c,
+    )
+
+
