@@ -18,12 +18,19 @@ from typing import Any
 
 import numpy as np
 
-from drivers.camera.wire import MAX_RAW, N_PHASES, RAW_OFFSET, UseCase, get_use_case
+from drivers.camera.wire import (
+    MAX_RAW,
+    N_PHASES,
+    RAW_OFFSET,
+    UseCase,
+    get_use_case,
+    raw_to_wire_values,
+)
 from drivers.errors import DeviceInputError, ProtocolError
 from sim_core.raw import RawFrame
 from toftwin_camera_bridge import RawDataCopy
 
-__all__ = ["RoyaleDataError", "royale_to_raw_frame"]
+__all__ = ["RoyaleDataError", "raw_frame_to_royale", "royale_to_raw_frame"]
 
 
 class RoyaleDataError(ProtocolError):
@@ -176,3 +183,48 @@ def royale_to_raw_frame(
     )
 
 
+
+
+def raw_frame_to_royale(raw: RawFrame, use_case: str | UseCase, *, grey_last: bool = False,
+                        timestamp_us: int | None = None) -> RawDataCopy:
+    """The raw data royale would give for ``raw`` (the inverse of :func:`royale_to_raw_frame`
+    up to the 12-bit quantisation of :func:`drivers.camera.wire.raw_to_wire_values`).
+
+    One exposure group of four phase frames (0, 90, 180, 270 deg) per modulation frequency, in
+    the use case's order, and the grey frame (illumination off) first or, with ``grey_last``,
+    last; frequencies and exposure times per exposure group. The simulated camera behind the
+    camera bridge (:mod:`drivers.sim.bridge_source`) serves its frames so.
+
+    >>> from drivers.camera.wire import USE_CASES
+    >>> uc = USE_CASES["MODE_5_45FPS_500"]
+    >>> frame = RawFrame(np.zeros((1, 4, 2, 3), np.float32), np.full((2, 3), 7.0, np.float32),
+    ...                  np.array(uc.frequencies_hz), np.zeros((2, 3), bool),
+    ...                  np.zeros((2, 3), bool), uc.exposure_s)
+    >>> copy = raw_frame_to_royale(frame, uc)
+    >>> copy.raw_frame_count, copy.phase_angles_deg, int(copy.raw_frames[0, 0, 0])
+    ((1, 4), (0, 0, 90, 180, 270), 7)
+    >>> np.array_equal(royale_to_raw_frame(copy, use_case=uc).phase_images, frame.phase_images)
+    True
+    """
+    uc = get_use_case(use_case)
+    grey, phases = raw_to_wire_values(raw)
+    n_f, height, width = phases.shape[0], grey.shape[0], grey.shape[1]
+    groups = [(f"mod{k}", phases[k], int(uc.frequencies_hz[k]), 1) for k in range(n_f)]
+    grey_group = ("gray", grey[None], int(uc.frequencies_hz[-1]), 0)
+    groups = [*groups, grey_group] if grey_last else [grey_group, *groups]
+    exposure_us = round(raw.exposure_s * 1e6)
+    stamp = timestamp_us if timestamp_us is not None else (
+        int(raw.timestamp_s * 1e6) if raw.timestamp_s > 0 else None)
+    return RawDataCopy(
+        width=width, height=height,
+        raw_frames=np.concatenate([frames for _, frames, _, _ in groups]).astype(np.uint16),
+        modulation_frequencies_hz=tuple(f for _, _, f, _ in groups),
+        exposure_times_us=(exposure_us,) * len(groups),
+        raw_frame_count=tuple(len(frames) for _, frames, _, _ in groups),
+        exposure_group_names=tuple(name for name, _, _, _ in groups),
+        phase_angles_deg=tuple(a for _, frames, _, on in groups
+                               for a in ((0, 90, 180, 270) if on else (0,))),
+        illumination_enabled=tuple(on for _, frames, _, on in groups for _ in range(len(frames))),
+        timestamp_us=stamp,
+        illumination_temperature_c=raw.illumination_temperature_c,
+    )

@@ -28,6 +28,9 @@ __all__ = ["SourceCamera", "camera_error"]
 
 _log = logging.getLogger(__name__)
 
+#: how often a capture waiting for a frame asks the source whether the camera is still there [s]
+POLL_S = 0.25
+
 
 def camera_error(exc: BridgeError, who: str) -> Exception:
     """A source's :class:`~toftwin_camera_bridge.BridgeError` as the driver's error family; a
@@ -193,10 +196,7 @@ class SourceCamera:
         frames: list[RawFrame] = []
         try:
             while len(frames) < n:
-                try:
-                    arrived, data = self._queue.get(timeout=self.frame_timeout_s)
-                except queue.Empty:
-                    raise self._no_frame_error(len(frames), n) from None
+                arrived, data = self._next(len(frames), n)
                 frames.append(royale_to_raw_frame(
                     data, use_case=self._use_case, value_shift=self.value_shift,
                     timestamp_s=arrived, meta={"device": self._opened_id or self.camera_id}))
@@ -207,6 +207,22 @@ class SourceCamera:
                 except CameraError as exc:
                     _log.warning("%s: stop after capture failed: %s", self._who(), exc)
         return frames
+
+    def _next(self, got: int, n: int) -> tuple[float, RawDataCopy]:
+        """The next queued frame; waits at most ``frame_timeout_s``, and no longer than
+        :data:`POLL_S` once the source says the camera is gone."""
+        deadline = time.monotonic() + self.frame_timeout_s
+        while True:
+            try:
+                return self._queue.get(timeout=max(0.0, min(POLL_S,
+                                                             deadline - time.monotonic())))
+            except queue.Empty:
+                source = self._source
+                gone = False
+                with contextlib.suppress(Exception):
+                    gone = source is None or not source.is_connected()
+                if gone or time.monotonic() >= deadline:
+                    raise self._no_frame_error(got, n) from None
 
     def _no_frame_error(self, got: int, n: int) -> CameraError | DeviceTimeoutError:
         """Why no frame came: a disconnected camera (its source says so), else a timeout;

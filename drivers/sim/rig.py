@@ -22,16 +22,24 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from drivers.camera import UsbCamera, UsbCameraSettings
+from drivers.camera.bridge_client import BridgeCamera
+from drivers.errors import DeviceInputError
 from drivers.rig import Rig, RigState
 from drivers.sim import SimClock
+from drivers.sim.bridge_source import SimulatedCameraSource
 from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.smc100 import Smc100Sim
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
 from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
 from drivers.turntable import SMC100_SETTINGS, Turntable
 from sim_core.twin_file import TurntableSettling
+from toftwin_camera_bridge import BridgeServer
 
 __all__ = ["SimulatedRigState", "simulated_rig"]
+
+#: longest wait for a bridged simulated frame (a path-traced frame may take a while; a bridge
+#: that goes away is noticed at once, not after this)
+BRIDGE_FRAME_TIMEOUT_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -66,12 +74,14 @@ def simulated_rig(
     camera_settings: UsbCameraSettings | None = None,
     turntable_settling: TurntableSettling | None = None,
     lab_wait: Callable[..., None] | None = None,
+    camera_transport: str = "usb",
 ) -> Rig:
     """Start the three simulators and return a rig with real drivers connected to them.
 
     Closing the rig closes the drivers and stops the simulators; ``rig.sims`` holds them
     (``"turntable"``, ``"solar"``: :class:`~drivers.sim.pty_server.SimHandle`; ``"camera"``:
-    the :class:`~drivers.sim.usb_camera.UsbCameraSim`).
+    the :class:`~drivers.sim.usb_camera.UsbCameraSim`; ``"bridge"``: the camera bridge's
+    :class:`toftwin_camera_bridge.BridgeServer` when the camera is bridged).
 
     Parameters
     ----------
@@ -107,6 +117,13 @@ def simulated_rig(
         real time. An instant stage's post-move wait passes on it too,
         ``lab_wait(seconds, turntable_angle_deg=...)`` with where the stage stopped (the move
         ends before the wait: :meth:`drivers.sim.lab_clock.LabClock.wait`).
+    camera_transport : {"usb", "bridge"}
+        How the rig's camera reaches the simulated one: our USB driver over the pyusb backend
+        (:class:`~drivers.camera.UsbCamera`), or the camera bridge's protocol over TCP
+        (:class:`~drivers.camera.bridge_client.BridgeCamera` against a
+        :class:`toftwin_camera_bridge.BridgeServer` serving
+        :class:`drivers.sim.bridge_source.SimulatedCameraSource` with the same frame source and
+        devices; the USB camera's faults do not apply to it).
 
     Examples
     --------
@@ -114,7 +131,13 @@ def simulated_rig(
     ...     rig.apply(RigState(30.0, 0.0, False)).turntable_angle_deg
     30.0
     """
+    if camera_transport not in ("usb", "bridge"):
+        raise DeviceInputError("camera_transport", f"got {camera_transport!r}; usb or bridge")
+    if camera_transport == "bridge" and list(camera_faults):
+        raise DeviceInputError("camera_faults", "the USB camera's faults; the bridged camera "
+                                                "has none (stop the bridge to fail it)")
     started: list[Callable[[], None]] = []
+    bridge: BridgeServer | None = None
     try:
         tt_instant = instant if turntable_instant is None else turntable_instant
         lab_stage = lab_wait is not None and tt_instant  # an instant stage on the lab's clock
@@ -165,7 +188,14 @@ def simulated_rig(
         )
         solar.connect()
         started.append(solar.close)
-        camera = UsbCamera(backend=cam_sim, use_case=use_case, settings=camera_settings)
+        if camera_transport == "bridge":
+            bridge = _camera_bridge(frame_source or cam_sim.frame_source,
+                                    _physical_state(tt_sim, solar_sim), seed)
+            started.append(bridge.close)
+            camera = BridgeCamera(f"tcp://127.0.0.1:{bridge.address[1]}", use_case=use_case,
+                                  frame_timeout_s=BRIDGE_FRAME_TIMEOUT_S)
+        else:
+            camera = UsbCamera(backend=cam_sim, use_case=use_case, settings=camera_settings)
         camera.connect()
     except BaseException:
         for stop in reversed(started):
@@ -177,9 +207,22 @@ def simulated_rig(
     # during it, not after it.
     rig_sleep = (_lab_sleep(lab_wait, tt_sim.models["turntable"]) if lab_stage
                  else lab_wait or _scaled_sleep(0.0 if instant else time_scale))
-    rig = Rig(turntable, solar, camera, on_close=[solar_sim.stop, tt_sim.stop], sleep=rig_sleep)
+    closers = [solar_sim.stop, tt_sim.stop]
+    if bridge is not None:
+        closers.insert(0, bridge.close)
+    rig = Rig(turntable, solar, camera, on_close=closers, sleep=rig_sleep)
     rig.sims = {"turntable": tt_sim, "solar": solar_sim, "camera": cam_sim}
+    if bridge is not None:
+        rig.sims["bridge"] = bridge
     return rig
+
+
+def _camera_bridge(frame_source: FrameSource, state: Callable[[], RigState],
+                   seed: int) -> BridgeServer:
+    """A camera bridge serving the simulated camera on a free loopback port."""
+    return BridgeServer(lambda on_frame: SimulatedCameraSource(on_frame, frame_source, state,
+                                                               seed=seed),
+                        "127.0.0.1", 0).start()
 
 
 def _scaled_sleep(time_scale: float) -> Callable[[float], None]:
