@@ -23,9 +23,11 @@ requests ``{"op": OP, "id": N, ...}``; the bridge answers each with ``{"op": "re
 "message": M}}`` (kinds: :data:`ERROR_KINDS`). Requests: ``hello`` (``{"protocol": 1}`` ->
 the bridge's versions), ``list_cameras``, ``open`` (``camera``: an id or null for the first,
 ``use_case``, ``exposure_us``: optional), ``use_case`` (``name``), ``exposure`` (``us``),
-``start``, ``stop``, ``close``, ``ping``. The bridge pushes ``{"op": "frame", "seq": N, ...}``
-with one royale ``RawData`` (the fields of :class:`RawDataCopy`; the payload is the raw frames,
-``(n, height, width)`` little-endian uint16, C order) and ``{"op": "event", "kind":
+``start``, ``stop``, ``close``, ``ping``, and for a simulated camera only ``attach_world``
+(``url``: the service's simulated world, toftwin's ``drivers.sim.world_link``). The bridge
+pushes ``{"op": "frame", "seq": N, ...}`` with one royale ``RawData`` (the fields of
+:class:`RawDataCopy`; the payload is the raw frames, ``(n, height, width)`` little-endian
+uint16, C order) and ``{"op": "event", "kind":
 "disconnected" | "error", "camera": ID, "message": M}``.
 
 One client at a time: a new connection replaces the old one (a restarted service finds its
@@ -724,6 +726,13 @@ class BridgeServer:
             return None
         if op == "stop":
             src.stop()
+            return None
+        if op == "attach_world":  # a simulated camera films the client's simulated world
+            attach = getattr(src, "attach_world", None)
+            if attach is None:
+                raise BridgeError("this bridge's camera is real: it films no simulated world",
+                                  "input")
+            attach(str(message.get("url")))
             return None
         if op == "close":
             src.close()

@@ -412,6 +412,7 @@ class Rig:
         turntable_address: int = 1,
         camera_serial: str | None = None,
         usb_backend: Any = None,
+        camera: str = "usb",
     ) -> Rig:
         """Open and connect the three devices of the real rig and return it.
 
@@ -433,6 +434,11 @@ class Rig:
             USB serial number of the camera.
         usb_backend : pyusb backend or None
             libusb when None; a :class:`drivers.sim.usb_camera.UsbCameraSim` for the simulator.
+        camera : str
+            ``"usb"`` (:class:`UsbCamera`), ``"royale"`` (:class:`drivers.camera.RoyaleCamera`,
+            PMD's roypy in this process) or ``"tcp://HOST:PORT"``
+            (:class:`drivers.camera.bridge_client.BridgeCamera`, a camera bridge);
+            ``camera_serial`` is the camera's id for the latter two.
         """
         opened: list[Any] = []
         try:
@@ -442,7 +448,7 @@ class Rig:
             solar = SolarSimulator(lamp_port, shutter_port)
             opened.append(solar)
             solar.connect()
-            camera = UsbCamera(camera_serial, backend=usb_backend)
+            camera = _camera(camera, camera_serial, usb_backend)
             opened.append(camera)
             camera.connect()
         except BaseException:
@@ -451,6 +457,19 @@ class Rig:
                     device.close()
             raise
         return cls(turntable, solar, camera)
+
+
+def _camera(kind: str, camera_id: str | None, usb_backend: Any) -> CameraProtocol:
+    """The real rig's camera driver of ``kind`` (see :meth:`Rig.open`), not yet connected."""
+    if kind == "usb":
+        return UsbCamera(camera_id, backend=usb_backend)
+    if kind == "royale":
+        from drivers.camera.royale import RoyaleCamera
+
+        return RoyaleCamera(camera_id)
+    from drivers.camera.bridge_client import BridgeCamera
+
+    return BridgeCamera(kind, camera_id)
 
 
 def _mismatch(error: DeviceError, device: str, target: str, read_back: str) -> DeviceError:

@@ -125,6 +125,11 @@ class Settings(BaseSettings):
     lamp_port: str | None = None
     shutter_port: str | None = None
     camera_serial: str | None = None
+    #: how the camera is reached: ``usb`` (our wire format over pyusb; the simulated rig's USB
+    #: camera), ``royale`` (PMD's roypy in this process) or ``tcp://HOST:PORT`` (a camera bridge:
+    #: ``toftwin_camera_bridge`` beside a real camera, ``toftwin camera-bridge --simulated``
+    #: filming the simulated rig's world)
+    camera: str = "usb"
     solar_stable_timeout_s: float = Field(60.0, gt=0.0)
     rig_wait_s: float = Field(30.0, gt=0.0)
 
@@ -150,10 +155,28 @@ class Settings(BaseSettings):
         if self.sim_motion != "instant" and not self.simulated:
             raise ValueError("sim_motion: the simulated turntable's motion needs the simulated "
                              "rig (TOFTWIN_SIMULATED=true, serve --simulated)")
+        if self.camera == "royale" and self.simulated:
+            raise ValueError("camera: royale opens a real pico flexx; the simulated rig's camera "
+                             "is usb or a simulated camera bridge (tcp://HOST:PORT)")
         if self.reality is not None and not self.simulated:
             raise ValueError("reality: a reality file describes the simulated lab's world; it "
                              "needs the simulated rig (TOFTWIN_SIMULATED=true, serve --simulated)")
         return self
+
+    @field_validator("camera")
+    @classmethod
+    def _known_camera(cls, v: str) -> str:
+        if v in ("usb", "royale"):
+            return v
+        from drivers.camera.bridge_client import parse_bridge_url
+        from drivers.errors import DeviceInputError
+
+        try:
+            parse_bridge_url(v)
+        except DeviceInputError:
+            raise ValueError(f"got {v!r}; allowed: 'usb', 'royale' or a camera bridge "
+                             "'tcp://HOST:PORT' (PORT 1..65535)") from None
+        return v
 
     @field_validator("reality")
     @classmethod

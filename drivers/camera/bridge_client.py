@@ -62,8 +62,10 @@ class RemoteSource:
     """
 
     def __init__(self, url: str, on_frame: Any, *, connect_timeout_s: float = 5.0,
-                 request_timeout_s: float = REQUEST_TIMEOUT_S) -> None:
+                 request_timeout_s: float = REQUEST_TIMEOUT_S,
+                 world_url: str | None = None) -> None:
         self.url = url
+        self.world_url = world_url
         self.host, self.port = parse_bridge_url(url)
         self.on_frame = on_frame
         self.connect_timeout_s = connect_timeout_s
@@ -168,7 +170,16 @@ class RemoteSource:
             if op != "open" and self.camera_id is not None:
                 self._identity = self._send(sock, "open", camera=self.camera_id,
                                             use_case=self._use_case)
-        return self._send(sock, op, **fields)
+                self._attach(sock)
+        result = self._send(sock, op, **fields)
+        if op == "open":
+            self._attach(sock)
+        return result
+
+    def _attach(self, sock: socket.socket) -> None:
+        """A simulated bridge films our simulated world (:mod:`drivers.sim.world_link`)."""
+        if self.world_url is not None:
+            self._send(sock, "attach_world", url=self.world_url)
 
     # -- the source's methods -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
@@ -232,6 +243,10 @@ class BridgeCamera(SourceCamera):
         The camera's royale id at the bridge; its first camera when None.
     connect_timeout_s : float
         Longest wait for the bridge to accept a connection.
+    world_url : str or None
+        A simulated bridge (``toftwin camera-bridge --simulated``) films the simulated world
+        served there (:class:`drivers.sim.world_link.WorldLinkServer`), attached at every
+        connection.
     use_case, frame_timeout_s, queue_size, value_shift
         As for :class:`~drivers.camera.source_camera.SourceCamera`.
     """
@@ -240,16 +255,18 @@ class BridgeCamera(SourceCamera):
 
     def __init__(self, url: str, camera_id: str | None = None, *,
                  use_case: str | UseCase = "MODE_5_45FPS_500", frame_timeout_s: float = 2.0,
-                 connect_timeout_s: float = 5.0, queue_size: int = 8,
-                 value_shift: int = 0) -> None:
+                 connect_timeout_s: float = 5.0, queue_size: int = 8, value_shift: int = 0,
+                 world_url: str | None = None) -> None:
         parse_bridge_url(url)
         super().__init__(camera_id, use_case=use_case, frame_timeout_s=frame_timeout_s,
                          queue_size=queue_size, value_shift=value_shift)
         self.url = url
         self.connect_timeout_s = connect_timeout_s
+        self.world_url = world_url
 
     def _make_source(self) -> RemoteSource:
-        return RemoteSource(self.url, self._on_frame, connect_timeout_s=self.connect_timeout_s)
+        return RemoteSource(self.url, self._on_frame, connect_timeout_s=self.connect_timeout_s,
+                            world_url=self.world_url)
 
     def _who(self) -> str:
         return f"{super()._who()} at camera bridge {self.url}"

@@ -70,6 +70,16 @@ class SimulatedCameraSource:
         self._thread: threading.Thread | None = None
         self.extra: dict[str, Any] = {}
 
+    def attach_world(self, url: str) -> None:
+        """Film the simulated world served at ``url``
+        (:class:`drivers.sim.world_link.WorldLinkServer`): its frame source and rig state."""
+        from drivers.sim.world_link import RemoteFrameSource
+
+        old = self.frame_source
+        self.frame_source, self.state_provider = RemoteFrameSource(url), None
+        if isinstance(old, RemoteFrameSource):
+            old.close()
+
     def describe(self) -> dict[str, Any]:
         return {"backend": self.backend, "royale": None, **self.extra}
 

@@ -30,6 +30,7 @@ from drivers.sim.bridge_source import SimulatedCameraSource
 from drivers.sim.pty_server import SimHandle, start_simulator
 from drivers.sim.smc100 import Smc100Sim
 from drivers.sim.usb_camera import FrameSource, UsbCameraSim
+from drivers.sim.world_link import WorldLinkServer
 from drivers.solar_simulator import LAMP_SETTINGS, SHUTTER_SETTINGS, SolarSimulator
 from drivers.turntable import SMC100_SETTINGS, Turntable
 from sim_core.twin_file import TurntableSettling
@@ -75,13 +76,15 @@ def simulated_rig(
     turntable_settling: TurntableSettling | None = None,
     lab_wait: Callable[..., None] | None = None,
     camera_transport: str = "usb",
+    camera_bridge: str | None = None,
 ) -> Rig:
     """Start the three simulators and return a rig with real drivers connected to them.
 
     Closing the rig closes the drivers and stops the simulators; ``rig.sims`` holds them
     (``"turntable"``, ``"solar"``: :class:`~drivers.sim.pty_server.SimHandle`; ``"camera"``:
     the :class:`~drivers.sim.usb_camera.UsbCameraSim`; ``"bridge"``: the camera bridge's
-    :class:`toftwin_camera_bridge.BridgeServer` when the camera is bridged).
+    :class:`toftwin_camera_bridge.BridgeServer` when the camera is bridged in this process, the
+    :class:`~drivers.sim.world_link.WorldLinkServer` an outside bridge films).
 
     Parameters
     ----------
@@ -124,6 +127,11 @@ def simulated_rig(
         :class:`toftwin_camera_bridge.BridgeServer` serving
         :class:`drivers.sim.bridge_source.SimulatedCameraSource` with the same frame source and
         devices; the USB camera's faults do not apply to it).
+    camera_bridge : str or None
+        With ``camera_transport="bridge"``: a simulated camera bridge already running there
+        (``tcp://HOST:PORT``, ``toftwin camera-bridge --simulated``) instead of one in this
+        process; it films this rig's world through a
+        :class:`drivers.sim.world_link.WorldLinkServer` (closed with the rig).
 
     Examples
     --------
@@ -137,7 +145,7 @@ def simulated_rig(
         raise DeviceInputError("camera_faults", "the USB camera's faults; the bridged camera "
                                                 "has none (stop the bridge to fail it)")
     started: list[Callable[[], None]] = []
-    bridge: BridgeServer | None = None
+    bridge: BridgeServer | WorldLinkServer | None = None
     try:
         tt_instant = instant if turntable_instant is None else turntable_instant
         lab_stage = lab_wait is not None and tt_instant  # an instant stage on the lab's clock
@@ -188,7 +196,13 @@ def simulated_rig(
         )
         solar.connect()
         started.append(solar.close)
-        if camera_transport == "bridge":
+        if camera_transport == "bridge" and camera_bridge is not None:
+            bridge = WorldLinkServer(frame_source or cam_sim.frame_source,
+                                     _physical_state(tt_sim, solar_sim)).start()
+            started.append(bridge.close)
+            camera = BridgeCamera(camera_bridge, use_case=use_case, world_url=bridge.url,
+                                  frame_timeout_s=BRIDGE_FRAME_TIMEOUT_S)
+        elif camera_transport == "bridge":
             bridge = _camera_bridge(frame_source or cam_sim.frame_source,
                                     _physical_state(tt_sim, solar_sim), seed)
             started.append(bridge.close)

@@ -55,6 +55,7 @@ def build_app() -> typer.Typer:
     app.command("correct")(correct.correct)
     app.add_typer(devices.devices_app, name="devices")
     app.command("sim-device")(devices.sim_device)
+    app.command("camera-bridge")(devices.camera_bridge)
     app.add_typer(schema.schema_app, name="schema")
     app.add_typer(calibrate.calibrate_app, name="calibrate")
     app.command("fit-object")(fit_object.fit_object_command)

@@ -1,4 +1,5 @@
-"""``toftwin devices`` and ``toftwin sim-device``: what is connected, and simulators to try."""
+"""``toftwin devices``, ``toftwin sim-device`` and ``toftwin camera-bridge``: what is connected,
+simulators to try, and the camera served to a service elsewhere."""
 
 from __future__ import annotations
 
@@ -11,7 +12,13 @@ import typer
 
 from drivers.diagnostics import check_devices, list_devices
 from service.cli import ranges
-from service.cli.common import command_group, console, fail_invalid, number_option
+from service.cli.common import (
+    command_group,
+    console,
+    fail_invalid,
+    number_option,
+    print_error,
+)
 from sim_core.errors import InvalidInputError
 
 devices_app = command_group("Devices of the rig: list and check them.")
@@ -102,3 +109,57 @@ def sim_device(
         serve(kind, list(fault or []), transport=transport, instant=instant)
     except InvalidInputError as exc:
         fail_invalid(exc)
+
+
+def camera_bridge(
+    simulated: Annotated[
+        bool, typer.Option("--simulated", help="Serve the simulated camera (it films the "
+                           "simulated world of the service that connects; a plane at 1 m "
+                           "until then).")
+    ] = False,
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[
+        int, number_option("--port", help="TCP port (0: any free port).", allowed=ranges.PORT)
+    ] = 5600,
+    access_code: Annotated[
+        str | None, typer.Option("--access-code", help="royale's access code (level 2: raw "
+                                 "data before royale 5; else $TOFTWIN_ROYALE_ACCESS_CODE).")
+    ] = None,
+) -> None:
+    """Serve the camera to a toftwin service elsewhere (``serve --camera tcp://HOST:PORT``).
+
+    Prints ``tcp://HOST:PORT`` first (a script reads it) and serves until stopped. Without
+    --simulated it opens a pico flexx with PMD's roypy, as the one-file
+    ``toftwin_camera_bridge.py`` does on a lab PC.
+    """
+    import signal
+    import threading
+
+    from toftwin_camera_bridge import BridgeError, BridgeServer, RoyaleSource, import_roypy
+
+    if simulated:
+        from drivers.sim.bridge_source import SimulatedCameraSource
+        from drivers.sim.usb_camera import plane_source
+
+        def make_source(on_frame):
+            return SimulatedCameraSource(on_frame, plane_source(1.0), paced=True)
+    else:
+        try:
+            roypy = import_roypy()
+        except BridgeError as exc:
+            print_error(str(exc))
+            raise typer.Exit(code=1) from exc
+
+        def make_source(on_frame):
+            return RoyaleSource(roypy, on_frame, access_code)
+
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    server = BridgeServer(make_source, host, port).start()
+    try:
+        print(f"tcp://{server.address[0]}:{server.address[1]}", flush=True)
+        while not stop.wait(0.2):
+            pass
+    finally:
+        server.close()

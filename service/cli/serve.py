@@ -21,7 +21,7 @@ from service.store.data_lock import make_private
 #: the settings the options of ``serve`` set: field -> option
 OPTION_OF_FIELD = {"host": "--host", "port": "--port", "data_dir": "--data-dir",
                    "simulated": "--simulated", "executor": "--executor", "workers": "--workers",
-                   "faults": "--fault", "reality": "--reality"}
+                   "faults": "--fault", "reality": "--reality", "camera": "--camera"}
 
 
 def serve(
@@ -59,6 +59,12 @@ def serve(
         typer.Option("--reality", help="The simulated lab's reality file (how its world differs "
                      "from the nominal scene; docs/calibration.md). Needs --simulated."),
     ] = None,
+    camera: Annotated[
+        str | None,
+        typer.Option("--camera", help="usb (default), royale (PMD's roypy in this process) or "
+                     "a camera bridge tcp://HOST:PORT (toftwin-camera-bridge beside the camera; "
+                     "with --simulated, toftwin camera-bridge --simulated)."),
+    ] = None,
 ) -> None:
     """Start the REST API (uvicorn); --simulated runs on the simulators and the satellite scene."""
     import uvicorn
@@ -73,7 +79,7 @@ def serve(
     token = secrets.token_urlsafe(24) if session else None
     given = {"host": host, "port": port, "data_dir": data_dir, "simulated": simulated or None,
              "executor": executor, "workers": workers, "faults": fault or None,
-             "reality": reality}
+             "reality": reality, "camera": camera}
     settings = load_settings(settings_file, OPTION_OF_FIELD, token=token, **given)
     refuse_if_in_use(settings.data_dir)
     refuse_if_no_room(settings.data_dir)

@@ -4,7 +4,9 @@
 drives the rig (``toftwin calibrate rig``, ``calibrate material``, ``fit-object``) get their rig,
 so both honour the same settings from the same environment: for the real rig the ports
 (``TOFTWIN_TURNTABLE_PORT``, ``TOFTWIN_LAMP_PORT``, ``TOFTWIN_SHUTTER_PORT``), the SMC100's
-address (``TOFTWIN_TURNTABLE_ADDRESS``) and the camera's serial (``TOFTWIN_CAMERA_SERIAL``); for
+address (``TOFTWIN_TURNTABLE_ADDRESS``), the camera's serial (``TOFTWIN_CAMERA_SERIAL``) and how
+it is reached (``TOFTWIN_CAMERA``: usb, royale or a camera bridge ``tcp://HOST:PORT``, which for
+the simulated lab is ``toftwin camera-bridge --simulated`` filming this lab's world); for
 the simulated lab the camera's render settings and noise seed, the reality, the armed faults and
 the turntable's motion. The simulated rig itself is assembled beside the simulators
 (:func:`drivers.sim.rig.simulated_rig`).
@@ -48,7 +50,7 @@ def open_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, SimulatedWorl
         )
     return Rig.open(settings.turntable_port, settings.lamp_port, settings.shutter_port,
                     turntable_address=settings.turntable_address,
-                    camera_serial=settings.camera_serial), None
+                    camera_serial=settings.camera_serial, camera=settings.camera), None
 
 
 def armed_faults(settings: Settings) -> dict[str, list[str]]:
@@ -100,5 +102,7 @@ def _open_simulated(settings: Settings, scene: SceneSource) -> tuple[Rig, Simula
                         solar_faults=armed["solar-simulator"],
                         camera_faults=armed["camera"],
                         turntable_settling=world.reality.turntable.settling,
-                        lab_wait=world.clock.wait)
+                        lab_wait=world.clock.wait,
+                        camera_transport="usb" if settings.camera == "usb" else "bridge",
+                        camera_bridge=None if settings.camera == "usb" else settings.camera)
     return rig, world

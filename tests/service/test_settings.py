@@ -68,3 +68,13 @@ def test_faults_are_checked_and_need_the_simulated_rig(tmp_path):
                  faults=["camera:drop", "camera:smoke"])
     with pytest.raises(ValidationError, match="needs the simulated rig"):
         Settings(token="t" * 16, data_dir=tmp_path, faults=["turntable:stall"])
+
+
+def test_the_camera_setting_names_the_allowed_forms(tmp_path):
+    for camera in ("usb", "royale", "tcp://labpc:5600"):
+        assert Settings(token="a-real-token-123", camera=camera, data_dir=tmp_path).camera == camera
+    for bad in ("udp://labpc:5600", "tcp://labpc", "pico"):
+        with pytest.raises(ValidationError, match=r"camera\n.*'usb', 'royale' or a camera bridge"):
+            Settings(token="a-real-token-123", camera=bad, data_dir=tmp_path)
+    with pytest.raises(ValidationError, match="camera: royale opens a real pico flexx"):
+        Settings(token="a-real-token-123", camera="royale", simulated=True, data_dir=tmp_path)
