@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 from calibration.captures import AveragedCapture
@@ -158,6 +158,29 @@ class CapturePlan:
     def n_captures(self) -> int:
         """Rig states the plan visits (for progress)."""
         return len(self.captures)
+
+    def rested_after_moves(self, rest_s: float, from_angle_deg: float | None = None
+                           ) -> CapturePlan:
+        """This plan with every capture that follows a move of the turntable (its angle not the
+        previous capture's, the first one's not ``from_angle_deg``) resting at least ``rest_s``
+        after it; captures taken on purpose while the table moves (``settle=False``) keep none.
+
+        >>> plan = CapturePlan(tuple(CaptureStep(f"c{i}", a, 0.0, False, 1)
+        ...                          for i, a in enumerate((0.0, 0.0, 5.0))))
+        >>> [c.rest_s for c in plan.rested_after_moves(120.0, 0.0).captures]
+        [0.0, 0.0, 120.0]
+        """
+        if not (math.isfinite(rest_s) and 0.0 <= rest_s <= MAX_WAIT_S):
+            raise InvalidInputError("rest_s", f"got {rest_s!r} s; 0..{MAX_WAIT_S:g} s")
+        steps: list[Step] = []
+        angle = from_angle_deg
+        for step in self.steps:
+            if isinstance(step, CaptureStep):
+                if step.settle and step.turntable_angle_deg != angle:
+                    step = replace(step, rest_s=max(step.rest_s, rest_s))
+                angle = step.turntable_angle_deg
+            steps.append(step)
+        return CapturePlan(tuple(steps), self.restore)
 
 
 def mount(objects: Sequence[ObjectSpec] | None, instruction: str) -> MountStep:

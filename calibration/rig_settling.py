@@ -27,7 +27,7 @@ import numpy as np
 
 from calibration.captures import AveragedCapture
 from calibration.object_twin.point_cloud import range_from_phases
-from calibration.settling import KEY, fit_settling, plane_yaw_deg
+from calibration.settling import KEY, RINGING_SIGMAS, fit_settling, plane_yaw_deg
 from calibration.verdicts import Verdict, Verdicts
 from sim_core.camera import Intrinsics, pixel_to_camera_direction
 from sim_core.errors import InvalidInputError
@@ -36,7 +36,7 @@ from sim_core.tof import phase_from_phasor
 from sim_core.twin_file import MAX_SETTLING_AMPLITUDE_DEG, TurntableSettling
 
 __all__ = ["SETTLING_KEYS", "RigSettling", "board_yaw_deg", "fit_rig_settling", "no_settling",
-           "settling_to_wait_out"]
+           "settling_to_wait_out", "wait_after_moves"]
 
 #: the keys of ``turntable.settling``
 SETTLING_KEYS = tuple(f"{KEY}.{k}" for k in ("amplitude_deg", "frequency_hz", "damping_ratio"))
@@ -153,21 +153,42 @@ def fit_rig_settling(rest: AveragedCapture, moved: AveragedCapture,
     return RigSettling(settling, verdicts, summary)
 
 
+def wait_after_moves(fit: RigSettling) -> tuple[TurntableSettling | None, str | None]:
+    """How the moves after the settling stage wait, from its ``fit``: the ringing to wait out
+    (None: none determined) and, when the table was seen ringing but its ringing is not
+    determined, why every later move must rest as long as the stage's own frames at rest did.
+
+    The ringing's amplitude is the fit's at the first frame, which a move end half a damped
+    period earlier would exceed by ``exp(pi zeta / sqrt(1 - zeta^2))`` (:data:`AMPLITUDE_REASON`):
+    the wait is for that larger one (at most the key's largest, 5 deg). ``zeta <= 0.9`` (the
+    key's range) keeps the square root's argument at least 0.19.
+
+    Seen ringing means an estimate whose amplitude is at least
+    :data:`calibration.settling.RINGING_SIGMAS` yaw noises: the rig sweep's reality 205 rang
+    1.2 deg (34 noises) and its fit stayed unexplained (reduced chi-square 5.9: a moving
+    board's yaw scatters more than at rest); without a wait its board sweep was captured on a
+    ringing table, every view after a move of the same sign at the same phase, and the
+    turntable's zero came out 0.67 deg off at 15.9 standard deviations.
+    """
+    if fit.settling is not None:
+        zeta = fit.settling.damping_ratio
+        margin = math.exp(math.pi * zeta / math.sqrt(1.0 - zeta**2))
+        return fit.settling.model_copy(update={
+            "amplitude_deg": min(fit.settling.amplitude_deg * margin,
+                                 MAX_SETTLING_AMPLITUDE_DEG)}), None
+    ratio = fit.summary.get("ringing_over_noise", math.nan)
+    if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio >= RINGING_SIGMAS):
+        return None, None
+    why = next((f"{k} {v.verdict}: {v.reason}" for k, v in fit.verdicts.items()
+                if not v.determined and k != SETTLING_KEYS[0]), "its shape is not determined")
+    return None, (f"the table was seen ringing ({ratio:.0f} times the yaw's noise) but how is "
+                  f"not known ({why})")
+
+
 def settling_to_wait_out(rest: AveragedCapture, moved: AveragedCapture,
                          intrinsics: Intrinsics) -> TurntableSettling | None:
     """The ringing to wait out after the moves that follow the settling stage, fitted as soon
     as its frames are in (at the nominal ``intrinsics``: the board's yaw scales with them, the
-    ringing's frequency and damping do not); None when not determined (the driver's own wait).
-
-    Its amplitude is the fit's at the first frame, which a move end half a damped period
-    earlier would exceed by ``exp(pi zeta / sqrt(1 - zeta^2))`` (:data:`AMPLITUDE_REASON`): the
-    wait is for that larger one (at most the key's largest, 5 deg). ``zeta <= 0.9`` (the key's
-    range) keeps the square root's argument at least 0.19.
-    """
-    fit = fit_rig_settling(rest, moved, intrinsics)
-    if fit.settling is None:
-        return None
-    zeta = fit.settling.damping_ratio
-    margin = math.exp(math.pi * zeta / math.sqrt(1.0 - zeta**2))
-    return fit.settling.model_copy(update={
-        "amplitude_deg": min(fit.settling.amplitude_deg * margin, MAX_SETTLING_AMPLITUDE_DEG)})
+    ringing's frequency and damping do not); None when not determined
+    (:func:`wait_after_moves`)."""
+    return wait_after_moves(fit_rig_settling(rest, moved, intrinsics))[0]

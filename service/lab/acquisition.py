@@ -12,6 +12,7 @@ alike (and the object fit's captures, for ``toftwin fit-object`` and a campaign'
 from __future__ import annotations
 
 import contextlib
+import logging
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -27,6 +28,7 @@ from calibration.rig_material import (
     material_capture_plan,
 )
 from calibration.rig_sequence import (
+    SETTLING_REST_WAIT_S,
     SETTLING_STEPS,
     RigCalibration,
     RigCalibrationPlan,
@@ -34,7 +36,7 @@ from calibration.rig_sequence import (
     rig_capture_plan,
     split_after_settling,
 )
-from calibration.rig_settling import settling_to_wait_out
+from calibration.rig_settling import fit_rig_settling, wait_after_moves
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
 from drivers.rig import Rig, RigState
 from service.lab.settling import settled_moves, unsettled_moves
@@ -44,6 +46,7 @@ from sim_core.scene import build_camera
 from sim_core.scene_spec import SceneSpec
 from sim_core.twin_file import TurntableParameters, TwinParameters
 
+_log = logging.getLogger(__name__)
 
 def acquire(
     rig: Rig,
@@ -123,18 +126,25 @@ def run_rig_calibration(
     ``spec`` is the nominal scene (camera pose, turntable, solar simulator); its mounted objects
     are swapped for the board during the sequence and mounted again at the end. The table's
     ringing, measured by the settling stage, is fitted as soon as its frames are in and waited
-    out after every later move (:func:`calibration.rig_settling.settling_to_wait_out`): a lab
-    that knows how its table rings does not capture the board sweep while it still does.
+    out after every later move (:func:`calibration.rig_settling.wait_after_moves`): a lab
+    that knows how its table rings does not capture the board sweep while it still does, and
+    one that saw it ring without learning how rests after every later move as long as the
+    settling stage's frames at rest did (:data:`calibration.rig_sequence.SETTLING_REST_WAIT_S`).
     """
     plan = plan or RigCalibrationPlan()
     capture_plan = rig_capture_plan(plan, spec)
     first, rest = split_after_settling(capture_plan)
     captures = acquire(rig, operator, first, progress, total=capture_plan.n_captures)
-    ringing = (settling_to_wait_out(captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]],
-                                    build_camera(spec).intrinsics)
-               if all(name in captures for name in SETTLING_STEPS) else None)
+    ringing, unknown_ringing = (wait_after_moves(fit_rig_settling(
+        captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]], build_camera(spec).intrinsics))
+        if all(name in captures for name in SETTLING_STEPS) else (None, None))
     settle_for = None if ringing is None else TwinParameters(
         turntable=TurntableParameters(settling=ringing))
+    if unknown_ringing is not None:  # rest as long as the settling stage's frames at rest did
+        _log.warning("rig calibration: %s; every later move rests %g s", unknown_ringing,
+                     SETTLING_REST_WAIT_S)
+        rest = rest.rested_after_moves(SETTLING_REST_WAIT_S,
+                                       captures[SETTLING_STEPS[0]].turntable_angle_deg)
     done = len(captures)
     captures |= acquire(rig, operator, rest,
                         lambda k, n, text: progress(done + k, n, text),

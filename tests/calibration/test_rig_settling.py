@@ -5,12 +5,20 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 
 import numpy as np
 import pytest
 
 from calibration.captures import average_frames
-from calibration.rig_settling import SETTLING_KEYS, board_yaw_deg, fit_rig_settling
+from calibration.rig_settling import (
+    SETTLING_KEYS,
+    RigSettling,
+    board_yaw_deg,
+    fit_rig_settling,
+    wait_after_moves,
+)
+from calibration.verdicts import Verdict, Verdicts
 from sim_core.camera import Intrinsics, pixel_centre_grid, pixel_to_camera_direction
 from sim_core.constants import SPEED_OF_LIGHT_M_S
 from sim_core.errors import InvalidInputError
@@ -184,3 +192,54 @@ def test_a_table_ringing_on_the_lab_clock_is_measured_then_waited_out():
         rig.capture(2)
         assert not world.last_rendered_per_step  # at rest: one render a frame
         assert world.clock.now_s - before_s >= waited_s  # the wait passed on the lab's clock
+
+
+def _fit(settling, verdict: str, ratio: float) -> RigSettling:
+    reason = None if verdict == "determined" else "reduced chi-square 5.9 after the fit"
+    return RigSettling(settling, Verdicts({k: Verdict(verdict, 0.01 if verdict == "determined"
+                                                      else None, reason)
+                                           for k in SETTLING_KEYS}),
+                       {"ringing_over_noise": ratio})
+
+
+def test_how_later_moves_wait_follows_what_the_settling_stage_learnt():
+    """A determined ringing is waited out (its amplitude raised for the move end's ambiguity);
+    a ringing seen but not determined makes every later move rest (the rig sweep's reality
+    205: unexplained at 34 yaw noises, its zero 0.67 deg off without a wait); a table seen not
+    to ring waits only the driver's own wait."""
+    ringing, why = wait_after_moves(_fit(TRUTH, "determined", 40.0))
+    assert why is None and ringing.frequency_hz == TRUTH.frequency_hz
+    assert ringing.amplitude_deg == pytest.approx(
+        TRUTH.amplitude_deg * np.exp(np.pi * 0.08 / np.sqrt(1 - 0.08**2)))
+    ringing, why = wait_after_moves(_fit(None, "unexplained", 34.0))
+    assert ringing is None
+    assert why.startswith("the table was seen ringing (34 times the yaw's noise)")
+    assert "turntable.settling.frequency_hz unexplained: reduced chi-square 5.9" in why
+    for ratio in (0.55, 2.9, float("nan")):  # nothing seen above the noise
+        assert wait_after_moves(_fit(None, "not determined", ratio)) == (None, None)
+
+
+def test_a_plan_rests_after_its_moves_only():
+    from calibration.capture_plan import CapturePlan, CaptureStep, WaitStep
+    from calibration.rig_sequence import (
+        SETTLING_REST_WAIT_S,
+        RigCalibrationPlan,
+        rig_capture_plan,
+        split_after_settling,
+    )
+    from tests.calibration.test_rig_roundtrip import SPEC
+
+    first, rest = split_after_settling(rig_capture_plan(RigCalibrationPlan(), SPEC))
+    start = first.captures[-1].turntable_angle_deg
+    rested = rest.rested_after_moves(SETTLING_REST_WAIT_S, start)
+    angles = [start] + [c.turntable_angle_deg for c in rest.captures]
+    moves = sum(a != b for a, b in itertools.pairwise(angles))
+    assert sum(c.rest_s > 0 for c in rested.captures) == moves > 100
+    assert rested.waited_s == pytest.approx(rest.waited_s + moves * SETTLING_REST_WAIT_S)
+    assert rested.restore == rest.restore
+    plan = CapturePlan((CaptureStep("a", 0.0, 0.0, False, 1), WaitStep(5.0, "w"),
+                        CaptureStep("b", 10.0, 0.0, False, 1, settle=False),
+                        CaptureStep("c", 10.0, 0.0, False, 1, rest_s=200.0)))
+    assert [c.rest_s for c in plan.rested_after_moves(60.0).captures] == [60.0, 0.0, 200.0]
+    with pytest.raises(InvalidInputError, match=r"^rest_s: got -1"):
+        plan.rested_after_moves(-1.0)
