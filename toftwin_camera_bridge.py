@@ -290,6 +290,20 @@ def raw_data_from_message(message: dict[str, Any], payload: bytes) -> RawDataCop
         raise BridgeError(f"frame message lacks or garbles a field: {exc!r}", "protocol") from exc
 
 
+def put_dropping_oldest(bounded: queue.Queue, item: Any) -> int:
+    """Put ``item`` into the ``bounded`` queue without blocking: when it is full, the oldest
+    items go first (a camera's newest frame is worth more than its oldest). Items dropped."""
+    dropped = 0
+    while True:
+        try:
+            bounded.put_nowait(item)
+            return dropped
+        except queue.Full:
+            with contextlib.suppress(queue.Empty):
+                bounded.get_nowait()
+                dropped += 1
+
+
 # -- a camera through roypy -------------------------------------------------------------------
 INSTALL_HINT = (
     "install PMD's royale SDK (from pmdtec.com; roypy is not on PyPI) and put its python "
@@ -601,14 +615,7 @@ class BridgeServer:
 
     # frames
     def _on_frame(self, data: RawDataCopy) -> None:
-        while True:
-            try:
-                self._frames.put_nowait(data)
-                return
-            except queue.Full:
-                with contextlib.suppress(queue.Empty):
-                    self._frames.get_nowait()
-                    self.dropped += 1
+        self.dropped += put_dropping_oldest(self._frames, data)
 
     def _send_loop(self) -> None:
         camera_gone_reported = False

@@ -22,7 +22,7 @@ from drivers.camera.royale_convert import royale_to_raw_frame
 from drivers.camera.wire import UseCase, get_use_case
 from drivers.errors import DeviceInputError, DeviceTimeoutError
 from sim_core.raw import RawFrame
-from toftwin_camera_bridge import BridgeError, RawDataCopy
+from toftwin_camera_bridge import BridgeError, RawDataCopy, put_dropping_oldest
 
 __all__ = ["SourceCamera", "camera_error"]
 
@@ -120,15 +120,7 @@ class SourceCamera:
 
     def _on_frame(self, data: RawDataCopy) -> None:
         """The source's thread: queue the copy (dropping the oldest when full)."""
-        item = (time.time(), data)
-        while True:
-            try:
-                self._queue.put_nowait(item)
-                return
-            except queue.Full:
-                with contextlib.suppress(queue.Empty):
-                    self._queue.get_nowait()
-                    self.dropped += 1
+        self.dropped += put_dropping_oldest(self._queue, (time.time(), data))
 
     def close(self) -> None:
         """Stop capturing and drop the camera; safe to call twice."""

@@ -113,3 +113,25 @@ class ScriptedPeer:
 def settings_for(kind: str) -> SerialSettings:
     """The fast test settings of a device kind."""
     return {"smc100": FAST_SMC100, "lamp": FAST_LAMP, "shutter": FAST_SHUTTER}[kind]
+
+
+def free_port() -> int:
+    """A TCP port on the loopback that nothing listens on (now)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def simulated_bridge_process(port: int):
+    """``toftwin camera-bridge --simulated --port PORT`` as a process of its own, returned once it
+    has said where it listens (its first line)."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "toftwin_cli", "camera-bridge", "--simulated",
+                             "--port", str(port)], stdout=subprocess.PIPE, text=True)
+    line = proc.stdout.readline().strip()
+    assert line == f"tcp://127.0.0.1:{port}", line
+    return proc

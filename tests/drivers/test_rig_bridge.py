@@ -9,10 +9,6 @@ rig's state, and a bridge that dies mid-capture must fail the capture naming the
 
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -23,6 +19,7 @@ from drivers.rig import RigState
 from drivers.sim.bridge_source import SIMULATED_CAMERA_ID
 from drivers.sim.rig import simulated_rig
 from drivers.sim.usb_camera import CameraRequest, plane_source
+from tests.drivers.helpers import free_port, simulated_bridge_process
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -82,24 +79,10 @@ def test_the_usb_cameras_faults_are_refused_on_a_bridged_camera():
 
 
 # -- a bridge in a process of its own (``toftwin camera-bridge --simulated``) -------------------
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _bridge_process(port: int) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-m", "toftwin_cli", "camera-bridge", "--simulated",
-                             "--port", str(port)], stdout=subprocess.PIPE, text=True)
-    line = proc.stdout.readline().strip()  # the bridge prints its address once it listens
-    assert line == f"tcp://127.0.0.1:{port}", line
-    return proc
-
-
 @pytest.mark.timeout(120)
 def test_a_bridge_process_films_the_rigs_world_and_comes_back_after_a_kill():
-    port = _free_port()
-    proc = _bridge_process(port)
+    port = free_port()
+    proc = simulated_bridge_process(port)
     try:
         with simulated_rig(frame_source=_angle_source(), seed=1, camera_transport="bridge",
                            camera_bridge=f"tcp://127.0.0.1:{port}") as rig:
@@ -112,7 +95,7 @@ def test_a_bridge_process_films_the_rigs_world_and_comes_back_after_a_kill():
             with pytest.raises(CameraError, match=rf"{SIMULATED_CAMERA_ID} at camera bridge "
                                                   rf"tcp://127.0.0.1:{port}"):
                 rig.capture(1)
-            proc = _bridge_process(port)  # back on its port
+            proc = simulated_bridge_process(port)  # back on its port
             rig.apply(RigState(-10.0, 0.0, False))
             frame = rig.capture(1)[0]
             assert float(frame.intensity[0, 0]) == pytest.approx(900.0)

@@ -214,26 +214,27 @@ def test_camera_unplugged_during_a_one_shot_capture(generation):
 
 
 # -- callbacks that raise --------------------------------------------------------------------------
-def test_raw_data_that_raises_is_counted_and_later_frames_arrive(generation):
-    DOUBLE.fail_next_data(2, where="getRawPhase")
+def _failing_data(where: str, n: int) -> list:
+    """``n`` frames captured after the double's next two data objects raise in ``where``; the
+    two failures are counted, none escaped into royale's thread."""
+    DOUBLE.fail_next_data(2, where=where)
     with _camera(MODE5) as cam:
-        frames = cam.capture(3)
+        frames = cam.capture(n)
         errors = list(cam.callback_errors)
     assert len(errors) == 2 and all("injected failure" in e for e in errors)
-    indices = [_frame_index(f) for f in frames]
-    assert indices[0] >= 2 and indices == sorted(indices)
     assert DOUBLE.listener_errors == []  # nothing escaped into royale's thread
+    assert len(frames) == n
+    return frames
+
+
+def test_raw_data_that_raises_is_counted_and_later_frames_arrive(generation):
+    indices = [_frame_index(f) for f in _failing_data("getRawPhase", 3)]
+    assert indices[0] >= 2 and indices == sorted(indices)
 
 
 @pytest.mark.parametrize("generation", [3, 4], indirect=True, ids=lambda g: f"royale{g}")
 def test_extended_data_that_raises_does_not_escape_into_royale(generation):
-    DOUBLE.fail_next_data(2, where="hasRawData")
-    with _camera(MODE5) as cam:
-        frames = cam.capture(2)
-        errors = list(cam.callback_errors)
-    assert len(errors) == 2 and all("injected failure" in e for e in errors)
-    assert len(frames) == 2
-    assert DOUBLE.listener_errors == []
+    _failing_data("hasRawData", 2)
 
 
 # -- use cases -------------------------------------------------------------------------------------
@@ -255,21 +256,12 @@ def test_double_keeps_streaming_when_a_listener_raises(gen5):
     DOUBLE.plug()
     seen: list[int] = []
 
-    class Listener(double.IRawDataListener):  # type: ignore[name-defined]
-        def onNewData(self, data):
-            seen.append(int(data.getRawPhase(0)[0]))
-            if len(seen) <= 2:
-                raise ValueError("listener bug")
+    def on_data(data):
+        seen.append(int(data.getRawPhase(0)[0]))
+        if len(seen) <= 2:
+            raise ValueError("listener bug")
 
-    cam = double.CameraManager().createCamera(CAMERA_ID)
-    cam.initialize()
-    listener = Listener()
-    cam.registerRawDataListener(listener)
-    cam.startCapture()
-    deadline = time.monotonic() + 5
-    while len(seen) < 4 and time.monotonic() < deadline:
-        time.sleep(0.01)
-    cam.stopCapture()
+    _stream_raw_data(on_data, lambda: len(seen) >= 4)
     assert len(seen) >= 4 and len(DOUBLE.listener_errors) == 2
     assert "ValueError: listener bug" in DOUBLE.listener_errors[0]
 
@@ -330,16 +322,13 @@ def test_double_recording_follows_the_record_sample(generation, tmp_path):
     assert stopped == [3] and (tmp_path / "x.rrf").exists()
 
 
-def test_double_royale_5_flat_buffer_has_a_pseudo_row_per_raw_frame(gen5):
-    DOUBLE.plug()
-    DOUBLE.expose_flat_raw_data = True
-    copies: list[tuple] = []
+def _stream_raw_data(on_data, done) -> None:
+    """Stream the double's camera through a raw-data listener calling ``on_data`` until
+    ``done()`` (5 s at most), then stop."""
 
     class Listener(double.IRawDataListener):  # type: ignore[name-defined]
         def onNewData(self, data):
-            n = data.getNumberOfRawFrames()
-            flat = split_raw_buffer(data.rawData, n, data.width, data.height)
-            copies.append((copy_roypy_raw_data(data), flat, list(data.getPseudoData(0))))
+            on_data(data)
 
     cam = double.CameraManager().createCamera(CAMERA_ID)
     cam.initialize()
@@ -347,9 +336,22 @@ def test_double_royale_5_flat_buffer_has_a_pseudo_row_per_raw_frame(gen5):
     cam.registerRawDataListener(listener)
     cam.startCapture()
     deadline = time.monotonic() + 5
-    while not copies and time.monotonic() < deadline:
+    while not done() and time.monotonic() < deadline:
         time.sleep(0.01)
     cam.stopCapture()
+
+
+def test_double_royale_5_flat_buffer_has_a_pseudo_row_per_raw_frame(gen5):
+    DOUBLE.plug()
+    DOUBLE.expose_flat_raw_data = True
+    copies: list[tuple] = []
+
+    def on_data(data):
+        n = data.getNumberOfRawFrames()
+        flat = split_raw_buffer(data.rawData, n, data.width, data.height)
+        copies.append((copy_roypy_raw_data(data), flat, list(data.getPseudoData(0))))
+
+    _stream_raw_data(on_data, lambda: bool(copies))
     copy, flat, pseudo = copies[0]
     assert np.array_equal(copy.raw_frames, flat) and copy.raw_frames.shape == (9, 171, 224)
     assert pseudo == [double.PSEUDO_WORD] * 224
@@ -359,19 +361,7 @@ def test_double_data_is_only_valid_inside_the_callback(gen5):
     DOUBLE.plug()
     kept: list = []
 
-    class Listener(double.IRawDataListener):  # type: ignore[name-defined]
-        def onNewData(self, data):
-            kept.append(data)
-
-    cam = double.CameraManager().createCamera(CAMERA_ID)
-    cam.initialize()
-    listener = Listener()
-    cam.registerRawDataListener(listener)
-    cam.startCapture()
-    deadline = time.monotonic() + 5
-    while not kept and time.monotonic() < deadline:
-        time.sleep(0.01)
-    cam.stopCapture()
+    _stream_raw_data(kept.append, lambda: bool(kept))
     with pytest.raises(RuntimeError, match="after onNewData returned"):
         kept[0].getRawPhase(0)
 

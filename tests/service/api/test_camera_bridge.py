@@ -10,13 +10,10 @@ with every pose stored once.
 
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
-
 import pytest
 
 from drivers.sim.bridge_source import SIMULATED_CAMERA_ID
+from tests.drivers.helpers import free_port, simulated_bridge_process
 from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
 
 pytestmark = pytest.mark.timeout(300)
@@ -24,23 +21,10 @@ pytestmark = pytest.mark.timeout(300)
 POSES = [{"turntable_deg": a} for a in (-45.0, -15.0, 15.0, 45.0)]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _bridge(port: int) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-m", "toftwin_cli", "camera-bridge", "--simulated",
-                             "--port", str(port)], stdout=subprocess.PIPE, text=True)
-    assert proc.stdout.readline().strip() == f"tcp://127.0.0.1:{port}"
-    return proc
-
-
 @pytest.fixture
 def bridge_port():
-    port = _free_port()
-    procs = [_bridge(port)]
+    port = free_port()
+    procs = [simulated_bridge_process(port)]
     yield port, procs
     for proc in procs:
         proc.kill()
@@ -66,7 +50,7 @@ def test_a_campaign_through_the_bridge_pauses_when_it_dies_and_finishes_when_it_
     done_before = status["poses_done"]
     assert 1 <= done_before < len(POSES)
 
-    procs.append(_bridge(port))  # the bridge is back
+    procs.append(simulated_bridge_process(port))  # the bridge is back
     res = client.post(f"/api/v1/campaigns/{cid}/resume", headers=AUTH)
     assert res.status_code == 200, res.text
     status = wait_campaign(client, cid, lambda s: s["state"] != "running", timeout_s=240)
