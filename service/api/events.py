@@ -48,15 +48,20 @@ async def status_events(
     try:
         deadline = time.monotonic() + settings.sse_max_s
         last = None
+        last_sent: dict[str, Any] | None = None
         sent = 0
         while True:
             now = await run_in_threadpool(key)
             if now != last:
                 last = now
                 current = await run_in_threadpool(status)
-                yield ServerSentEvent(data=current, event="status",
-                                      id=event_id(current, sent), retry=retry_ms)
-                sent += 1
+                # the key and the status are read at two moments: a status read after a later
+                # change may already be the one the next key announces (never send it twice)
+                if current != last_sent:
+                    last_sent = current
+                    yield ServerSentEvent(data=current, event="status",
+                                          id=event_id(current, sent), retry=retry_ms)
+                    sent += 1
                 if current["state"] in terminal:
                     return
             if time.monotonic() > deadline:
