@@ -113,6 +113,8 @@ class SimulatedCameraSource:
             self.start()
 
     def set_exposure(self, exposure_us: int) -> None:
+        """Check and keep the exposure asked for; the simulated frames are still rendered at the
+        use case's own exposure (the frame source knows no other: issue 28, left open)."""
         if not 1 <= int(exposure_us) <= round(self.use_case.exposure_s * 1e6):
             raise BridgeError(f"exposure {exposure_us} us; 1..{self.use_case.exposure_s * 1e6:g} "
                               f"us for {self.use_case.name}", "input")
