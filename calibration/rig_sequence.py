@@ -364,6 +364,9 @@ SETTLING_STEPS = ("settling/rest", "settling/moved")
 #: the wait between the frames right after the move and the frames at rest [s]: a ringing of
 #: 1 Hz damped at 0.02 falls from 1 deg to a hundredth of it in 37 s
 SETTLING_REST_WAIT_S = 120.0
+#: the calibration's key for the rest after every move when the table was seen ringing but how
+#: is not known (:func:`_rest_after_move`)
+REST_AFTER_MOVE_KEY = "turntable.rest_after_move_s"
 
 
 def _warmup_step(index: int) -> str:
@@ -541,7 +544,9 @@ def fit_rig_calibration(
     results["views"]["corner_bias_rms_px"] = corner_bias_px
     progress(done, total, "turntable settling")
     settle = _settling(captures, plan, intr.intrinsics)
-    results["settling"] = settle.summary
+    rest_after_move = _rest_after_move(settle)
+    results["settling"] = {**settle.summary, "rest_after_move_s": (
+        None if rest_after_move is None else SETTLING_REST_WAIT_S)}
     results["turntable"] = axis
     progress(done, total, "spread over the fixtures")
     spread = _fixture_jackknife(views, plan, spec, camera, intr, axis)
@@ -617,7 +622,8 @@ def fit_rig_calibration(
                                 stray_light=stray.stray_light_key()
                                 if stray is not None and stray.significant else None),
         illumination=IlluminationParameters(power_w=power.power_w),
-        turntable=_turntable_keys(axis, settle.settling),
+        turntable=_turntable_keys(axis, settle.settling,
+                                  None if rest_after_move is None else SETTLING_REST_WAIT_S),
         solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
         if solar is not None else SolarParameters(),
         provenance=Provenance(
@@ -633,7 +639,8 @@ def fit_rig_calibration(
         std=stage["std"], spread=spread, basis=axis.basis, fx_px=intr.intrinsics.fx_px,
         fy_px=intr.intrinsics.fy_px, corner_radius=corner_radius(views, intr))
     keys = calibration_keys(cal)
-    effects = {**warm.verdicts, **settle.verdicts, **stray_verdicts}
+    effects = {**warm.verdicts, **settle.verdicts, **stray_verdicts,
+               **({} if rest_after_move is None else {REST_AFTER_MOVE_KEY: rest_after_move})}
     verdicts = rig_verdicts(keys, evidence, depth_evidence(depth, use_case.frequencies_hz),
                             {**other_verdicts(noise, power, solar), **effects})
     # the effects' keys not written (not determined), judged all the same: verdicts.json says
@@ -781,10 +788,27 @@ def _fixture_jackknife(views, plan, spec, camera, intr, axis) -> dict[str, float
     return {n: float(s) for n, s in zip(names, jackknife_std(rows), strict=True)}
 
 
-def _turntable_keys(axis, settling=None) -> TurntableParameters:
+def _turntable_keys(axis, settling=None, rest_after_move_s=None) -> TurntableParameters:
     return TurntableParameters(axis_point_m=tuple(float(v) for v in axis.axis_point_m),
                                axis_direction=tuple(float(v) for v in axis.axis_direction),
-                               zero_offset_deg=float(axis.zero_offset_deg), settling=settling)
+                               zero_offset_deg=float(axis.zero_offset_deg), settling=settling,
+                               rest_after_move_s=rest_after_move_s)
+
+
+def _rest_after_move(settle) -> Verdict | None:
+    """``turntable.rest_after_move_s``'s verdict when the settling stage saw the table ring
+    without determining how (:func:`calibration.rig_settling.unknown_ringing`): every later
+    capture after a move, the calibration's own and every campaign's, rests
+    :data:`SETTLING_REST_WAIT_S`; None otherwise (no key)."""
+    from calibration.rig_settling import unknown_ringing
+
+    why = unknown_ringing(settle)
+    if why is None:
+        return None
+    return Verdict("determined", None, (
+        f"a wait, not a fit: {why}; every capture after a move rests as long as the settling "
+        f"stage's frames at rest did ({SETTLING_REST_WAIT_S:g} s), by which its board's yaw "
+        "was at its noise"))
 
 
 def _settling(captures: Captures, plan: RigCalibrationPlan, intrinsics):

@@ -36,7 +36,7 @@ from sim_core.tof import phase_from_phasor
 from sim_core.twin_file import MAX_SETTLING_AMPLITUDE_DEG, TurntableSettling
 
 __all__ = ["SETTLING_KEYS", "RigSettling", "board_yaw_deg", "fit_rig_settling", "no_settling",
-           "settling_to_wait_out", "wait_after_moves"]
+           "ringing_bound", "settling_to_wait_out", "unknown_ringing", "wait_after_moves"]
 
 #: the keys of ``turntable.settling``
 SETTLING_KEYS = tuple(f"{KEY}.{k}" for k in ("amplitude_deg", "frequency_hz", "damping_ratio"))
@@ -153,15 +153,30 @@ def fit_rig_settling(rest: AveragedCapture, moved: AveragedCapture,
     return RigSettling(settling, verdicts, summary)
 
 
-def wait_after_moves(fit: RigSettling) -> tuple[TurntableSettling | None, str | None]:
-    """How the moves after the settling stage wait, from its ``fit``: the ringing to wait out
-    (None: none determined) and, when the table was seen ringing but its ringing is not
-    determined, why every later move must rest as long as the stage's own frames at rest did.
+def ringing_bound(settling: TurntableSettling) -> TurntableSettling:
+    """The ringing a wait after a move must outlast, from a calibration's ``settling``.
 
-    The ringing's amplitude is the fit's at the first frame, which a move end half a damped
-    period earlier would exceed by ``exp(pi zeta / sqrt(1 - zeta^2))`` (:data:`AMPLITUDE_REASON`):
-    the wait is for that larger one (at most the key's largest, 5 deg). ``zeta <= 0.9`` (the
-    key's range) keeps the square root's argument at least 0.19.
+    Its amplitude is the fit's at the first frame, which a move end half a damped period
+    earlier would exceed by ``exp(pi zeta / sqrt(1 - zeta^2))`` (:data:`AMPLITUDE_REASON`): the
+    bound is that larger one (at most the key's largest, 5 deg). ``zeta <= 0.9`` (the key's
+    range) keeps the square root's argument at least 0.19.
+
+    >>> b = ringing_bound(TurntableSettling(amplitude_deg=0.1, frequency_hz=4.0,
+    ...                                     damping_ratio=0.1))
+    >>> round(b.amplitude_deg, 4), b.frequency_hz, b.damping_ratio
+    (0.1371, 4.0, 0.1)
+    """
+    zeta = settling.damping_ratio
+    margin = math.exp(math.pi * zeta / math.sqrt(1.0 - zeta**2))
+    return TurntableSettling.model_validate({
+        **settling.model_dump(),
+        "amplitude_deg": min(settling.amplitude_deg * margin, MAX_SETTLING_AMPLITUDE_DEG)})
+
+
+def unknown_ringing(fit: RigSettling) -> str | None:
+    """Why every capture after a move must rest (:data:`calibration.rig_sequence.
+    SETTLING_REST_WAIT_S`, ``turntable.rest_after_move_s``): the table was *seen* ringing but
+    how it rings is not determined; None when the ringing is determined or was not seen.
 
     Seen ringing means an estimate whose amplitude is at least
     :data:`calibration.settling.RINGING_SIGMAS` yaw noises: the rig sweep's reality 205 rang
@@ -171,18 +186,23 @@ def wait_after_moves(fit: RigSettling) -> tuple[TurntableSettling | None, str | 
     turntable's zero came out 0.67 deg off at 15.9 standard deviations.
     """
     if fit.settling is not None:
-        zeta = fit.settling.damping_ratio
-        margin = math.exp(math.pi * zeta / math.sqrt(1.0 - zeta**2))
-        return fit.settling.model_copy(update={
-            "amplitude_deg": min(fit.settling.amplitude_deg * margin,
-                                 MAX_SETTLING_AMPLITUDE_DEG)}), None
+        return None
     ratio = fit.summary.get("ringing_over_noise", math.nan)
     if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio >= RINGING_SIGMAS):
-        return None, None
+        return None
     why = next((f"{k} {v.verdict}: {v.reason}" for k, v in fit.verdicts.items()
                 if not v.determined and k != SETTLING_KEYS[0]), "its shape is not determined")
-    return None, (f"the table was seen ringing ({ratio:.0f} times the yaw's noise) but how is "
-                  f"not known ({why})")
+    return (f"the table was seen ringing ({ratio:.0f} times the yaw's noise) but how is not "
+            f"known ({why})")
+
+
+def wait_after_moves(fit: RigSettling) -> tuple[TurntableSettling | None, str | None]:
+    """How the moves after the settling stage wait, from its ``fit``: the ringing to wait out
+    (the determined one, waited out to its :func:`ringing_bound` by
+    :func:`service.lab.settling.settle_wait_s`; None: none determined) and, when the table was
+    seen ringing but its ringing is not determined, why every later move must rest
+    (:func:`unknown_ringing`)."""
+    return fit.settling, unknown_ringing(fit)
 
 
 def settling_to_wait_out(rest: AveragedCapture, moved: AveragedCapture,

@@ -274,6 +274,8 @@ class IlluminationParameters(_Strict):
 
 #: the largest ringing amplitude ``turntable.settling`` holds [deg]
 MAX_SETTLING_AMPLITUDE_DEG = 5.0
+#: the longest rest after a move ``turntable.rest_after_move_s`` holds [s]
+MAX_REST_AFTER_MOVE_S = 3600.0
 
 
 class TurntableSettling(_Strict):
@@ -293,12 +295,21 @@ class TurntableSettling(_Strict):
 
 class TurntableParameters(_Strict):
     """The turntable's true axis (world frame), the error of its zero and its settling (absent:
-    the table stops dead)."""
+    the table stops dead).
+
+    ``rest_after_move_s`` is a calibration's key only: the table was seen ringing after a move
+    but how it rings was not determined, so every capture after a move rests this long (the
+    service's wait, :func:`service.lab.settling.settle_wait_s`; the calibration's settling
+    stage's own rest, after which the board's yaw was at its noise). A reality's table rings by
+    ``settling``; a reality file with this key is refused (:func:`load_reality`).
+    """
 
     axis_point_m: Point3 | None = None
     axis_direction: UnitVector | None = None
     zero_offset_deg: Annotated[float, Field(ge=-180.0, le=180.0, allow_inf_nan=False)] = 0.0
     settling: TurntableSettling | None = None
+    rest_after_move_s: Annotated[float, Field(gt=0.0, le=MAX_REST_AFTER_MOVE_S,
+                                              allow_inf_nan=False)] | None = None
 
 
 class SolarParameters(_Strict):
@@ -500,8 +511,16 @@ def load_calibration(path: str | Path) -> CalibrationFile:
 
 
 def load_reality(path: str | Path) -> RealityFile:
-    """Read and validate a reality file (YAML or JSON)."""
-    return parse_reality(_read_mapping(path, "reality"))
+    """Read and validate a reality file (YAML or JSON). A calibration's own key,
+    ``turntable.rest_after_move_s`` (a wait, not a property of the world), is refused."""
+    reality = parse_reality(_read_mapping(path, "reality"))
+    if reality.turntable.rest_after_move_s is not None:
+        raise InvalidInputError(
+            "reality.turntable.rest_after_move_s", "is a calibration's key (how long the "
+            "service rests after a move when it does not know how the table rings); a "
+            "reality's table rings by turntable.settling {amplitude_deg, frequency_hz, "
+            "damping_ratio}")
+    return reality
 
 
 def parse_object_twin(data: Any) -> ObjectTwinFile:

@@ -14,6 +14,7 @@ import contextlib
 from collections.abc import Iterator
 from typing import Any
 
+from calibration.rig_settling import ringing_bound
 from sim_core.settling import settle_time_s
 from sim_core.subframes import MOTION_TOLERANCE_DEG
 from sim_core.twin_file import TwinParameters
@@ -26,16 +27,26 @@ SETTLE_TOLERANCE_DEG = MOTION_TOLERANCE_DEG
 
 
 def settle_wait_s(calibration: TwinParameters | None) -> float:
-    """Seconds to wait after a move for ``calibration``'s settling (0 without one).
+    """Seconds to wait after a move for ``calibration``'s turntable (0 without one): until its
+    ringing's bound (:func:`calibration.rig_settling.ringing_bound`: the fitted amplitude
+    raised for the move end the calibration did not see) has decayed below
+    :data:`SETTLE_TOLERANCE_DEG`, and at least its ``rest_after_move_s`` (a table seen ringing
+    whose ringing the calibration did not determine).
 
     >>> from sim_core.twin_file import parse_calibration
     >>> cal = parse_calibration({"turntable": {"settling": {
     ...     "amplitude_deg": 0.1, "frequency_hz": 4.0, "damping_ratio": 0.1}}})
     >>> round(settle_wait_s(cal), 3), settle_wait_s(None)
-    (1.832, 0.0)
+    (1.958, 0.0)
+    >>> settle_wait_s(parse_calibration({"turntable": {"rest_after_move_s": 120.0}}))
+    120.0
     """
-    settling = None if calibration is None else calibration.turntable.settling
-    return settle_time_s(settling, SETTLE_TOLERANCE_DEG)
+    if calibration is None:
+        return 0.0
+    table = calibration.turntable
+    ringing_s = (0.0 if table.settling is None
+                 else settle_time_s(ringing_bound(table.settling), SETTLE_TOLERANCE_DEG))
+    return max(ringing_s, table.rest_after_move_s or 0.0)
 
 
 @contextlib.contextmanager

@@ -9,6 +9,8 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from calibration.captures import average_frames
 from calibration.rig_settling import (
@@ -16,6 +18,7 @@ from calibration.rig_settling import (
     RigSettling,
     board_yaw_deg,
     fit_rig_settling,
+    ringing_bound,
     wait_after_moves,
 )
 from calibration.verdicts import Verdict, Verdicts
@@ -208,8 +211,8 @@ def test_how_later_moves_wait_follows_what_the_settling_stage_learnt():
     205: unexplained at 34 yaw noises, its zero 0.67 deg off without a wait); a table seen not
     to ring waits only the driver's own wait."""
     ringing, why = wait_after_moves(_fit(TRUTH, "determined", 40.0))
-    assert why is None and ringing.frequency_hz == TRUTH.frequency_hz
-    assert ringing.amplitude_deg == pytest.approx(
+    assert why is None and ringing == TRUTH  # waited out to its bound (settle_wait_s)
+    assert ringing_bound(TRUTH).amplitude_deg == pytest.approx(
         TRUTH.amplitude_deg * np.exp(np.pi * 0.08 / np.sqrt(1 - 0.08**2)))
     ringing, why = wait_after_moves(_fit(None, "unexplained", 34.0))
     assert ringing is None
@@ -243,3 +246,31 @@ def test_a_plan_rests_after_its_moves_only():
     assert [c.rest_s for c in plan.rested_after_moves(60.0).captures] == [60.0, 0.0, 200.0]
     with pytest.raises(InvalidInputError, match=r"^rest_s: got -1"):
         plan.rested_after_moves(-1.0)
+
+
+def test_what_the_calibration_file_says_of_a_table_seen_ringing_but_not_known():
+    """A settling stage that saw ringing without determining it writes
+    ``turntable.rest_after_move_s`` (judged, with the reason) so that every later capture
+    rests; a determined ringing or none seen writes no rest."""
+    from calibration.rig_sequence import REST_AFTER_MOVE_KEY, _rest_after_move
+
+    verdict = _rest_after_move(_fit(None, "unexplained", 34.0))
+    assert verdict.determined and verdict.std is None
+    assert verdict.reason.startswith("a wait, not a fit: the table was seen ringing (34 times")
+    assert "120 s" in verdict.reason
+    assert _rest_after_move(_fit(TRUTH, "determined", 40.0)) is None
+    assert _rest_after_move(_fit(None, "not determined", 1.0)) is None
+    assert REST_AFTER_MOVE_KEY == "turntable.rest_after_move_s"
+
+
+@settings(max_examples=200, deadline=None)
+@given(amplitude=st.floats(0.0, 5.0), frequency=st.floats(0.05, 500.0),
+       zeta=st.floats(0.001, 0.9))
+def test_the_ringing_bound_is_finite_no_smaller_and_within_the_key_s_range(
+        amplitude, frequency, zeta):
+    ringing = TurntableSettling(amplitude_deg=amplitude, frequency_hz=frequency,
+                                damping_ratio=zeta)
+    bound = ringing_bound(ringing)  # validated again: within the key's range
+    assert amplitude <= bound.amplitude_deg <= 5.0
+    assert np.isfinite(bound.amplitude_deg)
+    assert (bound.frequency_hz, bound.damping_ratio) == (frequency, zeta)

@@ -11,11 +11,14 @@ from sim_core.errors import InvalidInputError
 from sim_core.scene import build_scene
 from sim_core.scene_spec import load_scene_spec
 from sim_core.twin_file import (
+    ObjectTwinFile,
     dump_yaml,
     load_calibration,
+    load_reality,
     parse_calibration,
     parse_reality,
     twin_hash,
+    with_object_twin,
     write_calibration,
 )
 
@@ -164,3 +167,30 @@ def test_bad_warmup_and_stray_light_values_name_the_field_and_range(camera, fiel
         parse_reality({"camera": camera})
     assert err.value.field == f"reality.camera.{field}"
     assert allowed in str(err.value)
+
+
+# --- issue 27: the rest a calibration asks for after every move -------------------------------
+def test_a_calibration_keeps_its_rest_after_a_move_and_a_reality_file_refuses_it(tmp_path):
+    cal = parse_calibration({"turntable": {"rest_after_move_s": 120.0}})
+    assert cal.turntable.rest_after_move_s == 120.0 and cal.turntable.settling is None
+    assert twin_hash(cal) != twin_hash(parse_calibration({}))
+    assert parse_calibration({}).turntable.rest_after_move_s is None  # absent: no rest
+    path = tmp_path / "cal.yaml"
+    write_calibration(path, cal)
+    assert load_calibration(path).turntable.rest_after_move_s == 120.0
+    reality = tmp_path / "reality.yaml"
+    reality.write_text("turntable:\n  rest_after_move_s: 120.0\n")
+    with pytest.raises(InvalidInputError) as err:
+        load_reality(reality)
+    assert err.value.field == "reality.turntable.rest_after_move_s"
+    assert "turntable.settling" in str(err.value)
+    # a calibration combined with an object file keeps it (what the service's campaigns wait by)
+    both = with_object_twin(cal, ObjectTwinFile())
+    assert both.turntable.rest_after_move_s == 120.0
+
+
+@pytest.mark.parametrize("value", [0.0, -5.0, 3601.0, float("inf")])
+def test_a_rest_after_a_move_out_of_range_names_the_field(value):
+    with pytest.raises(InvalidInputError) as err:
+        parse_calibration({"turntable": {"rest_after_move_s": value}})
+    assert err.value.field == "calibration.turntable.rest_after_move_s"

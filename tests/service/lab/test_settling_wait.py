@@ -7,6 +7,7 @@ import time
 
 import pytest
 
+from calibration.rig_settling import ringing_bound
 from drivers.rig import RigState
 from drivers.sim.rig import simulated_rig
 from drivers.sim.usb_camera import CameraRequest
@@ -26,11 +27,34 @@ SETTLING = TurntableSettling(amplitude_deg=1.0, frequency_hz=5.0, damping_ratio=
 CALIBRATION = CalibrationFile(turntable=TurntableParameters(settling=SETTLING))
 
 
-def test_the_wait_is_until_the_envelope_is_below_the_tolerance():
+def test_the_wait_is_until_the_envelope_s_bound_is_below_the_tolerance():
+    """The calibrated amplitude is the fit's at its first frame; the wait outlasts the larger
+    one a move end half a damped period earlier would have (:func:`ringing_bound`)."""
     wait = settle_wait_s(CALIBRATION)
-    assert float(envelope_deg(SETTLING, wait)) == pytest.approx(SETTLE_TOLERANCE_DEG)
+    bound = ringing_bound(SETTLING)
+    assert bound.amplitude_deg > SETTLING.amplitude_deg
+    assert float(envelope_deg(bound, wait)) == pytest.approx(SETTLE_TOLERANCE_DEG)
+    assert float(envelope_deg(SETTLING, wait)) < SETTLE_TOLERANCE_DEG
     assert settle_wait_s(None) == 0.0
     assert settle_wait_s(CalibrationFile()) == 0.0
+
+
+def test_a_table_seen_ringing_but_not_known_rests_after_every_move():
+    """``turntable.rest_after_move_s`` (a calibration that saw the table ring without learning
+    how): every move rests that long, the longer of it and a known ringing's wait."""
+    rest = CalibrationFile(turntable=TurntableParameters(rest_after_move_s=120.0))
+    assert settle_wait_s(rest) == 120.0
+    both = CalibrationFile(turntable=TurntableParameters(settling=SETTLING,
+                                                         rest_after_move_s=0.5))
+    assert settle_wait_s(both) == settle_wait_s(CALIBRATION) > 0.5
+    with simulated_rig(seed=1, turntable_instant=False, time_scale=1000.0) as rig:
+        with settled_moves(rig, rest) as wait:
+            assert wait == rig.turntable.settle_s == 120.0
+            t0 = time.perf_counter()
+            rig.apply(RigState(5.0, 0.0, False))
+            elapsed = time.perf_counter() - t0
+        assert rig.turntable.settle_s < 1.0  # the driver's own wait again
+    assert elapsed >= 120.0 / 1000.0  # the rest passed on the stage's clock
 
 
 def test_moves_wait_for_the_settling_only_inside_and_not_when_motion_is_asked_for():
