@@ -85,13 +85,18 @@ class IntrinsicsResult:
         return f"Reprojection RMS per view (all: {self.rms_px:.3f} px)"
 
 
-def _calibrate(views, shape, guess):
+def _calibrate(views, shape, guess, fix_k3: bool = True):
+    """OpenCV's calibration of ``views``; ``guess`` None: OpenCV's own start from the views'
+    homographies (a camera with no preset)."""
     obj = [v.object_points_m.astype(np.float32) for v in views]
     img = [v.image_points_px.astype(np.float32).reshape(-1, 1, 2) for v in views]
     h, w = shape
-    k = np.array([[guess["fx_px"], 0, guess["cx_px"]], [0, guess["fy_px"], guess["cy_px"]],
-                  [0, 0, 1]], dtype=np.float64)
-    flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    k = None
+    if guess is not None:
+        k = np.array([[guess["fx_px"], 0, guess["cx_px"]], [0, guess["fy_px"], guess["cy_px"]],
+                      [0, 0, 1]], dtype=np.float64)
+        flags |= cv2.CALIB_USE_INTRINSIC_GUESS
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     rms, k, d, rvecs, tvecs, std_in, _, per_view = cv2.calibrateCameraExtended(
         obj, img, (w, h), k, np.zeros(5), flags=flags, criteria=crit)
@@ -105,9 +110,19 @@ def normal_spread(rvecs) -> float:
 
 
 def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
-                         preset: str = "pmd-camboard-pico-flexx") -> IntrinsicsResult:
+                         preset: str = "pmd-camboard-pico-flexx", *, fix_k3: bool = True,
+                         guess_from_preset: bool = True,
+                         refuse_degenerate: bool = True) -> IntrinsicsResult:
     """Calibrate from the views (module docstring); raises :class:`InvalidInputError` when the
-    views are too few, too sparse or degenerate."""
+    views are too few, too sparse or degenerate.
+
+    The defaults are the ToF camera's procedure. A camera of another kind (a photo camera,
+    :mod:`calibration.photo_intrinsics`) may fit k3 (``fix_k3=False``: its standard deviation
+    is then in ``std``), start from OpenCV's own estimate from the views' homographies instead
+    of the preset (``guess_from_preset=False``), and get degenerate views back as a result
+    (``refuse_degenerate=False``: ``normal_spread`` below :data:`MIN_NORMAL_SPREAD`, for its
+    verdicts to say so) rather than as an error.
+    """
     rejected = [{"name": v.name, "reason": f"{len(v.corner_ids)} corners (fewer than "
                  f"{MIN_CORNERS_PER_VIEW})"} for v in views
                 if len(v.corner_ids) < MIN_CORNERS_PER_VIEW]
@@ -118,9 +133,9 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
             f"the board was detected in {len(use)} views with enough corners; at least "
             f"{MIN_VIEWS} are needed: check the board is in view, lit and in focus, or add "
             "views (more turntable angles, another fixture)")
-    guess = CAMERA_PRESETS[preset]
+    guess = CAMERA_PRESETS[preset] if guess_from_preset else None
     while True:
-        rms, k, d, rvecs, tvecs, std, per_view = _calibrate(use, image_shape, guess)
+        rms, k, d, rvecs, tvecs, std, per_view = _calibrate(use, image_shape, guess, fix_k3)
         med = float(np.median(per_view))
         worst = int(np.argmax(per_view))
         limit = max(OUTLIER_FACTOR * med, OUTLIER_FLOOR_PX)
@@ -131,7 +146,7 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
                                    f"{limit:.2f} px ({OUTLIER_FACTOR:g} x the median)"})
         use = use[:worst] + use[worst + 1:]
     spread = normal_spread(rvecs)
-    if spread < MIN_NORMAL_SPREAD:
+    if spread < MIN_NORMAL_SPREAD and refuse_degenerate:
         raise InvalidInputError(
             "intrinsics.views",
             f"the board normals are all nearly parallel to one plane (spread {spread:.3f}, "
@@ -140,7 +155,8 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
             "-30 deg)")
     intr = Intrinsics(image_shape[1], image_shape[0], float(k[0, 0]), float(k[1, 1]),
                       float(k[0, 2]), float(k[1, 2]), tuple(float(x) for x in d[:5]))
-    names = ("fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2")
+    names = ("fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2") + (
+        () if fix_k3 else ("k3",))
     return IntrinsicsResult(
         intrinsics=intr, std={n: float(s) for n, s in zip(names, std, strict=False)},
         rms_px=float(rms), per_view_rms_px={v.name: float(r) for v, r in zip(use, per_view,

@@ -394,3 +394,74 @@ def brdf_command(
                   f"{100 * outlier_threshold:g} %)")
     verdicts_path = _print_and_write_verdicts(out, verdicts)
     console.print(f"material file written to {path} (verdicts {verdicts_path})")
+
+
+@calibrate_app.command("intrinsics")
+def intrinsics_command(
+    images: Annotated[
+        list[Path], typer.Argument(help="Images of the board: 8 or 16-bit PNG, JPEG, TIFF, a "
+                                   "frame folder or its frame.npz; a folder means every image "
+                                   "and frame folder in it, sorted by name. One camera, one "
+                                   "image size.")],
+    board: Annotated[str, typer.Option("--board", help="charuco or chessboard.")],
+    squares: Annotated[str, typer.Option("--squares", help="WxH: the board's SQUARES across "
+                                         "and down (not inner corners: a chessboard of 9 x 6 "
+                                         "inner corners is 10x7), each 3-40.")],
+    square_mm: Annotated[float, typer.Option("--square-mm", help="Side of a square [mm]; "
+                                             "above 0.")],
+    out: Annotated[Path, typer.Option("--out", help="Output folder: calibration.yaml, "
+                                      "verdicts.json, opencv_intrinsics.yml (replaced if "
+                                      "there).")],
+    marker_mm: Annotated[
+        float | None, typer.Option("--marker-mm", help="ChArUco: side of a marker [mm]; "
+                                   "above 0, below --square-mm.")
+    ] = None,
+    dictionary: Annotated[
+        str | None, typer.Option("--dictionary", help="ChArUco: the ArUco dictionary, e.g. "
+                                 "DICT_4X4_50, DICT_5X5_100.")
+    ] = None,
+    fit_k3: Annotated[
+        bool, typer.Option("--k3/--no-k3", help="Fit the sixth-order radial term k3 (wide "
+                           "angles); default: held at 0.")
+    ] = False,
+) -> None:
+    """Intrinsics and distortion of any camera from its images of a board: per view the
+    corners and the reprojection error, every key's verdict, the file in the project's and
+    OpenCV's forms (docs/calibration.md)."""
+    from datetime import UTC, datetime
+
+    from calibration.photo_intrinsics import calibrate_photos, make_board, write_outputs
+
+    try:
+        spec = make_board(board, squares, square_mm, marker_mm, dictionary)
+        cal = calibrate_photos(images, spec, fit_k3=fit_k3)
+        paths = write_outputs(out, cal, datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"))
+    except InvalidInputError as exc:
+        fail_invalid(exc)
+    _print_photo_calibration(cal)
+    print_verdicts(cal.verdicts)
+    console.print(f"calibration written to {paths['calibration']} (OpenCV's form "
+                  f"{paths['opencv']}, verdicts {paths['verdicts']})")
+
+
+def _print_photo_calibration(cal) -> None:
+    """The per-view table and the estimates with their standard deviations."""
+    from rich.table import Table
+
+    h, w = cal.image_shape
+    table = Table(title=f"{cal.board.describe()}; images {w} x {h} px")
+    for col in ("view", "corners", "RMS [px]", "refused because"):
+        table.add_column(col)
+    for v in cal.views:
+        table.add_row(v.name, str(v.corners), "" if v.rms_px is None else f"{v.rms_px:.3f}",
+                      v.reason or "")
+    console.print(table)
+    res = cal.result
+    console.print(f"{len(res.per_view_rms_px)} views, {res.n_corners} corners, reprojection RMS "
+                  f"{res.rms_px:.3f} px; model test: reduced chi-square "
+                  f"{cal.model.reduced_chi2:.2f} over {cal.model.cells} cells")
+    for name, value in cal.parameters.items():
+        key = f"camera.{name}" if name.endswith("_px") else f"camera.distortion.{name}"
+        std = cal.verdicts[key].std
+        note = f"± {std:.3g}" if isinstance(std, float) else ""
+        console.print(f"  {key:>24} = {value:.6g}  {note}  {cal.verdicts[key].verdict}")
