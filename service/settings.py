@@ -130,6 +130,12 @@ class Settings(BaseSettings):
     #: ``toftwin_camera_bridge`` beside a real camera, ``toftwin camera-bridge --simulated``
     #: filming the simulated rig's world)
     camera: str = "usb"
+    #: a campaign paused because its camera (or camera bridge) went away watches this long for
+    #: it to deliver frames again and then resumes by itself (:mod:`service.lab.camera_return`);
+    #: 0: the operator resumes, as after any other device fault [s]
+    camera_return_s: float = Field(900.0, ge=0.0, le=86400.0)
+    #: how often that watch tries a capture [s]
+    camera_return_poll_s: float = Field(2.0, gt=0.0, le=60.0)
     solar_stable_timeout_s: float = Field(60.0, gt=0.0)
     rig_wait_s: float = Field(30.0, gt=0.0)
 

@@ -17,13 +17,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 from drivers.camera.wire import UseCase
-from drivers.errors import DeviceError
+from drivers.errors import DeviceDisconnectedError, DeviceError
 from sim_core.raw import RawFrame
 
 __all__ = [
     "CameraAccessError",
     "CameraError",
     "CameraIdentity",
+    "CameraLostError",
     "CameraNotFoundError",
     "CameraProtocol",
 ]
@@ -36,6 +37,12 @@ class CameraError(DeviceError):
 
 class CameraNotFoundError(CameraError):
     """No matching camera is enumerated on the bus."""
+
+
+class CameraLostError(CameraError, DeviceDisconnectedError):
+    """The camera, or the camera bridge it is reached through, went away mid-use (unplugged, the
+    bridge or its SDK killed): it may come back, and a campaign it paused watches for it
+    (:mod:`service.lab.camera_return`)."""
 
 
 class CameraAccessError(CameraError):

@@ -17,7 +17,12 @@ import queue
 import time
 from typing import Any
 
-from drivers.camera.protocol import CameraError, CameraIdentity, CameraNotFoundError
+from drivers.camera.protocol import (
+    CameraError,
+    CameraIdentity,
+    CameraLostError,
+    CameraNotFoundError,
+)
 from drivers.camera.royale_convert import royale_to_raw_frame
 from drivers.camera.wire import UseCase, get_use_case
 from drivers.errors import DeviceInputError, DeviceTimeoutError
@@ -40,7 +45,7 @@ def camera_error(exc: BridgeError, who: str) -> Exception:
     if exc.kind == "input":
         return DeviceInputError("use_case", str(exc))
     if exc.kind == "disconnected":
-        return CameraError(f"{who}: {exc}")
+        return CameraLostError(f"{who}: {exc}")
     return CameraError(str(exc))
 
 
@@ -216,7 +221,7 @@ class SourceCamera:
                 if gone or time.monotonic() >= deadline:
                     raise self._no_frame_error(got, n) from None
 
-    def _no_frame_error(self, got: int, n: int) -> CameraError | DeviceTimeoutError:
+    def _no_frame_error(self, got: int, n: int) -> CameraLostError | DeviceTimeoutError:
         """Why no frame came: a disconnected camera (its source says so), else a timeout;
         both name the camera."""
         detail = f"{got} of {n} frames; callback errors: {self.callback_errors[-3:]}"
@@ -226,7 +231,7 @@ class SourceCamera:
             connected = source is None or source.is_connected()
         if not connected:
             why = getattr(source, "disconnect_reason", None) or "isConnected() is false"
-            return CameraError(f"{self._who()}: disconnected ({why}); {detail}")
+            return CameraLostError(f"{self._who()}: disconnected ({why}); {detail}")
         return DeviceTimeoutError(
             f"{self._who()}: no raw frame within {self.frame_timeout_s:g} s ({detail})")
 

@@ -79,6 +79,7 @@ class Lab:
         """Stop the running job, the executor and the rig; dispose of the engine; unlock the
         data."""
         try:
+            self.runner.close()  # no campaign resumes itself from now on
             self.background.shutdown()
             with contextlib.suppress(Exception):
                 self.executor.close()

@@ -20,7 +20,9 @@ simply done again on resume; its frame folders are swept at the next start.
 
 One campaign runs at a time and holds the rig for each unit's rig stage; manual device calls are
 refused with 409 while it runs (:class:`~service.lab.rig_lease.RigLease`). A device fault pauses the
-campaign with the device's message; the operator fixes the rig and resumes.
+campaign with the device's message; the operator fixes the rig and resumes. A lost camera (or
+camera bridge) is the exception: the campaign resumes by itself once the camera delivers frames
+again (:mod:`service.lab.camera_return`, ``camera_return_s``).
 
 The life cycle (the thread, the rig's claim, stop, the emergency stop, shutdown) is the one
 background runner's (:class:`~service.lab.background.BackgroundRunner`, shared with the
@@ -38,12 +40,14 @@ from typing import Any
 from sqlalchemy.orm import sessionmaker
 
 from calibration.object_twin.plan import captures_in_order, object_fit_capture_plan
+from drivers.camera.protocol import CameraLostError
 from drivers.errors import DeviceError
 from service.compute.executors import Executor
 from service.errors import ConflictError
 from service.lab.acquisition import NO_MOUNTS, acquire
 from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, Stopped, failed
 from service.lab.calibration import Twin, calibration_from_json
+from service.lab.camera_return import CameraReturnWatch
 from service.lab.object_fit import fit_poses, fitted_twin, run_fit
 from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
 from service.lab.requests import MaskSpec, ObjectFitIn
@@ -66,6 +70,8 @@ class _Progress:
     current: dict[str, Any] | None = None
     done: int = 0
     outcomes: list[Outcome] = field(default_factory=list)
+    #: the run was paused by a lost camera (:meth:`CampaignRunner._device_fault`)
+    camera_lost: bool = False
 
 
 _Run = Run[_Progress]
@@ -109,6 +115,10 @@ class CampaignRunner:
             live=self._live, finish=self._finished, failed=self._failed, thread="campaign")
         #: per-unit outcomes of the last run (benchmarks read them)
         self.last_outcomes: list[Outcome] = []
+        #: resumes a campaign paused by a lost camera once it is back
+        self.camera_return = CameraReturnWatch(
+            self._still_paused, self._probe_camera, lambda cid: self.start(cid, resume=True),
+            settings.camera_return_s, settings.camera_return_poll_s)
 
     # -- queries --------------------------------------------------------------------------------
     def live(self, campaign_id: str) -> dict[str, Any] | None:
@@ -192,6 +202,38 @@ class CampaignRunner:
         with self.sessions() as s:
             queries.transition(s, run.id, ("running",), to, error=error,
                                finished=to in queries.TERMINAL)
+        if to == "paused" and run.progress.camera_lost and error is not None:
+            self.camera_return.start(run.id, error)
+
+    def _device_fault(self, run: _Run, exc: DeviceError) -> Ending:
+        """How a device fault ends the run: paused with the device's message (the emergency
+        stop's own state when one made the device fail); a lost camera is watched for and the
+        campaign resumed when it is back (:mod:`service.lab.camera_return`), and says so."""
+        _log.warning("campaign %s paused: device fault: %s", run.id, exc)
+        if run.stop.is_set():  # an emergency stop made the move fail
+            return run.stopping
+        error = f"device fault ({type(exc).__name__}): {exc}"
+        if isinstance(exc, CameraLostError) and self.settings.camera_return_s > 0.0:
+            run.progress.camera_lost = True
+            error += (f"; the campaign resumes by itself when the camera delivers frames again "
+                      f"(watched for {self.settings.camera_return_s:g} s)")
+        return "paused", error
+
+    def _still_paused(self, campaign_id: str, error: str) -> bool:
+        """Whether ``campaign_id`` is still paused with ``error`` (nobody acted on it)."""
+        with self.sessions() as s:
+            row = queries.get_campaign(s, campaign_id)
+        return row is not None and row.state == "paused" and row.error == error
+
+    def _probe_camera(self) -> None:
+        """One frame through the rig (refused while a job holds it): raises while the camera
+        is away."""
+        with self.lease.manual() as rig:
+            rig.capture(1)
+
+    def close(self) -> None:
+        """Stop watching for lost cameras (the service shuts down)."""
+        self.camera_return.close()
 
     def _units(self, run: _Run) -> Ending:
         settings = self.settings
@@ -240,11 +282,7 @@ class CampaignRunner:
                     m = measure(self.lease.require(), self.store, plan,
                                 settings.solar_stable_timeout_s)
                 except DeviceError as exc:
-                    _log.warning("campaign %s paused: device fault: %s", run.id, exc)
-                    if run.stop.is_set():  # an emergency stop made the move fail
-                        to, error = run.stopping
-                    else:
-                        to, error = "paused", f"device fault ({type(exc).__name__}): {exc}"
+                    to, error = self._device_fault(run, exc)
                     break
                 in_flight.append((plan, m, submit(self.executor, plan, m,
                                                   settings.threads_per_job)))
@@ -274,10 +312,7 @@ class CampaignRunner:
                 measured = capture_turning(self.lease.require(), self.store, sweep, speed_deg_s,
                                            run.stop.is_set, current)
             except DeviceError as exc:
-                _log.warning("campaign %s paused: device fault: %s", run.id, exc)
-                if run.stop.is_set():
-                    return run.stopping
-                return "paused", f"device fault ({type(exc).__name__}): {exc}"
+                return self._device_fault(run, exc)
             for plan, m in measured:
                 self._finish(run, plan, m, submit(self.executor, plan, m,
                                                   settings.threads_per_job))
@@ -310,10 +345,7 @@ class CampaignRunner:
         except Stopped:
             return None, run.stopping
         except DeviceError as exc:
-            _log.warning("campaign %s paused: device fault: %s", run.id, exc)
-            if run.stop.is_set():
-                return None, run.stopping
-            return None, ("paused", f"device fault ({type(exc).__name__}): {exc}")
+            return None, self._device_fault(run, exc)
         try:
             object_twin, report = run_fit(scene, twin, captures, rig.camera.use_case)
         except InvalidInputError as exc:
