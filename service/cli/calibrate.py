@@ -407,14 +407,14 @@ def intrinsics_command(
     squares: Annotated[str, typer.Option("--squares", help="WxH: the board's SQUARES across "
                                          "and down (not inner corners: a chessboard of 9 x 6 "
                                          "inner corners is 10x7), each 3-40.")],
-    square_mm: Annotated[float, typer.Option("--square-mm", help="Side of a square [mm]; "
-                                             "above 0.")],
+    square_mm: Annotated[float, number_option("--square-mm", help="Side of a square [mm].",
+                                              allowed=ranges.BOARD_SIDE_MM)],
     out: Annotated[Path, typer.Option("--out", help="Output folder: calibration.yaml, "
                                       "verdicts.json, opencv_intrinsics.yml (replaced if "
                                       "there).")],
     marker_mm: Annotated[
-        float | None, typer.Option("--marker-mm", help="ChArUco: side of a marker [mm]; "
-                                   "above 0, below --square-mm.")
+        float | None, number_option("--marker-mm", help="ChArUco: side of a marker [mm], "
+                                    "below --square-mm.", allowed=ranges.BOARD_SIDE_MM)
     ] = None,
     dictionary: Annotated[
         str | None, typer.Option("--dictionary", help="ChArUco: the ArUco dictionary, e.g. "

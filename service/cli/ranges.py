@@ -75,3 +75,6 @@ FIT_SEED = Range(0, 2**32 - 1)
 #: a goniometer band: ultraviolet to far infrared
 WAVELENGTH = Range(100.0, 100_000.0, unit="nm")
 BENCH_ROUNDS = Range(1, 100)
+#: a board's square or marker side in ``calibrate intrinsics`` (a printed board: above 0, at
+#: most a metre)
+BOARD_SIDE_MM = Range(0.0, 1000.0, lo_open=True, unit="mm")
