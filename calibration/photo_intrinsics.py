@@ -58,13 +58,14 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 import cv2
 import numpy as np
 
+from calibration.board_detection import BoardDetection, detect_board, to_8bit
 from calibration.board_views import BoardView
 from calibration.intrinsics import (
     MIN_CORNERS_PER_VIEW,
@@ -261,43 +262,27 @@ def load_grey(path: str | Path) -> np.ndarray:
 def to_detector_8bit(grey: np.ndarray) -> np.ndarray:
     """An 8-bit image for OpenCV's detectors: 8-bit images as they are, deeper ones stretched
     between robust percentiles (:func:`calibration.board_detection.to_8bit`)."""
-    from calibration.board_detection import to_8bit
-
     return grey if grey.dtype == np.uint8 else to_8bit(grey)
 
 
 # -- detection -------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Corners:
-    """The corners found in one image: board points [m], image points [px], ids."""
-
-    object_points_m: np.ndarray = field(repr=False)
-    image_points_px: np.ndarray = field(repr=False)
-    corner_ids: np.ndarray = field(repr=False)
-
-
-def detect_corners(grey: np.ndarray, board: PhotoBoard) -> Corners | None:
+def detect_corners(grey: np.ndarray, board: PhotoBoard) -> BoardDetection | None:
     """The board's corners in ``grey`` (H, W), or None when the board is not found
     (module docstring: which detector for which image size)."""
     from sim_core.boards import board_corners_m
 
     h, w = grey.shape
     if min(h, w) <= SMALL_IMAGE_PX:
-        from calibration.board_detection import detect_board
-
         upscale = max(2, math.ceil(UPSCALED_PX / min(h, w)))
-        det = detect_board(np.asarray(grey, dtype=np.float64), board.mesh, upscale=upscale,
-                           min_corners=1)
-        if det is None:
-            return None
-        return Corners(det.object_points_m, det.image_points_px, det.corner_ids)
+        return detect_board(np.asarray(grey, dtype=np.float64), board.mesh, upscale=upscale,
+                            min_corners=1)
     img = to_detector_8bit(grey)
     pts, _ = board_corners_m(board.mesh)
     if board.kind == "chessboard":
         xy = _chessboard(img, board)
         if xy is None:
             return None
-        return Corners(pts, xy, np.arange(len(pts)))
+        return BoardDetection(pts, xy, np.arange(len(pts)), (h, w))
     from sim_core.boards import cv2_board
 
     detector = cv2.aruco.CharucoDetector(cv2_board(board.mesh))
@@ -305,7 +290,7 @@ def detect_corners(grey: np.ndarray, board: PhotoBoard) -> Corners | None:
     if ids is None or len(ids) == 0:
         return None
     ids = ids.ravel().astype(int)
-    return Corners(pts[ids], corners.reshape(-1, 2).astype(np.float64), ids)
+    return BoardDetection(pts[ids], corners.reshape(-1, 2).astype(np.float64), ids, (h, w))
 
 
 def _chessboard(img: np.ndarray, board: PhotoBoard) -> np.ndarray | None:

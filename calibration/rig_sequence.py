@@ -545,8 +545,8 @@ def fit_rig_calibration(
     progress(done, total, "turntable settling")
     settle = _settling(captures, plan, intr.intrinsics)
     rest_after_move = _rest_after_move(settle)
-    results["settling"] = {**settle.summary, "rest_after_move_s": (
-        None if rest_after_move is None else SETTLING_REST_WAIT_S)}
+    rest_after_move_s = None if rest_after_move is None else SETTLING_REST_WAIT_S
+    results["settling"] = {**settle.summary, "rest_after_move_s": rest_after_move_s}
     results["turntable"] = axis
     progress(done, total, "spread over the fixtures")
     spread = _fixture_jackknife(views, plan, spec, camera, intr, axis)
@@ -622,8 +622,7 @@ def fit_rig_calibration(
                                 stray_light=stray.stray_light_key()
                                 if stray is not None and stray.significant else None),
         illumination=IlluminationParameters(power_w=power.power_w),
-        turntable=_turntable_keys(axis, settle.settling,
-                                  None if rest_after_move is None else SETTLING_REST_WAIT_S),
+        turntable=_turntable_keys(axis, settle.settling, rest_after_move_s),
         solar_simulator=SolarParameters(irradiance_scale=solar.irradiance_scale)
         if solar is not None else SolarParameters(),
         provenance=Provenance(

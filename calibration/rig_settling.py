@@ -36,7 +36,7 @@ from sim_core.tof import phase_from_phasor
 from sim_core.twin_file import MAX_SETTLING_AMPLITUDE_DEG, TurntableSettling
 
 __all__ = ["SETTLING_KEYS", "RigSettling", "board_yaw_deg", "fit_rig_settling", "no_settling",
-           "ringing_bound", "settling_to_wait_out", "unknown_ringing", "wait_after_moves"]
+           "ringing_bound", "unknown_ringing"]
 
 #: the keys of ``turntable.settling``
 SETTLING_KEYS = tuple(f"{KEY}.{k}" for k in ("amplitude_deg", "frequency_hz", "damping_ratio"))
@@ -194,21 +194,3 @@ def unknown_ringing(fit: RigSettling) -> str | None:
                 if not v.determined and k != SETTLING_KEYS[0]), "its shape is not determined")
     return (f"the table was seen ringing ({ratio:.0f} times the yaw's noise) but how is not "
             f"known ({why})")
-
-
-def wait_after_moves(fit: RigSettling) -> tuple[TurntableSettling | None, str | None]:
-    """How the moves after the settling stage wait, from its ``fit``: the ringing to wait out
-    (the determined one, waited out to its :func:`ringing_bound` by
-    :func:`service.lab.settling.settle_wait_s`; None: none determined) and, when the table was
-    seen ringing but its ringing is not determined, why every later move must rest
-    (:func:`unknown_ringing`)."""
-    return fit.settling, unknown_ringing(fit)
-
-
-def settling_to_wait_out(rest: AveragedCapture, moved: AveragedCapture,
-                         intrinsics: Intrinsics) -> TurntableSettling | None:
-    """The ringing to wait out after the moves that follow the settling stage, fitted as soon
-    as its frames are in (at the nominal ``intrinsics``: the board's yaw scales with them, the
-    ringing's frequency and damping do not); None when not determined
-    (:func:`wait_after_moves`)."""
-    return wait_after_moves(fit_rig_settling(rest, moved, intrinsics))[0]

@@ -36,7 +36,7 @@ from calibration.rig_sequence import (
     rig_capture_plan,
     split_after_settling,
 )
-from calibration.rig_settling import fit_rig_settling, wait_after_moves
+from calibration.rig_settling import fit_rig_settling, unknown_ringing
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
 from drivers.rig import Rig, RigState
 from service.lab.settling import settled_moves, unsettled_moves
@@ -126,7 +126,7 @@ def run_rig_calibration(
     ``spec`` is the nominal scene (camera pose, turntable, solar simulator); its mounted objects
     are swapped for the board during the sequence and mounted again at the end. The table's
     ringing, measured by the settling stage, is fitted as soon as its frames are in and waited
-    out after every later move (:func:`calibration.rig_settling.wait_after_moves`): a lab
+    out after every later move (:func:`calibration.rig_settling.unknown_ringing`): a lab
     that knows how its table rings does not capture the board sweep while it still does, and
     one that saw it ring without learning how rests after every later move as long as the
     settling stage's frames at rest did (:data:`calibration.rig_sequence.SETTLING_REST_WAIT_S`).
@@ -135,13 +135,15 @@ def run_rig_calibration(
     capture_plan = rig_capture_plan(plan, spec)
     first, rest = split_after_settling(capture_plan)
     captures = acquire(rig, operator, first, progress, total=capture_plan.n_captures)
-    ringing, unknown_ringing = (wait_after_moves(fit_rig_settling(
-        captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]], build_camera(spec).intrinsics))
-        if all(name in captures for name in SETTLING_STEPS) else (None, None))
-    settle_for = None if ringing is None else TwinParameters(
-        turntable=TurntableParameters(settling=ringing))
-    if unknown_ringing is not None:  # rest as long as the settling stage's frames at rest did
-        _log.warning("rig calibration: %s; every later move rests %g s", unknown_ringing,
+    fit = (fit_rig_settling(captures[SETTLING_STEPS[0]], captures[SETTLING_STEPS[1]],
+                            build_camera(spec).intrinsics)
+           if all(name in captures for name in SETTLING_STEPS) else None)
+    # a determined ringing is waited out (service.lab.settling.settle_wait_s)
+    settle_for = None if fit is None or fit.settling is None else TwinParameters(
+        turntable=TurntableParameters(settling=fit.settling))
+    why_rest = None if fit is None else unknown_ringing(fit)
+    if why_rest is not None:  # rest as long as the settling stage's frames at rest did
+        _log.warning("rig calibration: %s; every later move rests %g s", why_rest,
                      SETTLING_REST_WAIT_S)
         rest = rest.rested_after_moves(SETTLING_REST_WAIT_S,
                                        captures[SETTLING_STEPS[0]].turntable_angle_deg)

@@ -19,7 +19,7 @@ from calibration.rig_settling import (
     board_yaw_deg,
     fit_rig_settling,
     ringing_bound,
-    wait_after_moves,
+    unknown_ringing,
 )
 from calibration.verdicts import Verdict, Verdicts
 from sim_core.camera import Intrinsics, pixel_centre_grid, pixel_to_camera_direction
@@ -163,9 +163,8 @@ def test_a_table_ringing_on_the_lab_clock_is_measured_then_waited_out():
     """The world rings its instant stage's table on the lab's clock and stamps the frames with
     it: the settling stage measures the frequency within issue 27's 5 % (and the damping), and
     a move waited out for what it measured (:func:`calibration.rig_settling.
-    settling_to_wait_out`, :func:`service.lab.settling.settled_moves`) is captured at rest."""
+    fit_rig_settling`, :func:`service.lab.settling.settled_moves`) is captured at rest."""
     from calibration.rig_sequence import SETTLING_STEPS
-    from calibration.rig_settling import settling_to_wait_out
     from drivers.rig import RigState
     from service.lab.settling import settle_wait_s, settled_moves
     from sim_core.twin_file import TurntableParameters, TwinParameters
@@ -184,9 +183,9 @@ def test_a_table_ringing_on_the_lab_clock_is_measured_then_waited_out():
             assert out.verdicts[key].determined, out.verdicts[key]
         assert out.settling.frequency_hz == pytest.approx(TRUTH.frequency_hz, rel=0.05)
         assert out.settling.damping_ratio == pytest.approx(TRUTH.damping_ratio, rel=0.2)
-        ringing = settling_to_wait_out(rest, moved, intrinsics)
-        assert ringing is not None and ringing.amplitude_deg >= out.settling.amplitude_deg
-        wait = TwinParameters(turntable=TurntableParameters(settling=ringing))
+        bound = ringing_bound(out.settling)
+        assert bound.amplitude_deg >= out.settling.amplitude_deg
+        wait = TwinParameters(turntable=TurntableParameters(settling=out.settling))
         before_s = world.clock.now_s
         angle = caps[SETTLING_STEPS[0]].turntable_angle_deg + 15.0
         with settled_moves(rig, wait) as waited_s:
@@ -210,16 +209,14 @@ def test_how_later_moves_wait_follows_what_the_settling_stage_learnt():
     a ringing seen but not determined makes every later move rest (the rig sweep's reality
     205: unexplained at 34 yaw noises, its zero 0.67 deg off without a wait); a table seen not
     to ring waits only the driver's own wait."""
-    ringing, why = wait_after_moves(_fit(TRUTH, "determined", 40.0))
-    assert why is None and ringing == TRUTH  # waited out to its bound (settle_wait_s)
+    assert unknown_ringing(_fit(TRUTH, "determined", 40.0)) is None  # waited out instead
     assert ringing_bound(TRUTH).amplitude_deg == pytest.approx(
         TRUTH.amplitude_deg * np.exp(np.pi * 0.08 / np.sqrt(1 - 0.08**2)))
-    ringing, why = wait_after_moves(_fit(None, "unexplained", 34.0))
-    assert ringing is None
+    why = unknown_ringing(_fit(None, "unexplained", 34.0))
     assert why.startswith("the table was seen ringing (34 times the yaw's noise)")
     assert "turntable.settling.frequency_hz unexplained: reduced chi-square 5.9" in why
     for ratio in (0.55, 2.9, float("nan")):  # nothing seen above the noise
-        assert wait_after_moves(_fit(None, "not determined", ratio)) == (None, None)
+        assert unknown_ringing(_fit(None, "not determined", ratio)) is None
 
 
 def test_a_plan_rests_after_its_moves_only():
