@@ -23,7 +23,7 @@ from drivers.camera.protocol import (
     CameraLostError,
     CameraNotFoundError,
 )
-from drivers.camera.royale_convert import royale_to_raw_frame
+from drivers.camera.royale_convert import RoyaleDataError, royale_to_raw_frame
 from drivers.camera.wire import UseCase, get_use_case
 from drivers.errors import DeviceInputError, DeviceTimeoutError
 from sim_core.raw import RawFrame
@@ -64,7 +64,8 @@ class SourceCamera:
         Longest wait for one frame in :meth:`capture`.
     queue_size : int
         Frames buffered between the source's thread and :meth:`capture`; when full the oldest
-        is dropped and counted in ``dropped``.
+        is dropped and counted in ``dropped``. Frames of the previous use case that arrive after a
+        switch are dropped and counted in ``stale``.
     value_shift : int
         See :func:`~drivers.camera.royale_convert.royale_to_raw_frame`.
     """
@@ -81,7 +82,9 @@ class SourceCamera:
         self._queue: queue.Queue[tuple[float, RawDataCopy]] = queue.Queue(maxsize=queue_size)
         self._source: Any = None
         self._opened_id: str | None = None
+        self._previous_use_case: UseCase | None = None
         self.dropped = 0
+        self.stale = 0
 
     # -- what a subclass provides ---------------------------------------------------------------
     def _make_source(self) -> Any:
@@ -161,6 +164,8 @@ class SourceCamera:
         uc = get_use_case(use_case)
         source = self._require()
         self._do(source.set_use_case, uc.name)
+        if uc != self._use_case:
+            self._previous_use_case = self._use_case
         self._use_case = uc
         self._drain()  # frames of the previous use case
 
@@ -194,9 +199,9 @@ class SourceCamera:
         try:
             while len(frames) < n:
                 arrived, data = self._next(len(frames), n)
-                frames.append(royale_to_raw_frame(
-                    data, use_case=self._use_case, value_shift=self.value_shift,
-                    timestamp_s=arrived, meta={"device": self._opened_id or self.camera_id}))
+                frame = self._convert(arrived, data)
+                if frame is not None:
+                    frames.append(frame)
         finally:
             if one_shot and self._source is not None:
                 try:
@@ -204,6 +209,28 @@ class SourceCamera:
                 except CameraError as exc:
                     _log.warning("%s: stop after capture failed: %s", self._who(), exc)
         return frames
+
+    def _convert(self, arrived: float, data: RawDataCopy) -> RawFrame | None:
+        """One copy as a frame of the configured use case; ``None`` (counted in ``stale``) for a
+        frame of the previous use case that the source had already taken when the switch came
+        (a source's capture thread and its command replies are not ordered). A frame that fits
+        neither use case is an error."""
+        meta = {"device": self._opened_id or self.camera_id}
+        try:
+            return royale_to_raw_frame(data, use_case=self._use_case, value_shift=self.value_shift,
+                                       timestamp_s=arrived, meta=meta)
+        except RoyaleDataError:
+            if self._previous_use_case is None:
+                raise
+            try:
+                royale_to_raw_frame(data, use_case=self._previous_use_case,
+                                    value_shift=self.value_shift, timestamp_s=arrived, meta=meta)
+            except RoyaleDataError:
+                pass
+            else:
+                self.stale += 1
+                return None
+            raise
 
     def _next(self, got: int, n: int) -> tuple[float, RawDataCopy]:
         """The next queued frame; waits at most ``frame_timeout_s``, and no longer than

@@ -361,3 +361,23 @@ def test_the_illumination_temperature_is_copied_from_raw_data_when_present():
     assert royale_to_raw_frame(warm, use_case=MODE5).illumination_temperature_c == 38.5
     cold = RawDataCopy(**{**data.__dict__, "illumination_temperature_c": None})
     assert royale_to_raw_frame(cold, use_case=MODE5).illumination_temperature_c is None
+
+
+def test_a_frame_of_the_previous_use_case_after_a_switch_is_dropped_and_counted(monkeypatch):
+    """A source's capture thread may hand over a frame it took before a use-case switch after
+    the switch was acknowledged: such a frame is stale, not an error; one that fits neither
+    use case still is."""
+    cam = _StandInCamera(layout=False)  # streams nothing: the test hands over every frame
+    monkeypatch.setattr(royale_backend, "roypy", _stand_in_roypy(cam))
+    with RoyaleCamera(use_case="MODE_5_45FPS_500", frame_timeout_s=1.0) as royale:
+        royale.start()
+        royale.configure("MODE_9_5FPS_2000")
+        royale._on_frame(_royale_layout(MODE5))  # late, from before the switch
+        royale._on_frame(_royale_layout(MODE9))
+        frames = royale.capture(1)
+        assert frames[0].phase_images.shape[0] == 2 and royale.stale == 1
+        bad = _royale_layout(MODE5)
+        royale._on_frame(RawDataCopy(**{**bad.__dict__, "modulation_frequencies_hz": (1, 1)}))
+        with pytest.raises(RoyaleDataError, match="frequenc"):
+            royale.capture(1)
+        royale.stop()
