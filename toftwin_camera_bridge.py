@@ -171,7 +171,8 @@ def copy_roypy_raw_data(raw: Any) -> RawDataCopy:
     """Copy a roypy ``RawData`` into a :class:`RawDataCopy` (call it inside the callback).
 
     Uses ``getRawPhase(i)`` for each of the ``sum(rawFrameCount)`` frames when available, else
-    the flat ``rawData`` buffer with its pseudo-data rows (:func:`split_raw_buffer`).
+    the flat ``rawData`` buffer with its pseudo-data rows (:func:`split_raw_buffer`), which must
+    hold exactly that many frames.
     """
     width, height = int(raw.width), int(raw.height)
     counts = _ints(getattr(raw, "rawFrameCount", None))
@@ -182,8 +183,9 @@ def copy_roypy_raw_data(raw: Any) -> RawDataCopy:
                            for i in range(n)])
     else:
         flat = np.asarray(raw.rawData, dtype=np.uint16).ravel()
-        per_frame = width * (height + 1)
-        frames = split_raw_buffer(flat, flat.size // per_frame, width, height)
+        # as many frames as royale counts (a buffer of another size is refused, naming it);
+        # only a RawData that counts nothing is split by the buffer's own size
+        frames = split_raw_buffer(flat, n or flat.size // (width * (height + 1)), width, height)
     temperature = getattr(raw, "illuminationTemperature", None)
     return RawDataCopy(
         width=width,
@@ -397,10 +399,14 @@ class RoyaleSource:
 
     def open(self, camera_id: str | None = None) -> dict[str, Any]:
         """Open ``camera_id`` (the first camera when None), register the raw-data listener;
-        the camera's identity (``id``, ``name``, ``use_cases``, ``info``)."""
+        the camera's identity (``id``, ``name``, ``use_cases``, ``info``). The camera already
+        open is kept when it is still connected, else opened again (a camera pulled and plugged
+        in again under a running bridge)."""
         if self._cam is not None:
-            if camera_id in (None, self.camera_id):
+            if camera_id in (None, self.camera_id) and self.is_connected():
                 return self.identity()
+            # another camera, or this one pulled (and perhaps plugged in again): royale's old
+            # device is dead for good, so it goes and the camera is created anew
             self.close()
         ids = self.list_cameras()
         if not ids:
@@ -617,9 +623,23 @@ class BridgeServer:
     def _on_frame(self, data: RawDataCopy) -> None:
         self.dropped += put_dropping_oldest(self._frames, data)
 
+    def _report_callback_errors(self, reported: int) -> int:
+        """Push an ``error`` event for the callback errors after the first ``reported``;
+        how many are reported now."""
+        errors = list(getattr(self.source, "callback_errors", ()) or ())
+        if len(errors) > reported:
+            new = len(errors) - reported
+            self._push({"op": "event", "kind": "error",
+                        "camera": getattr(self.source, "camera_id", None),
+                        "message": f"{new} frame(s) lost in royale's callback; the last: "
+                                   f"{errors[-1]}"})
+        return len(errors)
+
     def _send_loop(self) -> None:
         camera_gone_reported = False
+        errors_reported = 0
         while not self._stop.is_set():
+            errors_reported = self._report_callback_errors(errors_reported)
             try:
                 data = self._frames.get(timeout=0.2)
             except queue.Empty:

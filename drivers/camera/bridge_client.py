@@ -115,6 +115,9 @@ class RemoteSource:
                     self.disconnect_reason = (f"the bridge reports camera "
                                               f"{message.get('camera')} disconnected: "
                                               f"{message.get('message')}")
+                elif op == "event" and message.get("kind") == "error":
+                    # lost frames on the bridge's side: a timeout's message names them
+                    self.callback_errors.append(f"bridge: {message.get('message')}")
         except (ConnectionError, OSError) as exc:
             reason = f"connection lost ({exc})"
         except BridgeError as exc:

@@ -65,7 +65,8 @@ class SourceCamera:
     queue_size : int
         Frames buffered between the source's thread and :meth:`capture`; when full the oldest
         is dropped and counted in ``dropped``. Frames of the previous use case that arrive after a
-        switch are dropped and counted in ``stale``.
+        switch or a reconnection are dropped and counted in ``stale`` (and named when no frame
+        of the use case comes).
     value_shift : int
         See :func:`~drivers.camera.royale_convert.royale_to_raw_frame`.
     """
@@ -82,7 +83,6 @@ class SourceCamera:
         self._queue: queue.Queue[tuple[float, RawDataCopy]] = queue.Queue(maxsize=queue_size)
         self._source: Any = None
         self._opened_id: str | None = None
-        self._previous_use_case: UseCase | None = None
         self.dropped = 0
         self.stale = 0
 
@@ -164,8 +164,6 @@ class SourceCamera:
         uc = get_use_case(use_case)
         source = self._require()
         self._do(source.set_use_case, uc.name)
-        if uc != self._use_case:
-            self._previous_use_case = self._use_case
         self._use_case = uc
         self._drain()  # frames of the previous use case
 
@@ -212,25 +210,18 @@ class SourceCamera:
 
     def _convert(self, arrived: float, data: RawDataCopy) -> RawFrame | None:
         """One copy as a frame of the configured use case; ``None`` (counted in ``stale``) for a
-        frame of the previous use case that the source had already taken when the switch came
-        (a source's capture thread and its command replies are not ordered). A frame that fits
-        neither use case is an error."""
+        well-formed frame of another configuration: one the source took before a use-case switch
+        or a reconnection but handed over after it (a source's capture thread and its command
+        replies are not ordered). A copy that is no raw frame at all is an error."""
         meta = {"device": self._opened_id or self.camera_id}
         try:
             return royale_to_raw_frame(data, use_case=self._use_case, value_shift=self.value_shift,
                                        timestamp_s=arrived, meta=meta)
         except RoyaleDataError:
-            if self._previous_use_case is None:
-                raise
-            try:
-                royale_to_raw_frame(data, use_case=self._previous_use_case,
-                                    value_shift=self.value_shift, timestamp_s=arrived, meta=meta)
-            except RoyaleDataError:
-                pass
-            else:
-                self.stale += 1
-                return None
-            raise
+            royale_to_raw_frame(data, value_shift=self.value_shift, timestamp_s=arrived,
+                                meta=meta)  # raises when the copy is malformed in itself
+            self.stale += 1
+            return None
 
     def _next(self, got: int, n: int) -> tuple[float, RawDataCopy]:
         """The next queued frame; waits at most ``frame_timeout_s``, and no longer than
@@ -251,7 +242,8 @@ class SourceCamera:
     def _no_frame_error(self, got: int, n: int) -> CameraLostError | DeviceTimeoutError:
         """Why no frame came: a disconnected camera (its source says so), else a timeout;
         both name the camera."""
-        detail = f"{got} of {n} frames; callback errors: {self.callback_errors[-3:]}"
+        detail = (f"{got} of {n} frames; {self.stale} of another use case dropped; "
+                  f"callback errors: {self.callback_errors[-3:]}")
         source = self._source
         connected = True
         with contextlib.suppress(Exception):

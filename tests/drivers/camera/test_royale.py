@@ -365,11 +365,11 @@ def test_the_illumination_temperature_is_copied_from_raw_data_when_present():
 
 def test_a_frame_of_the_previous_use_case_after_a_switch_is_dropped_and_counted(monkeypatch):
     """A source's capture thread may hand over a frame it took before a use-case switch after
-    the switch was acknowledged: such a frame is stale, not an error; one that fits neither
-    use case still is."""
+    the switch was acknowledged: such a frame is stale, not an error; a copy that is no raw
+    frame still is."""
     cam = _StandInCamera(layout=False)  # streams nothing: the test hands over every frame
     monkeypatch.setattr(royale_backend, "roypy", _stand_in_roypy(cam))
-    with RoyaleCamera(use_case="MODE_5_45FPS_500", frame_timeout_s=1.0) as royale:
+    with RoyaleCamera(use_case="MODE_5_45FPS_500", frame_timeout_s=0.3) as royale:
         royale.start()
         royale.configure("MODE_9_5FPS_2000")
         royale._on_frame(_royale_layout(MODE5))  # late, from before the switch
@@ -377,7 +377,10 @@ def test_a_frame_of_the_previous_use_case_after_a_switch_is_dropped_and_counted(
         frames = royale.capture(1)
         assert frames[0].phase_images.shape[0] == 2 and royale.stale == 1
         bad = _royale_layout(MODE5)
-        royale._on_frame(RawDataCopy(**{**bad.__dict__, "modulation_frequencies_hz": (1, 1)}))
-        with pytest.raises(RoyaleDataError, match="frequenc"):
+        royale._on_frame(RawDataCopy(**{**bad.__dict__, "raw_frames": bad.raw_frames[:4]}))
+        with pytest.raises(RoyaleDataError, match="4 raw frames"):
+            royale.capture(1)
+        royale._on_frame(_royale_layout(MODE5))  # only stale frames: a timeout naming them
+        with pytest.raises(DeviceTimeoutError, match="0 of 1 frames; 2 of another use case"):
             royale.capture(1)
         royale.stop()

@@ -99,6 +99,10 @@ def figures(seed: int, label: str, rows: list[dict]) -> dict[str, dict[str, floa
               f"{1e3 * e['ceiling']['depth_rmse_m']:.2f} mm; grey nominal "
               f"{e['nominal']['grey_psnr_db']:.2f} fitted {e['fitted']['grey_psnr_db']:.2f} "
               f"ceiling {e['ceiling']['grey_psnr_db']:.2f} dB")
+        for t in ("fitted", "ceiling"):
+            tof = e[t].get("tof") or {}
+            print(f"    {t} depth difference: median {tof.get('depth_diff_median_mm')} mm, MAD "
+                  f"{tof.get('depth_diff_mad_mm')} mm over {tof.get('depth_diff_n_pixels')} pixels")
         for u in e["unexplained"]:
             print(f"    unexplained {u['text']}")
     return out
