@@ -638,37 +638,21 @@ def calibration_data(cal: PhotoCalibration, created_utc: str = "") -> dict[str, 
 
 def write_calibration_yaml(path: str | Path, cal: PhotoCalibration,
                            created_utc: str = "") -> Path:
-    """``calibration.yaml``. The calibration file describes the pico flexx's 224 x 171 image
-    (:class:`sim_core.twin_file.CalibrationFile` checks a lens against it): for that image the
-    file is written and validated as one; for any other size the same keys are written, the
-    lens checked against its own image (:func:`sim_core.scene_spec.check_lens`, the rules of
-    a scene's camera), the size in ``provenance.procedures.photo_intrinsics.image_size_px``;
-    such a file describes another camera and the ToF twin refuses it
-    (:func:`sim_core.twin_file.load_calibration`: the principal point outside 224 x 171)."""
-    import yaml
-    from pydantic_core import PydanticCustomError
-
-    from sim_core.files import atomic_write
-    from sim_core.scene_spec import Distortion, check_lens
-    from sim_core.twin_file import PRESET_SHAPE, parse_calibration, write_calibration
+    """``calibration.yaml``, validated as a calibration file
+    (:func:`sim_core.twin_file.parse_calibration`), with the photographs' image size in
+    ``camera.image_size_px``: the lens is checked against that image, and a twin takes the file
+    only for a scene camera of that size (:func:`sim_core.twin_apply.apply_to_spec`)."""
+    from sim_core.twin_file import parse_calibration, write_calibration
 
     data = calibration_data(cal, created_utc)
-    if cal.image_shape == PRESET_SHAPE:
-        return write_calibration(path, parse_calibration(data))
-    cam = data["camera"]
     h, w = cal.image_shape
-    lens = {"width_px": w, "height_px": h}
+    data["camera"] = {"image_size_px": [w, h], **data["camera"]}
     try:
-        for key in ("fx_px", "fy_px", "cx_px", "cy_px"):
-            lens[key] = check_lens(key, cam[key], lens)
-        check_lens("distortion", Distortion(**cam["distortion"]), lens)
-    except (ValueError, PydanticCustomError) as exc:
-        raise InvalidInputError("calibration.camera", f"the fitted lens is no lens for a {w} x "
-                                f"{h} image: {exc}") from None
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    return atomic_write(p, yaml.safe_dump(data, sort_keys=False, default_flow_style=None,
-                                          width=100))
+        parsed = parse_calibration(data)
+    except InvalidInputError as exc:
+        raise InvalidInputError(exc.field, f"the fitted lens is no lens for a {w} x {h} image: "
+                                f"{exc.message}") from None
+    return write_calibration(path, parsed)
 
 
 def write_opencv_yaml(path: str | Path, cal: PhotoCalibration) -> Path:

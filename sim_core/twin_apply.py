@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
+from sim_core import lens_ranges
 from sim_core.errors import SceneError
 from sim_core.geometry import rotation_matrix_xyz_deg
 from sim_core.materials import Material
@@ -38,6 +39,13 @@ def apply_to_spec(spec: SceneSpec, twin: TwinParameters) -> SceneSpec:
     (211.4, 1.3)
     """
     cam = twin.camera
+    image = (spec.camera.width_px or lens_ranges.PRESET["width_px"],
+             spec.camera.height_px or lens_ranges.PRESET["height_px"])
+    if cam.image_size_px is not None and tuple(cam.image_size_px) != image:
+        w, h = cam.image_size_px
+        raise SceneError("camera.image_size_px", f"the calibration's lens was measured on a "
+                         f"{w} x {h} image; this scene's camera is {image[0]} x {image[1]}: "
+                         "it is another camera's calibration")
     cam_update = {k: getattr(cam, k) for k in ("fx_px", "fy_px", "cx_px", "cy_px", "distortion")
                   if getattr(cam, k) is not None}
     sensor_set = cam.sensor.model_dump(exclude_none=True)

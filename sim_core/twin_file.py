@@ -235,9 +235,22 @@ class StrayLight(_Strict):
                                              allow_inf_nan=False)]
 
 
-class CameraParameters(_Strict):
-    """What the camera really is: intrinsics, distortion, depth errors, sensor."""
+#: the largest image side ``camera.image_size_px`` holds [px]
+MAX_IMAGE_SIDE_PX = 16384
 
+
+class CameraParameters(_Strict):
+    """What the camera really is: intrinsics, distortion, depth errors, sensor.
+
+    ``image_size_px`` ([width, height]) names the image the lens was measured on; absent, it is
+    the preset's 224 x 171. The lens keys are checked against that image, and a twin applies
+    the file only to a scene camera of that size (:func:`sim_core.twin_apply.apply_to_spec`):
+    ``toftwin calibrate intrinsics`` on another camera's photographs writes a valid file that
+    no pico flexx scene takes by mistake.
+    """
+
+    image_size_px: tuple[Annotated[int, Field(ge=1, le=MAX_IMAGE_SIDE_PX)],
+                         Annotated[int, Field(ge=1, le=MAX_IMAGE_SIDE_PX)]] | None = None
     fx_px: Finite | None = None
     fy_px: Finite | None = None
     cx_px: Finite | None = None
@@ -252,15 +265,22 @@ class CameraParameters(_Strict):
 
     @field_validator("fx_px", "fy_px", "cx_px", "cy_px", "distortion")
     @classmethod
-    def _a_lens_for_the_preset(cls, v, info: ValidationInfo):
-        # The preset's 224 x 171 image: the rule and its ranges are the scene's camera's.
-        return check_lens(info.field_name, v, info.data)
+    def _a_lens_for_the_image(cls, v, info: ValidationInfo):
+        # The file's image (the preset's 224 x 171 when it names none): the rule and its ranges
+        # are the scene's camera's.
+        size = info.data.get("image_size_px")
+        data = dict(info.data)
+        if size is not None:
+            data.update(width_px=size[0], height_px=size[1])
+        return check_lens(info.field_name, v, data)
 
     @field_validator("depth")
     @classmethod
-    def _grid_covers_the_preset(cls, v: DepthErrors | None):
+    def _grid_covers_the_image(cls, v: DepthErrors | None, info: ValidationInfo):
         if v is not None and isinstance(v.pixel_offset_m, PixelOffsetGrid):
-            problem = grid_coverage_problem(v.pixel_offset_m, PRESET_SHAPE)
+            size = info.data.get("image_size_px")
+            shape = PRESET_SHAPE if size is None else (size[1], size[0])
+            problem = grid_coverage_problem(v.pixel_offset_m, shape)
             if problem is not None:
                 raise range_error(f"pixel_offset_m.{problem}")
         return v
@@ -446,6 +466,8 @@ def twin_hash(params: TwinParameters | ObjectTwinParameters) -> str:
     True
     """
     data = params.model_dump(mode="json", exclude={"provenance"})
+    if data.get("camera", {}).get("image_size_px", 0) is None:
+        del data["camera"]["image_size_px"]  # absent: the preset's, as before the key existed
     text = json.dumps(data, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

@@ -176,6 +176,21 @@ def test_a_synthetic_camera_is_recovered_and_judged(synthetic_dir, tmp_path):
     record = data["provenance"]["procedures"]["photo_intrinsics"]
     assert record["image_size_px"] == [640, 480] and len(record["views"]) == 16
     assert data["camera"]["cx_px"] == pytest.approx(p["cx_px"])
+    # a valid calibration file of a 640 x 480 camera, which no 224 x 171 scene takes
+    from sim_core.errors import SceneError
+    from sim_core.scene_spec import SceneSpec
+    from sim_core.twin_apply import apply_to_spec
+    from sim_core.twin_file import load_calibration
+
+    loaded = load_calibration(paths["calibration"])
+    assert loaded.camera.image_size_px == (640, 480)
+    assert loaded.camera.fx_px == pytest.approx(p["fx_px"])
+    camera = {"pose": {"position_m": [0, -1, 0], "look_at_m": [0, 0, 0]}}
+    with pytest.raises(SceneError, match=r"^camera\.image_size_px: .* 640 x 480 image; this "
+                       r"scene's camera is 224 x 171"):
+        apply_to_spec(SceneSpec.model_validate({"camera": camera}), loaded)
+    wide = SceneSpec.model_validate({"camera": {**camera, "width_px": 640, "height_px": 480}})
+    assert apply_to_spec(wide, loaded).camera.cx_px == pytest.approx(p["cx_px"])
 
 
 def test_a_wrong_lens_model_is_unexplained(synthetic_dir):

@@ -60,12 +60,28 @@ def test_the_issues_example_reality_is_valid():
         ({"turntable": {"zero_offset_deg": float("nan")}}, "calibration.turntable.zero_offset_deg"),
         ({"colour": 1}, "calibration.colour"),
         ({"mount": {}}, "calibration.mount"),  # a reality key is not a calibration key
+        ({"camera": {"image_size_px": [640, 0]}}, "calibration.camera.image_size_px[1]"),
+        ({"camera": {"image_size_px": [20000, 480]}}, "calibration.camera.image_size_px[0]"),
+        # a lens is checked against the file's image: 342 px lies outside 224 x 171
+        ({"camera": {"cx_px": 342.5}}, "calibration.camera.cx_px"),
+        ({"camera": {"image_size_px": [320, 240], "cx_px": 342.5}}, "calibration.camera.cx_px"),
     ],
 )
 def test_bad_values_name_the_field(data, field):
     with pytest.raises(InvalidInputError) as err:
         parse_calibration(data)
     assert err.value.field == field
+
+
+def test_a_calibration_of_another_image_is_checked_against_it_and_hashed_apart():
+    lens = {"fx_px": 533.0, "fy_px": 533.2, "cx_px": 342.5, "cy_px": 233.9}
+    cal = parse_calibration({"camera": {"image_size_px": [640, 480], **lens}})
+    assert cal.camera.image_size_px == (640, 480)
+    preset = parse_calibration({"camera": {"fx_px": 210.0}})
+    assert twin_hash(preset) == twin_hash(parse_calibration(
+        {"camera": {"fx_px": 210.0, "image_size_px": None}}))  # absent and null: one hash
+    assert twin_hash(preset) != twin_hash(parse_calibration(
+        {"camera": {"fx_px": 210.0, "image_size_px": [224, 171]}}))
 
 
 def test_hash_ignores_provenance_but_not_values(tmp_path):
