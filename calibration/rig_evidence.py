@@ -25,6 +25,7 @@ from calibration.rig_verdicts import (
 )
 from calibration.verdicts import Verdict, Verdicts
 from calibration.warmup import DRIFT_KEY
+from sim_core.constants import SPEED_OF_LIGHT_M_S
 
 #: the saddle-point detector's own error per coordinate [px], beyond the image noise it sees:
 #: what the bias synthesis leaves (the detector's response to what the twin's render and the
@@ -109,15 +110,46 @@ def corner_radius(views, intr) -> float:
     return float(np.max(np.hypot(x, y)))
 
 
-def depth_evidence(depth, frequencies_hz) -> DepthEvidence:
-    """The depth fit's chi-square and standard deviations as the verdicts read them."""
+def drift_carried_std_rad(frequencies_hz, drift_std_mm_per_c, mean_rise_c: float) -> list[float]:
+    """Per frequency, the phase error the drift coefficient's own error leaves in the depth
+    model [rad]: the board views' drift is removed at ``k (T - T_start)``
+    (:func:`calibration.captures.drift_free_phase_rad`), so an error ``s_k`` of ``k`` moves their
+    common range by ``s_k * mean(T - T_start)`` (``mean_rise_c``), which the phase offset takes
+    up: ``4 pi f s_k mean_rise / c`` (the seed's range-phase relation). One ``s_k`` for all
+    frequencies is used for each; a NaN or infinite ``s_k`` carries as infinite (a NaN
+    ``mean_rise_c`` too), views at the reference temperature as 0.
+
+    >>> [round(v, 6) for v in drift_carried_std_rad([60.24e6], [0.02], 10.0)]  # 0.2 mm
+    [0.000505]
+    """
+    f = np.asarray(frequencies_hz, dtype=np.float64).ravel()
+    s = np.abs(np.asarray(drift_std_mm_per_c, dtype=np.float64).ravel())
+    if s.size not in (1, f.size):
+        s = np.full(1, float(np.max(s)) if s.size else math.inf)
+    s = np.broadcast_to(s, f.shape)
+    rise_m = 1e-3 * abs(float(mean_rise_c))
+    if not math.isfinite(rise_m):
+        return [math.inf] * f.size
+    if rise_m == 0.0:  # the views at the reference temperature: the coefficient moves nothing
+        return [0.0] * f.size
+    s = np.where(np.isfinite(s), s, math.inf)
+    return [float(v) for v in 4.0 * math.pi * f * s * rise_m / SPEED_OF_LIGHT_M_S]
+
+
+def depth_evidence(depth, frequencies_hz, drift_std_rad=None) -> DepthEvidence:
+    """The depth fit's chi-square and standard deviations as the verdicts read them; with
+    ``drift_std_rad`` (:func:`drift_carried_std_rad`) the drift coefficient's error is added to
+    the model's standard deviation in quadrature (the fit alone does not see it)."""
+    model_std = [float(v) for v in depth.model_std_rad]
+    if drift_std_rad is not None and len(drift_std_rad) == len(model_std):
+        model_std = [math.hypot(m, d) for m, d in zip(model_std, drift_std_rad, strict=True)]
     bad = [n for n, c in depth.per_view_reduced_chi2.items() if not c <= 2.0]
     where = "the depth model on the board (range residual against the phase noise)"
     if bad:
         where += f"; views above 2: {', '.join(bad[:6])}" + (" ..." if len(bad) > 6 else "")
     return DepthEvidence(
         stage=StageEvidence(depth.reduced_chi2, where),
-        model_std_rad=depth.model_std_rad, pixel_offset_std_m=depth.pixel_offset_std_m,
+        model_std_rad=model_std, pixel_offset_std_m=depth.pixel_offset_std_m,
         frequencies_hz=list(np.asarray(frequencies_hz, dtype=float).ravel()),
         phase_span_rad=depth.phase_span_rad, range_span_m=depth.range_span_m,
         coverage=depth.coverage)

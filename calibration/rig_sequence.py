@@ -77,6 +77,7 @@ from calibration.rig_evidence import (
     corner_std_px,
     depth_evidence,
     depth_through_drift,
+    drift_carried_std_rad,
     free_stage_chi2,
     other_verdicts,
     reprojection_stage,
@@ -640,7 +641,9 @@ def fit_rig_calibration(
     keys = calibration_keys(cal)
     effects = {**warm.verdicts, **settle.verdicts, **stray_verdicts,
                **({} if rest_after_move is None else {REST_AFTER_MOVE_KEY: rest_after_move})}
-    verdicts = rig_verdicts(keys, evidence, depth_evidence(depth, use_case.frequencies_hz),
+    verdicts = rig_verdicts(keys, evidence,
+                            depth_evidence(depth, use_case.frequencies_hz,
+                                           _drift_carried(warm, views, use_case.frequencies_hz)),
                             {**other_verdicts(noise, power, solar), **effects})
     # the effects' keys not written (not determined), judged all the same: verdicts.json says
     # why the file has no such key
@@ -828,6 +831,18 @@ def _depth(views, intr, plan, frequencies_hz, noise=None, temperature=None, stra
     caps = [(v, cap if stray is None else without_stray_light(cap, stray)) for v, cap, _ in views]
     dviews = depth_views_from_captures(intr, caps, board, noise, temperature)
     return fit_depth_errors(dviews, frequencies_hz)
+
+
+def _drift_carried(warm, views, frequencies_hz) -> list[float] | None:
+    """The drift coefficient's error carried into the depth model
+    (:func:`calibration.rig_evidence.drift_carried_std_rad`) over the board views' reported
+    temperatures; None when no drift was removed from them."""
+    temps = [cap.illumination_temperature_c for _, cap, _ in views
+             if cap.illumination_temperature_c is not None]
+    if warm.temperature is None or warm.fit is None or not temps:
+        return None
+    rise = float(np.mean(temps)) - warm.temperature.illumination_start_c
+    return drift_carried_std_rad(frequencies_hz, warm.fit.drift_std_mm_per_c, rise)
 
 
 def _warmup(captures: Captures, plan: RigCalibrationPlan):

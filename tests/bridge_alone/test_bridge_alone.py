@@ -322,6 +322,22 @@ class _WithoutGetRawPhase:
         return getattr(self._raw, name)
 
 
+def _stream_mode9_until(listener: Any, results: list) -> None:
+    """Stream MODE_9 from the double's camera to ``listener`` (held here: royale keeps no
+    reference of its own) until ``results`` holds something or WAIT_S passed; then reset."""
+    cam = double.CameraManager().createCamera(CAMERA_ID)
+    cam.initialize()
+    cam.registerRawDataListener(listener)
+    cam.setUseCase(MODE9)
+    cam.setExposureTime(EXPOSURE_US[MODE9])
+    cam.startCapture()
+    deadline = time.monotonic() + WAIT_S
+    while not results and time.monotonic() < deadline:
+        time.sleep(0.01)
+    cam.stopCapture()
+    DOUBLE.reset()
+
+
 def test_royale_5_flat_buffer_gives_the_same_frames_as_get_raw_phase(monkeypatch):
     recorder = _setup_double(5, monkeypatch)
     DOUBLE.expose_flat_raw_data = True
@@ -334,18 +350,7 @@ def test_royale_5_flat_buffer_gives_the_same_frames_as_get_raw_phase(monkeypatch
             results.append((copy_roypy_raw_data(data),
                             copy_roypy_raw_data(_WithoutGetRawPhase(data)), flat))
 
-    cam = double.CameraManager().createCamera(CAMERA_ID)
-    cam.initialize()
-    listener = Listener()
-    cam.registerRawDataListener(listener)
-    cam.setUseCase(MODE9)
-    cam.setExposureTime(EXPOSURE_US[MODE9])
-    cam.startCapture()
-    deadline = time.monotonic() + WAIT_S
-    while not results and time.monotonic() < deadline:
-        time.sleep(0.01)
-    cam.stopCapture()
-    DOUBLE.reset()
+    _stream_mode9_until(Listener(), results)
     assert results and DOUBLE.listener_errors == []
     by_phase, by_buffer, flat = results[0]
     assert _check_copy(by_phase, recorder, MODE9, True) == 0
@@ -693,18 +698,7 @@ def test_a_flat_buffer_holding_another_number_of_frames_than_royale_counts_is_re
             else:
                 results.append((whole, None))
 
-    cam = double.CameraManager().createCamera(CAMERA_ID)
-    cam.initialize()
-    listener = Listener()  # royale keeps no reference of its own
-    cam.registerRawDataListener(listener)
-    cam.setUseCase(MODE9)
-    cam.setExposureTime(EXPOSURE_US[MODE9])
-    cam.startCapture()
-    deadline = time.monotonic() + WAIT_S
-    while not results and time.monotonic() < deadline:
-        time.sleep(0.01)
-    cam.stopCapture()
-    DOUBLE.reset()
+    _stream_mode9_until(Listener(), results)
     assert results and DOUBLE.listener_errors == []
     whole, refused = results[0]
     assert whole.raw_frames.shape == (9, H, W)

@@ -359,3 +359,35 @@ def test_the_depth_keys_claim_nothing_while_the_drift_they_are_fitted_without_is
         "not determined", None, "no drift above the noise")}))
     assert calm["camera.depth.phase_offset_rad"].determined
     assert depth_through_drift(Verdicts(depth))["camera.depth.wiggling"].determined
+
+
+@given(st.floats(0.0, 10.0), st.floats(-30.0, 30.0), st.sampled_from([[60.24e6],
+                                                                      [80.32e6, 60.24e6]]))
+def test_the_drift_coefficients_error_carried_into_the_depth_model_is_safe_and_linear(
+        std_mm_per_c, rise_c, freqs):
+    from calibration.rig_evidence import drift_carried_std_rad
+
+    out = drift_carried_std_rad(freqs, [std_mm_per_c], rise_c)
+    assert len(out) == len(freqs) and all(v >= 0.0 and math.isfinite(v) for v in out)
+    # range error s * |rise| as phase: 4 pi f d / c
+    for f, v in zip(freqs, out, strict=True):
+        assert v == pytest.approx(4 * math.pi * f * 1e-3 * std_mm_per_c * abs(rise_c)
+                                  / SPEED_OF_LIGHT_M_S, rel=1e-12, abs=1e-300)
+    # an unknown coefficient error carries as unbounded, except for views at the reference
+    assert drift_carried_std_rad(freqs, [math.nan], rise_c) == (
+        [0.0] * len(freqs) if rise_c == 0.0 else [math.inf] * len(freqs))
+    assert drift_carried_std_rad(freqs, [std_mm_per_c], math.nan) == [math.inf] * len(freqs)
+
+
+def test_the_depth_models_std_takes_the_drifts_error_in_quadrature():
+    from types import SimpleNamespace
+
+    from calibration.rig_evidence import depth_evidence
+
+    depth = SimpleNamespace(per_view_reduced_chi2={"v": 1.0}, reduced_chi2=1.0,
+                            model_std_rad=(0.003, 0.004), pixel_offset_std_m=1e-4,
+                            phase_span_rad=(0.1, 0.5), range_span_m=(0.4, 0.9), coverage=1.0)
+    alone = depth_evidence(depth, [80.32e6, 60.24e6])
+    assert list(alone.model_std_rad) == [0.003, 0.004]
+    carried = depth_evidence(depth, [80.32e6, 60.24e6], [0.004, 0.003])
+    assert list(carried.model_std_rad) == pytest.approx([0.005, 0.005])
