@@ -85,6 +85,8 @@ class SourceCamera:
         self._opened_id: str | None = None
         self.dropped = 0
         self.stale = 0
+        #: why the last stale frame was not the configured use case's (the conversion's words)
+        self.stale_reason: str | None = None
 
     # -- what a subclass provides ---------------------------------------------------------------
     def _make_source(self) -> Any:
@@ -217,10 +219,11 @@ class SourceCamera:
         try:
             return royale_to_raw_frame(data, use_case=self._use_case, value_shift=self.value_shift,
                                        timestamp_s=arrived, meta=meta)
-        except RoyaleDataError:
+        except RoyaleDataError as exc:
             royale_to_raw_frame(data, value_shift=self.value_shift, timestamp_s=arrived,
                                 meta=meta)  # raises when the copy is malformed in itself
             self.stale += 1
+            self.stale_reason = str(exc)
             return None
 
     def _next(self, got: int, n: int) -> tuple[float, RawDataCopy]:
@@ -242,7 +245,8 @@ class SourceCamera:
     def _no_frame_error(self, got: int, n: int) -> CameraLostError | DeviceTimeoutError:
         """Why no frame came: a disconnected camera (its source says so), else a timeout;
         both name the camera."""
-        detail = (f"{got} of {n} frames; {self.stale} of another use case dropped; "
+        stale = "" if not self.stale else f" (the last: {self.stale_reason})"
+        detail = (f"{got} of {n} frames; {self.stale} of another use case dropped{stale}; "
                   f"callback errors: {self.callback_errors[-3:]}")
         source = self._source
         connected = True
