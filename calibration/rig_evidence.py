@@ -127,13 +127,16 @@ def drift_carried_std_rad(frequencies_hz, drift_std_mm_per_c, mean_rise_c: float
     if s.size not in (1, f.size):
         s = np.full(1, float(np.max(s)) if s.size else math.inf)
     s = np.broadcast_to(s, f.shape)
-    rise_m = 1e-3 * abs(float(mean_rise_c))
-    if not math.isfinite(rise_m):
+    rise_c = abs(float(mean_rise_c))
+    if not math.isfinite(rise_c):
         return [math.inf] * f.size
-    if rise_m == 0.0:  # the views at the reference temperature: the coefficient moves nothing
+    if rise_c == 0.0:  # the views at the reference temperature: the coefficient moves nothing
         return [0.0] * f.size
-    s = np.where(np.isfinite(s), s, math.inf)
-    return [float(v) for v in 4.0 * math.pi * f * s * rise_m / SPEED_OF_LIGHT_M_S]
+    # an unknown coefficient error carries as unbounded whatever the rise (no inf * 0 = NaN
+    # when a tiny rise underflows in the product)
+    phase_per_mm = 4.0 * math.pi * f * 1e-3 / SPEED_OF_LIGHT_M_S
+    return [math.inf if not math.isfinite(sk) else float(k * sk * rise_c)
+            for k, sk in zip(phase_per_mm, s, strict=True)]
 
 
 def depth_evidence(depth, frequencies_hz, drift_std_rad=None) -> DepthEvidence:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 from scipy import ndimage
 
@@ -363,6 +363,8 @@ def test_the_depth_keys_claim_nothing_while_the_drift_they_are_fitted_without_is
 
 @given(st.floats(0.0, 10.0), st.floats(-30.0, 30.0), st.sampled_from([[60.24e6],
                                                                       [80.32e6, 60.24e6]]))
+@example(1e-300, 5e-324, [60.24e6])  # a rise so small its product underflows (CI found it)
+@example(10.0, -30.0, [80.32e6, 60.24e6])
 def test_the_drift_coefficients_error_carried_into_the_depth_model_is_safe_and_linear(
         std_mm_per_c, rise_c, freqs):
     from calibration.rig_evidence import drift_carried_std_rad
