@@ -626,14 +626,14 @@ class BridgeServer:
     def _report_callback_errors(self, reported: int) -> int:
         """Push an ``error`` event for the callback errors after the first ``reported``;
         how many are reported now."""
-        errors = list(getattr(self.source, "callback_errors", ()) or ())
-        if len(errors) > reported:
-            new = len(errors) - reported
+        errors = getattr(self.source, "callback_errors", None) or ()
+        count = len(errors)  # read once: royale's thread may append meanwhile (no copy per frame)
+        if count > reported:
             self._push({"op": "event", "kind": "error",
                         "camera": getattr(self.source, "camera_id", None),
-                        "message": f"{new} frame(s) lost in royale's callback; the last: "
-                                   f"{errors[-1]}"})
-        return len(errors)
+                        "message": f"{count - reported} frame(s) lost in royale's callback; "
+                                   f"the last: {errors[count - 1]}"})
+        return count
 
     def _send_loop(self) -> None:
         camera_gone_reported = False

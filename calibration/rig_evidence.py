@@ -144,8 +144,11 @@ def depth_evidence(depth, frequencies_hz, drift_std_rad=None) -> DepthEvidence:
     ``drift_std_rad`` (:func:`drift_carried_std_rad`) the drift coefficient's error is added to
     the model's standard deviation in quadrature (the fit alone does not see it)."""
     model_std = [float(v) for v in depth.model_std_rad]
-    if drift_std_rad is not None and len(drift_std_rad) == len(model_std):
-        model_std = [math.hypot(m, d) for m, d in zip(model_std, drift_std_rad, strict=True)]
+    if drift_std_rad is not None and len(drift_std_rad):
+        # one per frequency; a model of another length takes the largest for each (never none)
+        drift = (list(drift_std_rad) if len(drift_std_rad) == len(model_std)
+                 else [max(drift_std_rad)] * len(model_std))
+        model_std = [math.hypot(m, d) for m, d in zip(model_std, drift, strict=True)]
     bad = [n for n, c in depth.per_view_reduced_chi2.items() if not c <= 2.0]
     where = "the depth model on the board (range residual against the phase noise)"
     if bad:

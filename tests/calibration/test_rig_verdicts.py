@@ -393,3 +393,7 @@ def test_the_depth_models_std_takes_the_drifts_error_in_quadrature():
     assert list(alone.model_std_rad) == [0.003, 0.004]
     carried = depth_evidence(depth, [80.32e6, 60.24e6], [0.004, 0.003])
     assert list(carried.model_std_rad) == pytest.approx([0.005, 0.005])
+    # one offset for both frequencies: it takes the larger drift term, never none
+    one = SimpleNamespace(**{**depth.__dict__, "model_std_rad": (0.003,)})
+    assert list(depth_evidence(one, [80.32e6, 60.24e6], [0.004, 0.001]).model_std_rad) == \
+        pytest.approx([0.005])
