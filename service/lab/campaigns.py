@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import uuid
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy.orm import sessionmaker
@@ -36,6 +37,7 @@ from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
+from service.store.recording import RecordedCampaign, Recording, recorded_poses
 from sim_core.errors import InvalidInputError
 
 
@@ -51,6 +53,8 @@ def create_campaign(
     ``rig`` gives the stage's software limits the angles are checked against (None: the rig is
     not available, the angles are checked when the campaign runs).
     """
+    if req.source == "recording":
+        return _create_replay(req, sessions=sessions, settings=settings)
     scene = scene_from_request(settings, req.scene)
     spp = check_spp(req.spp, settings)
     check_mask(req.mask, scene, image_shape(scene, rig.camera.use_case if rig else None))
@@ -82,8 +86,57 @@ def create_campaign(
             calibration_hash=twin.hash,
             object_fit=None if fit is None else fit.model_dump(mode="json"),
             turning_deg_s=req.turning_deg_s,
+            record_path=(str(recordings_dir(settings) / f"{campaign_id}.h5") if req.record
+                         else None),
         )
     return campaign_id
+
+
+def recordings_dir(settings: Settings) -> Path:
+    """Where the service's recordings are: ``recordings/`` in the data directory."""
+    return Path(settings.data_dir) / "recordings"
+
+
+def _create_replay(req: CampaignCreate, *, sessions: sessionmaker, settings: Settings) -> str:
+    """A campaign that replays ``req.recording`` (:mod:`service.store.recording`): its poses as
+    recorded, its scene, mask, seed and spp unless the request gives them, the active
+    calibration (as every campaign), the recorded object fit's result when it had one. It
+    needs neither the rig nor the mounted scene."""
+    assert req.recording is not None  # CampaignCreate checked it
+    recording = Recording(recordings_dir(settings) / req.recording)
+    recorded = recording.campaign
+    if not recording.index:
+        raise InvalidInputError("recording", f"'{req.recording}' holds no frame")
+    scene = (scene_from_request(settings, req.scene) if req.scene is not None
+             else recorded_scene(recorded, settings))
+    given = req.model_fields_set
+    mask = req.mask.model_dump(mode="json") if "mask" in given else recorded.mask
+    spp = check_spp(req.spp, settings) if req.spp is not None else recorded.spp
+    twin = effective_twin(active_twin(sessions), scene)
+    pinned = twin.to_json()
+    campaign_id = uuid.uuid4().hex
+    with sessions() as s:
+        queries.create_campaign(
+            s, campaign_id=campaign_id, name=req.name, scene_name=scene.name,
+            scene_json=scene.to_json(), scene_base_dir=str(scene.base_dir), mask=mask,
+            seed=req.seed if "seed" in given else recorded.seed, spp=spp,
+            poses=recorded_poses(recorded, recording.units()),
+            calibration_json=None if pinned is None else json.dumps(pinned, sort_keys=True),
+            calibration_hash=twin.hash, object_fit=recorded.object_fit,
+            object_twin=(None if recorded.object_twin is None else
+                         (recorded.object_twin, recorded.object_twin_hash)),
+            turning_deg_s=recorded.turning_deg_s, replay_path=str(recording.path))
+    return campaign_id
+
+
+def recorded_scene(recorded: RecordedCampaign, settings: Settings) -> SceneSource:
+    """The scene a recording was captured with; its files are looked for where they were, else
+    in this service's bundled scenes (a recording made on another PC)."""
+    base_dir = Path(recorded.scene_base_dir)
+    if not base_dir.is_dir():
+        base_dir = Path(settings.examples_dir)
+    return SceneSource.from_json(json.dumps(recorded.scene), str(base_dir),
+                                 recorded.scene_name)
 
 
 def status_key(sessions: sessionmaker, runner: CampaignRunner, campaign_id: str) -> tuple:

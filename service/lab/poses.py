@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import sessionmaker
 
+from drivers.camera.wire import get_use_case
 from drivers.errors import LimitError
 from drivers.rig import Rig, RigState
 from service.compute.executors import Executor, JobFuture
@@ -45,11 +46,12 @@ from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import require_free, writing
 from service.store.frame_files import FrameStore, new_frame_id
+from service.store.recording import Recording
 from service.store.tables import FrameRow, PoseResultRow
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.edges import edge_depth_error
 from sim_core.errors import InvalidInputError
-from sim_core.raw import reconstruct_raw
+from sim_core.raw import RawFrame, reconstruct_raw
 from sim_core.render_request import AccuracyTarget, RenderRequest, request_from_spec
 from sim_core.scene_spec import SceneSpec
 from sim_core.tof import ToFImage
@@ -124,6 +126,10 @@ class Measurement:
     #: the illumination temperature the camera reported with the frame [degC], if any: the
     #: simulations apply a calibrated warm-up drift at it
     illumination_temperature_c: float | None = None
+    #: the raw frame(s) as captured (a campaign that records them writes these), and the use
+    #: case they were taken in
+    raws: list[RawFrame] = field(default_factory=list)
+    use_case: str = ""
 
 
 @dataclass(frozen=True)
@@ -213,7 +219,19 @@ def store_measurement(
     )
     return Measurement(row, image, state, sim_spec,
                        {"move": t1 - t0, "capture": t2 - t1, "store": t3 - t2}, t0,
-                       grey_full_scale, second, turning_deg_s, raw.illumination_temperature_c)
+                       grey_full_scale, second, turning_deg_s, raw.illumination_temperature_c,
+                       list(raws), use_case.name)
+
+
+def replay_measure(recording: Recording, store: FrameStore, plan: PosePlan) -> Measurement:
+    """Stage 1 of a replay: the unit's recorded frame(s) (two for a plan with a fitted twin)
+    stored as :func:`measure` stores a captured one, at the rig state, use case and turning
+    speed recorded with them. Raises :class:`~service.store.recording.RecordingError` for a
+    unit the recording does not hold."""
+    t0 = time.perf_counter()
+    unit = recording.unit(plan.pose_index, plan.repeat, 1 if plan.fitted is None else 2)
+    return store_measurement(store, plan, unit.state, unit.raws, get_use_case(unit.use_case),
+                             t0, t0, unit.turning_deg_s)
 
 
 def submit(

@@ -186,6 +186,10 @@ class PoseCreate(RequestBody):
 
 
 # -- campaigns ---------------------------------------------------------------------------------
+#: a recording's file name in the data directory's recordings/ folder (no folder, no '..')
+RECORDING_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]*\.h5$"
+
+
 class CampaignPoseIn(RequestBody):
     """One pose of a campaign."""
 
@@ -239,7 +243,22 @@ class CampaignCreate(RequestBody):
 
     name: str = Field(min_length=1, max_length=200)
     scene: SceneRef | None = None
-    poses: list[CampaignPoseIn] = Field(min_length=1, max_length=100000)
+    source: Literal["rig", "recording"] = Field(
+        "rig", description="Where the frames come from: 'rig' captures them; 'recording' "
+        "replays the recording named by 'recording' (its poses, scene, mask, seed and spp, "
+        "unless given; the active calibration, as every campaign) without the rig.")
+    recording: Annotated[str, Field(pattern=RECORDING_NAME_PATTERN, max_length=200)] | None = \
+        Field(None, description="With source 'recording': the file in the data directory's "
+              "recordings/ folder to replay (a campaign created with record: true wrote "
+              "<campaign id>.h5 there).")
+    record: Annotated[bool, Strict()] = Field(
+        False, description="Record every captured frame with its rig state, temperature and "
+        "timestamp into recordings/<campaign id>.h5 in the data directory (HDF5, "
+        "docs/recordings.md), to replay later.")
+    poses: list[CampaignPoseIn] = Field(
+        default_factory=list, max_length=100000,
+        description="At least one pose (source 'rig'); none with source 'recording' (the "
+        "recording's poses are replayed).")
     mask: MaskSpec = MaskSpec()
     seed: Seed = 0
     spp: Spp | None = None
@@ -270,6 +289,27 @@ class CampaignCreate(RequestBody):
             raise ValueError(f"got {v!r}; allowed: true, false, or an object with 'poses' "
                              "and 'frames'")
         return v
+
+    @model_validator(mode="after")
+    def _source_fields(self) -> CampaignCreate:
+        replay = self.source == "recording"
+        refused = {"poses": bool(self.poses), "record": self.record,
+                   "object_fit": self.object_fit is not None,
+                   "turning_deg_s": self.turning_deg_s is not None}
+        if not replay and not self.poses:
+            raise InvalidInputError("poses", "no pose given; allowed: 1 to 100000 poses")
+        if not replay and self.recording is not None:
+            raise InvalidInputError("recording", "names a recording to replay: needs "
+                                    "source 'recording'")
+        if replay and self.recording is None:
+            raise InvalidInputError("recording", "source 'recording' needs the recording's "
+                                    "file name")
+        for name, given in refused.items():
+            if replay and given:
+                raise InvalidInputError(
+                    name, "a replay takes it from the recording (poses, the object fit and "
+                    "its result, the turning speed) and records nothing; leave it out")
+        return self
 
     def object_fit_settings(self) -> ObjectFitIn | None:
         """The fit's settings, or None without a fit."""

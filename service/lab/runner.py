@@ -34,6 +34,7 @@ from __future__ import annotations
 import collections
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,7 +50,15 @@ from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, St
 from service.lab.calibration import Twin, calibration_from_json
 from service.lab.camera_return import CameraReturnWatch
 from service.lab.object_fit import fit_poses, fitted_twin, run_fit
-from service.lab.poses import Measurement, Outcome, PosePlan, finish, measure, submit
+from service.lab.poses import (
+    Measurement,
+    Outcome,
+    PosePlan,
+    finish,
+    measure,
+    replay_measure,
+    submit,
+)
 from service.lab.requests import MaskSpec, ObjectFitIn
 from service.lab.scenes import SceneSource, require_mounted
 from service.lab.turning import capture_turning
@@ -57,6 +66,7 @@ from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
+from service.store.recording import RecordedCampaign, RecordedUnit, Recording, RecordingWriter
 from sim_core.errors import InvalidInputError
 from sim_core.twin_file import twin_hash
 
@@ -72,6 +82,9 @@ class _Progress:
     outcomes: list[Outcome] = field(default_factory=list)
     #: the run was paused by a lost camera (:meth:`CampaignRunner._device_fault`)
     camera_lost: bool = False
+    #: what is done with each unit's captured frames before they are simulated: written to
+    #: the campaign's recording, if it records (:mod:`service.store.recording`)
+    record: Callable[[PosePlan, Measurement], None] = lambda _plan, _m: None
 
 
 _Run = Run[_Progress]
@@ -133,12 +146,15 @@ class CampaignRunner:
     def start(self, campaign_id: str, resume: bool = False) -> None:
         """Start (``created``) or resume (``paused``, ``interrupted``, ``failed``) a campaign."""
         allowed = queries.RESUMABLE if resume else ("created",)
-        self.lease.require()
+        with self.sessions() as s:
+            replay = queries.require_campaign(s, campaign_id).replay_path is not None
+        if not replay:  # a replay needs no rig (and not the mounted scene)
+            self.lease.require()
 
         def prepare() -> None:  # with the rig claimed: 409 while a calibration job holds it
             with self.sessions() as s:
                 row = queries.require_campaign(s, campaign_id)
-                if self.mounted is not None:
+                if self.mounted is not None and not replay:
                     stored = SceneSource.from_json(row.scene_json, row.scene_base_dir,
                                                    row.scene_name)
                     require_mounted(stored, self.mounted,
@@ -257,7 +273,13 @@ class CampaignRunner:
         todo = [(p, r) for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done]
         in_flight: collections.deque[tuple[PosePlan, Measurement, Any]] = collections.deque()
         to, error = "completed", None
-        if camp.turning_deg_s is not None:
+        replay = None if camp.replay_path is None else Recording(camp.replay_path)
+        if camp.record_path is not None:
+            with self.sessions() as s:  # with the object twin, if it was fitted just now
+                recorded = RecordedCampaign.of_row(queries.get_campaign(s, run.id), poses)
+            recorder = RecordingWriter(camp.record_path, recorded)
+            run.progress.record = lambda plan, m: recorder.append(recorded_unit(plan, m))
+        if camp.turning_deg_s is not None and replay is None:
             plans = [PosePlan(scene, p.turntable_deg, p.solar_suns, mask, camp.seed, camp.spp,
                               run.id, p.pose_index, r, twin, fitted, effects, noise_fraction)
                      for p, r in todo]
@@ -279,11 +301,13 @@ class CampaignRunner:
                                "turntable_deg": pose.turntable_deg,
                                "solar_suns": pose.solar_suns}
                 try:
-                    m = measure(self.lease.require(), self.store, plan,
-                                settings.solar_stable_timeout_s)
+                    m = (replay_measure(replay, self.store, plan) if replay is not None else
+                         measure(self.lease.require(), self.store, plan,
+                                 settings.solar_stable_timeout_s))
                 except DeviceError as exc:
                     to, error = self._device_fault(run, exc)
                     break
+                run.progress.record(plan, m)
                 in_flight.append((plan, m, submit(self.executor, plan, m,
                                                   settings.threads_per_job)))
                 while len(in_flight) >= settings.depth:
@@ -314,6 +338,7 @@ class CampaignRunner:
             except DeviceError as exc:
                 return self._device_fault(run, exc)
             for plan, m in measured:
+                run.progress.record(plan, m)
                 self._finish(run, plan, m, submit(self.executor, plan, m,
                                                   settings.threads_per_job))
             if run.stop.is_set():
@@ -361,3 +386,8 @@ class CampaignRunner:
         run.progress.done += 1
         run.progress.outcomes.append(outcome)
 
+
+def recorded_unit(plan: PosePlan, m: Measurement) -> RecordedUnit:
+    """A unit's captured frames as a recording keeps them."""
+    return RecordedUnit(plan.pose_index, plan.repeat, m.rig, m.use_case, m.turning_deg_s,
+                        m.raws)

@@ -99,10 +99,15 @@ def create_campaign(
     calibration_hash: str | None = None,
     object_fit: dict | None = None,
     turning_deg_s: float | None = None,
+    record_path: str | None = None,
+    replay_path: str | None = None,
+    object_twin: tuple[dict, str] | None = None,
 ) -> CampaignRow:
     """Store a new campaign (state ``created``) with its poses; one transaction.
 
-    ``object_fit``: the object fit's settings (None: the campaign fits no object twin).
+    ``object_fit``: the object fit's settings (None: the campaign fits no object twin);
+    ``object_twin``: its result and hash, already fitted (a replay of a campaign that fitted
+    one). ``record_path``: the recording it writes; ``replay_path``: the one it replays.
     """
     poses = list(poses)
     t = now()
@@ -113,7 +118,9 @@ def create_campaign(
         created_at=t, started_at=None, updated_at=t, finished_at=None,
         calibration_json=calibration_json, calibration_hash=calibration_hash,
         object_fit_json=None if object_fit is None else dumps(object_fit),
-        turning_deg_s=turning_deg_s,
+        turning_deg_s=turning_deg_s, record_path=record_path, replay_path=replay_path,
+        object_twin_json=None if object_twin is None else dumps(object_twin[0]),
+        object_twin_hash=None if object_twin is None else object_twin[1],
     )
     session.add(row)
     session.flush()

@@ -64,6 +64,11 @@ class CampaignRow(Base):
     object_fit_report_json: Mapped[str | None] = mapped_column(Text, nullable=True)
     #: capture while turning at this speed [deg/s] (None: stop and go)
     turning_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    #: the recording the campaign writes its captures to (:mod:`service.store.recording`;
+    #: None: it records nothing)
+    record_path: Mapped[str | None] = mapped_column(Text, nullable=True)
+    #: the recording the campaign replays instead of capturing (None: it captures on the rig)
+    replay_path: Mapped[str | None] = mapped_column(Text, nullable=True)
 
 
 class PlannedPoseRow(Base):
