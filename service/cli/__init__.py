@@ -18,6 +18,7 @@ from service.cli import (
     correct,
     devices,
     fit_object,
+    recordings,
     schema,
     serve,
     simulate,
@@ -59,6 +60,8 @@ def build_app() -> typer.Typer:
     app.add_typer(schema.schema_app, name="schema")
     app.add_typer(calibrate.calibrate_app, name="calibrate")
     app.command("fit-object")(fit_object.fit_object_command)
+    app.command("record")(recordings.record_command)
+    app.command("replay")(recordings.replay_command)
     return app
 
 

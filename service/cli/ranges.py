@@ -78,3 +78,9 @@ BENCH_ROUNDS = Range(1, 100)
 #: a board's square or marker side in ``calibrate intrinsics`` (a printed board: above 0, at
 #: most a metre)
 BOARD_SIDE_MM = Range(0.0, 1000.0, lo_open=True, unit="mm")
+#: ``toftwin record --frames``: frames at one rig state (service.lab.requests.CampaignPoseIn.
+#: repeats)
+RECORD_FRAMES = Range(1, 10000)
+#: ``toftwin replay --spp``: the simulations' samples per pixel (service.settings.Settings.
+#: max_spp's default)
+REPLAY_SPP = Range(1, 256)

@@ -22,7 +22,7 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.rig import Rig
 from service.errors import ConflictError, InsufficientStorageError, NotFoundError
-from service.lab.calibration import active_twin, effective_twin
+from service.lab.calibration import Twin, active_twin, effective_twin
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate
 from service.lab.runner import CampaignRunner
@@ -98,28 +98,42 @@ def recordings_dir(settings: Settings) -> Path:
 
 
 def _create_replay(req: CampaignCreate, *, sessions: sessionmaker, settings: Settings) -> str:
-    """A campaign that replays ``req.recording`` (:mod:`service.store.recording`): its poses as
-    recorded, its scene, mask, seed and spp unless the request gives them, the active
-    calibration (as every campaign), the recorded object fit's result when it had one. It
-    needs neither the rig nor the mounted scene."""
+    """``POST /campaigns`` with ``"source": "recording"``: the recording named in the data
+    directory's ``recordings/``, replayed with the active calibration (as every campaign)."""
     assert req.recording is not None  # CampaignCreate checked it
     recording = Recording(recordings_dir(settings) / req.recording)
+    scene = (scene_from_request(settings, req.scene) if req.scene is not None
+             else recorded_scene(recording.campaign, settings))
+    given = req.model_fields_set
+    return create_replay(
+        sessions, recording, name=req.name, scene=scene,
+        twin=effective_twin(active_twin(sessions), scene),
+        mask=req.mask.model_dump(mode="json") if "mask" in given else None,
+        seed=req.seed if "seed" in given else None,
+        spp=check_spp(req.spp, settings) if req.spp is not None else None)
+
+
+def create_replay(
+    sessions: sessionmaker, recording: Recording, *, name: str, scene: SceneSource, twin: Twin,
+    mask: dict[str, Any] | None = None, seed: int | None = None, spp: int | None = None,
+) -> str:
+    """Store a campaign that replays ``recording`` (:mod:`service.store.recording`); returns
+    its id. Its poses are the recording's (each with the repeats recorded), its mask, seed and
+    samples per pixel the recording's unless given, its calibration ``twin``; a recording of a
+    campaign with an object fit replays with that fit's result (it is not fitted again). It
+    needs neither the rig nor the mounted scene."""
     recorded = recording.campaign
     if not recording.index:
-        raise InvalidInputError("recording", f"'{req.recording}' holds no frame")
-    scene = (scene_from_request(settings, req.scene) if req.scene is not None
-             else recorded_scene(recorded, settings))
-    given = req.model_fields_set
-    mask = req.mask.model_dump(mode="json") if "mask" in given else recorded.mask
-    spp = check_spp(req.spp, settings) if req.spp is not None else recorded.spp
-    twin = effective_twin(active_twin(sessions), scene)
+        raise InvalidInputError("recording", f"'{recording.path.name}' holds no frame")
     pinned = twin.to_json()
     campaign_id = uuid.uuid4().hex
     with sessions() as s:
         queries.create_campaign(
-            s, campaign_id=campaign_id, name=req.name, scene_name=scene.name,
-            scene_json=scene.to_json(), scene_base_dir=str(scene.base_dir), mask=mask,
-            seed=req.seed if "seed" in given else recorded.seed, spp=spp,
+            s, campaign_id=campaign_id, name=name, scene_name=scene.name,
+            scene_json=scene.to_json(), scene_base_dir=str(scene.base_dir),
+            mask=recorded.mask if mask is None else mask,
+            seed=recorded.seed if seed is None else seed,
+            spp=recorded.spp if spp is None else spp,
             poses=recorded_poses(recorded, recording.units()),
             calibration_json=None if pinned is None else json.dumps(pinned, sort_keys=True),
             calibration_hash=twin.hash, object_fit=recorded.object_fit,

@@ -9,10 +9,14 @@ of a live campaign that ran with that calibration from the start.
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from service.cli import app
 from service.store.recording import FORMAT, Recording
 from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 from tests.service.api.test_calibration import CALIBRATION
@@ -49,7 +53,8 @@ def _comparable(rows: list[dict]) -> list[tuple]:
             for r in rows]
 
 
-def test_a_replayed_campaign_reproduces_every_stored_metric_exactly(make_client, tmp_path):
+def test_a_replayed_campaign_reproduces_every_stored_metric_exactly(make_client, tmp_path,
+                                                                   monkeypatch):
     client = make_client()
     cid, live = _run(client, POSES, record=True, seed=7)
     path = tmp_path / "recordings" / f"{cid}.h5"
@@ -70,6 +75,14 @@ def test_a_replayed_campaign_reproduces_every_stored_metric_exactly(make_client,
     assert any(r["metrics"]["tof"]["depth_diff_n_pixels"] > 0 for r in live)
     status = client.get(f"/api/v1/campaigns/{replay_id}").json()
     assert status["poses_total"] == len(POSES)
+
+    # and offline, by `toftwin replay` with its own database and workers: the same numbers
+    monkeypatch.setenv("TOFTWIN_EXECUTOR", "thread")
+    res = CliRunner().invoke(app, ["replay", str(path), "--out", str(tmp_path / "offline")])
+    assert res.exit_code == 0, res.output
+    offline = json.loads((tmp_path / "offline" / "results.json").read_text())
+    assert [(r["pose_index"], r["metrics"]) for r in offline] == [
+        (r["pose_index"], r["metrics"]) for r in live]
 
 
 def test_a_replay_with_a_new_calibration_gives_the_new_twins_numbers(make_client, tmp_path):

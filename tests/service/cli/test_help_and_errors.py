@@ -122,6 +122,10 @@ ERROR_CALLS = {
     "bench turning": (lambda t: ["bench", "turning", "--speed-deg-s", "25"], 2,
                       "--speed-deg-s"),
     "schema": (lambda t: ["schema", "table"], 2, "No such command"),
+    "record": (lambda t: ["record", "--out", str(t / "r.txt"), "--simulated"], 2,
+               "an .h5 file"),
+    "replay": (lambda t: ["replay", str(t / "none.h5"), "--out", str(t / "o")], 2,
+               "does not exist"),
 }
 
 
