@@ -128,6 +128,12 @@ class CampaignPublic(BaseModel):
     object_fit: dict[str, Any] | None = Field(
         None, description="The object fit (campaigns created with object_fit): its settings, "
         "state ('pending' or 'fitted'), the fitted object twin and the fit's report.")
+    source: Literal["rig", "recording"] = Field(
+        "rig", description="'recording': the campaign replays a recording instead of capturing.")
+    recording: str | None = Field(
+        None, description="The recording it replays (source 'recording') or writes (created "
+        "with record: true; links.recording downloads it), a file in the data directory's "
+        "recordings/.")
     current_pose: CurrentPose | None
     eta_s: float | None
     error: str | None

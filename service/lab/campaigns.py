@@ -138,7 +138,8 @@ def create_replay(
             calibration_json=None if pinned is None else json.dumps(pinned, sort_keys=True),
             calibration_hash=twin.hash, object_fit=recorded.object_fit,
             object_twin=(None if recorded.object_twin is None else
-                         (recorded.object_twin, recorded.object_twin_hash)),
+                         (recorded.object_twin, recorded.object_twin_hash,
+                          recorded.object_fit_report)),
             turning_deg_s=recorded.turning_deg_s, replay_path=str(recording.path))
     return campaign_id
 
@@ -203,12 +204,28 @@ def campaign_status(
         "poses_done": done, "poses_total": row.poses_total, "pose_count": len(poses),
         "calibration_hash": row.calibration_hash,
         "object_fit": object_fit_public(row),
+        "source": "recording" if row.replay_path is not None else "rig",
+        "recording": _recording_name(row),
         "current_pose": current, "eta_s": eta, "error": row.error, "runs": row.runs,
         "created_at": row.created_at, "started_at": row.started_at,
         "updated_at": row.updated_at, "finished_at": row.finished_at,
         "links": {k: f"{base}/{k}" for k in ("events", "results", "report", "documents")}
-        | {"self": base},
+        | {"self": base}
+        | ({"recording": f"{base}/recording"} if recording_file(row) is not None else {}),
     }
+
+
+def _recording_name(row: Any) -> str | None:
+    path = row.replay_path or row.record_path
+    return None if path is None else Path(path).name
+
+
+def recording_file(row: Any) -> Path | None:
+    """The recording a campaign wrote (``"record": true``), once it holds a frame; None
+    otherwise (a replay's is the one it read, named in its ``recording``)."""
+    if row.record_path is None or not Path(row.record_path).is_file():
+        return None
+    return Path(row.record_path)
 
 
 def object_fit_public(row) -> dict[str, Any] | None:

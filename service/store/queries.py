@@ -101,13 +101,13 @@ def create_campaign(
     turning_deg_s: float | None = None,
     record_path: str | None = None,
     replay_path: str | None = None,
-    object_twin: tuple[dict, str] | None = None,
+    object_twin: tuple[dict, str, dict | None] | None = None,
 ) -> CampaignRow:
     """Store a new campaign (state ``created``) with its poses; one transaction.
 
     ``object_fit``: the object fit's settings (None: the campaign fits no object twin);
-    ``object_twin``: its result and hash, already fitted (a replay of a campaign that fitted
-    one). ``record_path``: the recording it writes; ``replay_path``: the one it replays.
+    ``object_twin``: its result, hash and report, already fitted (a replay of a campaign that
+    fitted one). ``record_path``: the recording it writes; ``replay_path``: the one it replays.
     """
     poses = list(poses)
     t = now()
@@ -121,6 +121,8 @@ def create_campaign(
         turning_deg_s=turning_deg_s, record_path=record_path, replay_path=replay_path,
         object_twin_json=None if object_twin is None else dumps(object_twin[0]),
         object_twin_hash=None if object_twin is None else object_twin[1],
+        object_fit_report_json=(None if object_twin is None or object_twin[2] is None
+                                else dumps(object_twin[2])),
     )
     session.add(row)
     session.flush()

@@ -65,8 +65,9 @@ class RecordedCampaign:
 
     ``poses`` are (turntable_deg, solar_suns, repeats) in pose-index order; ``calibration`` the
     calibration pinned when it was captured (JSON, None: nominal) and its hash;
-    ``object_fit`` and ``object_twin`` the object fit's settings and its result, when the
-    campaign had one (a replay compares with that fitted twin, it does not fit again).
+    ``object_fit``, ``object_twin`` (and its hash) and ``object_fit_report`` the object fit's
+    settings, result and report, when the campaign had one (a replay compares with that fitted
+    twin, it does not fit again).
     """
 
     name: str
@@ -83,6 +84,7 @@ class RecordedCampaign:
     object_fit: dict[str, Any] | None = None
     object_twin: dict[str, Any] | None = None
     object_twin_hash: str | None = None
+    object_fit_report: dict[str, Any] | None = None
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__, sort_keys=True, allow_nan=False)
@@ -100,7 +102,8 @@ class RecordedCampaign:
             spp=row.spp, poses=[(p.turntable_deg, p.solar_suns, p.repeats) for p in poses],
             calibration=loads(row.calibration_json), calibration_hash=row.calibration_hash,
             turning_deg_s=row.turning_deg_s, object_fit=loads(row.object_fit_json),
-            object_twin=loads(row.object_twin_json), object_twin_hash=row.object_twin_hash)
+            object_twin=loads(row.object_twin_json), object_twin_hash=row.object_twin_hash,
+            object_fit_report=loads(row.object_fit_report_json))
 
     @classmethod
     def from_json(cls, text: str) -> RecordedCampaign:

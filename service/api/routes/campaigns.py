@@ -9,7 +9,7 @@ from functools import partial
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Response
-from fastapi.responses import HTMLResponse, StreamingResponse
+from fastapi.responses import FileResponse, HTMLResponse, StreamingResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from service.api.deps import (
@@ -29,6 +29,7 @@ from service.api.deps import (
 from service.api.events import status_events
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.api.security_headers import self_contained_document
+from service.errors import NotFoundError
 from service.export.bluesky import iter_campaign_documents
 from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
@@ -194,6 +195,23 @@ def get_campaign_report(
 ) -> HTMLResponse:
     """An HTML page: metrics over the poses, image panels measured / simulated / difference."""
     return HTMLResponse(campaign_report(sessions, store, campaign_id))
+
+
+@router.get("/{campaign_id}/recording", response_class=FileResponse, responses={
+    200: {"content": {"application/x-hdf5": {}},
+          "description": "The campaign's recording (HDF5, docs/recordings.md)"},
+    **errors(404)})
+def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep) -> FileResponse:
+    """The recording a campaign created with ``record: true`` writes: every captured raw frame
+    with its rig state, to replay (``toftwin replay``, a campaign with source 'recording') or
+    to share. 404 for a campaign that records nothing or has captured nothing yet."""
+    with sessions() as s:
+        row = queries.require_campaign(s, campaign_id)
+    path = lab_campaigns.recording_file(row)
+    if path is None:
+        raise NotFoundError(f"campaign {campaign_id} has no recording"
+                            + ("" if row.record_path is None else " yet"))
+    return FileResponse(path, media_type="application/x-hdf5", filename=path.name)
 
 
 @router.get("/{campaign_id}/plots/{name}.svg", response_class=Response, responses={

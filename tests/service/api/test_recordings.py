@@ -69,12 +69,20 @@ def test_a_replayed_campaign_reproduces_every_stored_metric_exactly(make_client,
         assert abs(first.attrs["turntable_angle_deg"] - live[0]["turntable_deg"]) <= 0.01
         assert np.isfinite(first.attrs["timestamp_s"])
 
+    status = client.get(f"/api/v1/campaigns/{cid}").json()
+    assert status["source"] == "rig" and status["recording"] == path.name
+    res = client.get(status["links"]["recording"])  # a lab shares it
+    assert res.status_code == 200 and res.content == path.read_bytes()
+
     replay_id, replayed = _run(client, source="recording", recording=path.name)
     assert len(replayed) == len(live) == len(POSES)
     assert _comparable(replayed) == _comparable(live)  # every metric, exactly
     assert any(r["metrics"]["tof"]["depth_diff_n_pixels"] > 0 for r in live)
     status = client.get(f"/api/v1/campaigns/{replay_id}").json()
     assert status["poses_total"] == len(POSES)
+    assert status["source"] == "recording" and status["recording"] == path.name
+    assert "recording" not in status["links"]
+    assert client.get(f"/api/v1/campaigns/{replay_id}/recording").status_code == 404
 
     # and offline, by `toftwin replay` with its own database and workers: the same numbers
     monkeypatch.setenv("TOFTWIN_EXECUTOR", "thread")
@@ -124,3 +132,25 @@ def test_replay_requests_are_checked_and_name_the_field(client, tmp_path):
     assert "not an HDF5 file" in refused({"source": "recording", "recording": "bad.h5"},
                                          "recording")
     assert client.get("/api/v1/campaigns").json() == []  # nothing stored
+
+
+@pytest.mark.parametrize("fields", [
+    {"turning_deg_s": 10.0},
+    pytest.param({"object_fit": {"poses": 2, "frames": 2}}, marks=pytest.mark.slow),
+], ids=["captured-while-turning", "with-an-object-fit"])
+def test_turning_and_object_fit_campaigns_replay_exactly(make_client, tmp_path, fields):
+    """A recording keeps each frame's turning speed, and a campaign's fitted object twin (and
+    the noise ceiling's second capture): the replay compares with that fit, it does not fit."""
+    client = make_client()
+    poses = [{"turntable_deg": a} for a in (-40.0, -10.0, 20.0, 50.0)]
+    cid, live = _run(client, poses, record=True, **fields)
+    replay_id, replayed = _run(client, source="recording", recording=f"{cid}.h5")
+    assert _comparable(replayed) == _comparable(live)
+    original = client.get(f"/api/v1/campaigns/{cid}").json()
+    replay = client.get(f"/api/v1/campaigns/{replay_id}").json()
+    assert replay["object_fit"] == original["object_fit"]
+    if "object_fit" in fields:
+        assert all("explained" in r["metrics"] for r in replayed)
+        assert replay["object_fit"]["state"] == "fitted"
+    else:
+        assert all("edges" in r["metrics"] for r in replayed)
