@@ -85,13 +85,14 @@ class IntrinsicsResult:
         return f"Reprojection RMS per view (all: {self.rms_px:.3f} px)"
 
 
-def _calibrate(views, shape, guess, fix_k3: bool = True):
+def _calibrate(views, shape, guess, fix_k3: bool = True, zero_tangential: bool = False):
     """OpenCV's calibration of ``views``; ``guess`` None: OpenCV's own start from the views'
     homographies (a camera with no preset)."""
     obj = [v.object_points_m.astype(np.float32) for v in views]
     img = [v.image_points_px.astype(np.float32).reshape(-1, 1, 2) for v in views]
     h, w = shape
-    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (
+        cv2.CALIB_ZERO_TANGENT_DIST if zero_tangential else 0)
     k = None
     if guess is not None:
         k = np.array([[guess["fx_px"], 0, guess["cx_px"]], [0, guess["fy_px"], guess["cy_px"]],
@@ -112,7 +113,8 @@ def normal_spread(rvecs) -> float:
 def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
                          preset: str = "pmd-camboard-pico-flexx", *, fix_k3: bool = True,
                          guess_from_preset: bool = True,
-                         refuse_degenerate: bool = True) -> IntrinsicsResult:
+                         refuse_degenerate: bool = True,
+                         zero_tangential: bool = False) -> IntrinsicsResult:
     """Calibrate from the views (module docstring); raises :class:`InvalidInputError` when the
     views are too few, too sparse or degenerate.
 
@@ -121,7 +123,9 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
     is then in ``std``), start from OpenCV's own estimate from the views' homographies instead
     of the preset (``guess_from_preset=False``), and get degenerate views back as a result
     (``refuse_degenerate=False``: ``normal_spread`` below :data:`MIN_NORMAL_SPREAD`, for its
-    verdicts to say so) rather than as an error.
+    verdicts to say so) rather than as an error; and hold the tangential terms p1, p2 at 0
+    (``zero_tangential``: they are then absent from ``std``) when the views do not call for
+    them.
     """
     rejected = [{"name": v.name, "reason": f"{len(v.corner_ids)} corners (fewer than "
                  f"{MIN_CORNERS_PER_VIEW})"} for v in views
@@ -135,7 +139,8 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
             "views (more turntable angles, another fixture)")
     guess = CAMERA_PRESETS[preset] if guess_from_preset else None
     while True:
-        rms, k, d, rvecs, tvecs, std, per_view = _calibrate(use, image_shape, guess, fix_k3)
+        rms, k, d, rvecs, tvecs, std, per_view = _calibrate(use, image_shape, guess, fix_k3,
+                                                             zero_tangential)
         med = float(np.median(per_view))
         worst = int(np.argmax(per_view))
         limit = max(OUTLIER_FACTOR * med, OUTLIER_FLOOR_PX)
@@ -157,8 +162,10 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
                       float(k[0, 2]), float(k[1, 2]), tuple(float(x) for x in d[:5]))
     names = ("fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2") + (
         () if fix_k3 else ("k3",))
+    held = ("p1", "p2") if zero_tangential else ()
     return IntrinsicsResult(
-        intrinsics=intr, std={n: float(s) for n, s in zip(names, std, strict=False)},
+        intrinsics=intr, std={n: float(s) for n, s in zip(names, std, strict=False)
+                              if n not in held},
         rms_px=float(rms), per_view_rms_px={v.name: float(r) for v, r in zip(use, per_view,
                                                                               strict=True)},
         poses={v.name: (np.asarray(r, dtype=np.float64).ravel(),
