@@ -22,12 +22,15 @@ requests ``{"op": OP, "id": N, ...}``; the bridge answers each with ``{"op": "re
 "ok": true, "result": ...}`` or ``{"op": "reply", "id": N, "ok": false, "error": {"kind": K,
 "message": M}}`` (kinds: :data:`ERROR_KINDS`). Requests: ``hello`` (``{"protocol": 1}`` ->
 the bridge's versions), ``list_cameras``, ``open`` (``camera``: an id or null for the first,
-``use_case``, ``exposure_us``: optional), ``use_case`` (``name``), ``exposure`` (``us``),
+``use_case``, ``exposure_us``, ``mode``: ``"raw"`` or ``"depth"``, optional), ``use_case``
+(``name``), ``exposure`` (``us``),
 ``start``, ``stop``, ``close``, ``ping``, and for a simulated camera only ``attach_world``
 (``url``: the service's simulated world, toftwin's ``drivers.sim.world_link``). The bridge
 pushes ``{"op": "frame", "seq": N, ...}`` with one royale ``RawData`` (the fields of
 :class:`RawDataCopy`; the payload is the raw frames, ``(n, height, width)`` little-endian
-uint16, C order) and ``{"op": "event", "kind":
+uint16, C order) or, in ``"depth"`` mode, ``{"op": "frame", "kind": "depth", ...}`` with one
+royale ``DepthData`` (the fields of :class:`DepthDataCopy`; the payload is its points,
+``(height, width, 6)`` little-endian float32), and ``{"op": "event", "kind":
 "disconnected" | "error", "camera": ID, "message": M}``.
 
 One client at a time: a new connection replaces the old one (a restarted service finds its
@@ -204,6 +207,79 @@ def copy_roypy_raw_data(raw: Any) -> RawDataCopy:
     )
 
 
+#: the channels of a :class:`DepthDataCopy`'s points, in order
+DEPTH_CHANNELS = ("x_m", "y_m", "z_m", "noise_m", "grey", "confidence")
+#: what a data source can stream: royale's raw data, or its processed depth
+MODES = ("raw", "depth")
+
+
+@dataclass(frozen=True)
+class DepthDataCopy:
+    """A copy of one ``royale::DepthData`` (royale's processed depth, ``IDepthDataListener``).
+
+    Attributes
+    ----------
+    width, height : int
+    points : (height, width, 6) float32
+        Per pixel :data:`DEPTH_CHANNELS`: x, y, z [m] in the camera's frame, royale's noise
+        estimate [m] (NaN where royale gives none: royale 5), the grey value [DN], and the
+        depth confidence scaled to 0..1 (royale < 5 gives 0..255, royale 5 0..1).
+    exposure_times_us : tuple of int
+    timestamp_us : int or None
+    illumination_temperature_c : float or None
+        royale 5 only.
+    stream_id : int
+    """
+
+    width: int
+    height: int
+    points: np.ndarray = field(repr=False)
+    exposure_times_us: tuple[int, ...] = ()
+    timestamp_us: int | None = None
+    illumination_temperature_c: float | None = None
+    stream_id: int = 0
+
+
+def copy_roypy_depth_data(data: Any, confidence_full_scale: float = 255.0) -> DepthDataCopy:
+    """Copy a roypy ``DepthData`` into a :class:`DepthDataCopy` (call it inside the callback).
+
+    ``npoints()`` where roypy has it (royale 4: x, y, z, noise, grey, confidence; royale 5: x, y,
+    z, grey, confidence), else the per-point getters of royale 3 (``getX(i)``, ``getY``,
+    ``getZ``, ``getNoise`` where present, ``getGrayValue``, ``getDepthConfidence``).
+    ``confidence_full_scale`` is royale's full confidence (255 before royale 5, 1.0 from 5 on).
+    """
+    width, height = int(data.width), int(data.height)
+    points = None
+    if hasattr(data, "npoints"):
+        with contextlib.suppress(AttributeError):  # royale 3's DepthData has none
+            points = np.asarray(data.npoints(), dtype=np.float32)
+    if points is None:
+        n = width * height
+        noise = getattr(data, "getNoise", None)
+        columns = [[float(data.getX(i)) for i in range(n)], [float(data.getY(i)) for i in range(n)],
+                   [float(data.getZ(i)) for i in range(n)],
+                   [float(noise(i)) for i in range(n)] if noise else [float("nan")] * n,
+                   [float(data.getGrayValue(i)) for i in range(n)],
+                   [float(data.getDepthConfidence(i)) for i in range(n)]]
+        points = np.asarray(columns, dtype=np.float32).T.reshape(height, width, 6)
+    elif points.shape == (height, width, 5):  # royale 5: no noise channel
+        nan = np.full((height, width, 1), np.nan, dtype=np.float32)
+        points = np.concatenate([points[..., :3], nan, points[..., 3:]], axis=-1)
+    if points.shape != (height, width, 6):
+        raise RawDataLayoutError(f"depth points of shape {points.shape}; expected "
+                                 f"({height}, {width}, 5 or 6)")
+    points = points.copy()
+    points[..., 5] /= np.float32(confidence_full_scale)
+    temperature = getattr(data, "illuminationTemperature", None)
+    return DepthDataCopy(
+        width=width, height=height, points=points,
+        exposure_times_us=_ints(getattr(data, "exposureTimes", None)),
+        timestamp_us=_timestamp_us(getattr(data, "timeStamp", None)),
+        illumination_temperature_c=None if temperature is None else float(temperature),
+        stream_id=int(getattr(data, "streamId", 0) or 0),
+    )
+
+
 # -- the wire format --------------------------------------------------------------------------
 def encode_message(message: dict[str, Any], payload: bytes = b"") -> bytes:
     """One message on the wire (module docstring, "Protocol")."""
@@ -262,6 +338,46 @@ def frame_message(data: RawDataCopy, seq: int, camera: str) -> tuple[dict[str, A
         value = getattr(data, name)
         message[name] = list(value) if isinstance(value, tuple) else value
     return message, frames.tobytes()
+
+
+#: the :class:`DepthDataCopy` fields a depth frame message carries as JSON
+_DEPTH_FIELDS = ("width", "height", "exposure_times_us", "timestamp_us",
+                 "illumination_temperature_c", "stream_id")
+
+
+def depth_frame_message(data: DepthDataCopy, seq: int,
+                        camera: str) -> tuple[dict[str, Any], bytes]:
+    """A frame message (``"kind": "depth"``) for ``data`` and its payload: the points,
+    ``(height, width, 6)`` little-endian float32."""
+    message: dict[str, Any] = {"op": "frame", "kind": "depth", "seq": seq, "camera": camera}
+    for name in _DEPTH_FIELDS:
+        value = getattr(data, name)
+        message[name] = list(value) if isinstance(value, tuple) else value
+    return message, np.ascontiguousarray(data.points, dtype="<f4").tobytes()
+
+
+def data_from_message(message: dict[str, Any], payload: bytes) -> RawDataCopy | DepthDataCopy:
+    """The copy a frame message carries: raw data, or processed depth (``"kind": "depth"``)."""
+    if message.get("kind", "raw") != "depth":
+        return raw_data_from_message(message, payload)
+    try:
+        width, height = int(message["width"]), int(message["height"])
+        if len(payload) != 4 * 6 * width * height:
+            raise BridgeError(f"depth payload has {len(payload)} bytes; {width} x {height} "
+                              f"points of 6 float32 need {4 * 6 * width * height}", "protocol")
+        stamp = message.get("timestamp_us")
+        temperature = message.get("illumination_temperature_c")
+        return DepthDataCopy(
+            width=width, height=height,
+            points=np.frombuffer(payload, dtype="<f4").reshape(height, width, 6).astype(
+                np.float32),
+            exposure_times_us=_ints(message.get("exposure_times_us")),
+            timestamp_us=None if stamp is None else int(stamp),
+            illumination_temperature_c=None if temperature is None else float(temperature),
+            stream_id=int(message.get("stream_id") or 0))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise BridgeError(f"depth frame message lacks or garbles a field: {exc!r}",
+                          "protocol") from exc
 
 
 def raw_data_from_message(message: dict[str, Any], payload: bytes) -> RawDataCopy:
@@ -351,15 +467,20 @@ class RoyaleSource:
     access_code : str or None
         royale access code (level 2, raw data before royale 5); ``TOFTWIN_ROYALE_ACCESS_CODE``
         when None.
+    mode : "raw" or "depth"
+        royale's raw data (``IRawDataListener``, the extended listener before royale 5), or its
+        processed depth (``IDepthDataListener``, level 0: no access code), each frame then a
+        :class:`DepthDataCopy`; :meth:`open` may switch it.
     """
 
     backend = "roypy"
 
-    def __init__(self, roypy: Any, on_frame: Callable[[RawDataCopy], None],
-                 access_code: str | None = None) -> None:
+    def __init__(self, roypy: Any, on_frame: Callable[[Any], None],
+                 access_code: str | None = None, mode: str = "raw") -> None:
         self.roypy = roypy
         self.on_frame = on_frame
         self.access_code = access_code
+        self.mode = _checked_mode(mode)
         self.callback_errors: list[str] = []
         self.camera_id: str | None = None
         self._manager: Any = None
@@ -397,17 +518,20 @@ class RoyaleSource:
         return _strings(self._call("getConnectedCameraList",
                                    self._manager_for().getConnectedCameraList))
 
-    def open(self, camera_id: str | None = None) -> dict[str, Any]:
-        """Open ``camera_id`` (the first camera when None), register the raw-data listener;
-        the camera's identity (``id``, ``name``, ``use_cases``, ``info``). The camera already
-        open is kept when it is still connected, else opened again (a camera pulled and plugged
-        in again under a running bridge)."""
+    def open(self, camera_id: str | None = None, mode: str | None = None) -> dict[str, Any]:
+        """Open ``camera_id`` (the first camera when None), register the listener of ``mode``
+        (None: the current one); the camera's identity (``id``, ``name``, ``use_cases``,
+        ``info``, ``mode``). The camera already open is kept when it is still connected and the
+        mode is the same, else opened again (a camera pulled and plugged in again under a
+        running bridge)."""
+        mode = self.mode if mode is None else _checked_mode(mode)
         if self._cam is not None:
-            if camera_id in (None, self.camera_id) and self.is_connected():
+            if camera_id in (None, self.camera_id) and mode == self.mode and self.is_connected():
                 return self.identity()
             # another camera, or this one pulled (and perhaps plugged in again): royale's old
             # device is dead for good, so it goes and the camera is created anew
             self.close()
+        self.mode = mode
         ids = self.list_cameras()
         if not ids:
             raise BridgeError("royale sees no camera; is the pico flexx plugged in and "
@@ -441,6 +565,13 @@ class RoyaleSource:
 
     def _make_listener(self) -> tuple[Any, str]:
         rp, deliver, errors = self.roypy, self._deliver, self.callback_errors
+        if self.mode == "depth":
+
+            class DepthListener(rp.IDepthDataListener):  # type: ignore[misc, name-defined]
+                def onNewData(self, data: Any) -> None:  # noqa: N802 - royale's name
+                    deliver(data)
+
+            return DepthListener(), "registerDataListener"
         if hasattr(rp, "IRawDataListener"):  # royale >= 5
 
             class RawListener(rp.IRawDataListener):  # type: ignore[misc, name-defined]
@@ -461,10 +592,14 @@ class RoyaleSource:
 
         return ExtendedListener(), "registerDataListenerExtended"
 
-    def _deliver(self, raw: Any) -> None:
+    def _deliver(self, data: Any) -> None:
         """royale's callback thread: copy the data out at once and hand it on."""
         try:
-            self.on_frame(copy_roypy_raw_data(raw))
+            if self.mode == "depth":  # royale 5 has IRawDataListener and confidences 0..1
+                full = 1.0 if hasattr(self.roypy, "IRawDataListener") else 255.0
+                self.on_frame(copy_roypy_depth_data(data, full))
+            else:
+                self.on_frame(copy_roypy_raw_data(data))
         except Exception as exc:  # never raise into royale's thread
             self.callback_errors.append(repr(exc))
 
@@ -485,7 +620,7 @@ class RoyaleSource:
                 info[str(key)] = str(value)
         return {"id": _call_str(cam.getId) or self.camera_id,
                 "name": _call_str(cam.getCameraName), "use_cases": self.use_cases(),
-                "info": info, **self.describe()}
+                "info": info, "mode": self.mode, **self.describe()}
 
     def use_cases(self) -> list[str]:
         cam = self._require()
@@ -541,6 +676,12 @@ class RoyaleSource:
         self._manager = self._listener = None
 
 
+def _checked_mode(mode: str) -> str:
+    if mode not in MODES:
+        raise BridgeError(f"mode {mode!r}; allowed: {', '.join(MODES)}", "input")
+    return mode
+
+
 def _call_str(fn: Callable[[], Any]) -> str | None:
     """A royale getter returning a string (or ``(status, string)`` in some wrappers)."""
     try:
@@ -568,12 +709,13 @@ class BridgeServer:
         Frames held for a slow client; beyond it the oldest is dropped and counted.
     """
 
-    def __init__(self, make_source: Callable[[Callable[[RawDataCopy], None]], Any],
+    def __init__(self, make_source: Callable[[Callable[[Any], None]], Any],
                  host: str = "127.0.0.1", port: int = DEFAULT_PORT, queue_frames: int = 8) -> None:
         self.source = make_source(self._on_frame)
         self._listener = socket.create_server((host, port))
         self.address: tuple[str, int] = self._listener.getsockname()[:2]
-        self._frames: queue.Queue[RawDataCopy] = queue.Queue(maxsize=queue_frames)
+        self._frames: queue.Queue[RawDataCopy | DepthDataCopy] = queue.Queue(
+            maxsize=queue_frames)
         self._client: socket.socket | None = None
         self._send_lock = threading.Lock()
         self._source_lock = threading.Lock()
@@ -620,7 +762,7 @@ class BridgeServer:
             self.close()
 
     # frames
-    def _on_frame(self, data: RawDataCopy) -> None:
+    def _on_frame(self, data: RawDataCopy | DepthDataCopy) -> None:
         self.dropped += put_dropping_oldest(self._frames, data)
 
     def _report_callback_errors(self, reported: int) -> int:
@@ -652,8 +794,9 @@ class BridgeServer:
                 continue
             camera_gone_reported = False
             self.seq += 1
-            message, payload = frame_message(data, self.seq,
-                                             str(getattr(self.source, "camera_id", "") or ""))
+            encode = depth_frame_message if isinstance(data, DepthDataCopy) else frame_message
+            message, payload = encode(data, self.seq,
+                                      str(getattr(self.source, "camera_id", "") or ""))
             message["dropped"] = self.dropped
             self._push(message, payload)
 
@@ -736,7 +879,8 @@ class BridgeServer:
         if op == "list_cameras":
             return src.list_cameras()
         if op == "open":
-            identity = src.open(message.get("camera"))
+            identity = (src.open(message.get("camera"), str(message["mode"]))
+                        if message.get("mode") is not None else src.open(message.get("camera")))
             if message.get("use_case"):
                 src.set_use_case(str(message["use_case"]))
             if message.get("exposure_us") is not None:

@@ -413,6 +413,7 @@ class Rig:
         camera_serial: str | None = None,
         usb_backend: Any = None,
         camera: str = "usb",
+        camera_mode: str = "raw",
     ) -> Rig:
         """Open and connect the three devices of the real rig and return it.
 
@@ -439,6 +440,9 @@ class Rig:
             PMD's roypy in this process) or ``"tcp://HOST:PORT"``
             (:class:`drivers.camera.bridge_client.BridgeCamera`, a camera bridge);
             ``camera_serial`` is the camera's id for the latter two.
+        camera_mode : str
+            ``"raw"`` (royale's raw data) or ``"depth"`` (royale's processed depth, for a camera
+            without raw access: the latter two only).
         """
         opened: list[Any] = []
         try:
@@ -448,7 +452,7 @@ class Rig:
             solar = SolarSimulator(lamp_port, shutter_port)
             opened.append(solar)
             solar.connect()
-            camera = _camera(camera, camera_serial, usb_backend)
+            camera = _camera(camera, camera_serial, usb_backend, camera_mode)
             opened.append(camera)
             camera.connect()
         except BaseException:
@@ -459,17 +463,21 @@ class Rig:
         return cls(turntable, solar, camera)
 
 
-def _camera(kind: str, camera_id: str | None, usb_backend: Any) -> CameraProtocol:
+def _camera(kind: str, camera_id: str | None, usb_backend: Any,
+            mode: str = "raw") -> CameraProtocol:
     """The real rig's camera driver of ``kind`` (see :meth:`Rig.open`), not yet connected."""
     if kind == "usb":
+        if mode != "raw":
+            raise DeviceInputError("camera_mode", "our USB wire format carries raw frames only; "
+                                   "royale's processed depth needs camera royale or a bridge")
         return UsbCamera(camera_id, backend=usb_backend)
     if kind == "royale":
         from drivers.camera.royale import RoyaleCamera
 
-        return RoyaleCamera(camera_id)
+        return RoyaleCamera(camera_id, mode=mode)
     from drivers.camera.bridge_client import BridgeCamera
 
-    return BridgeCamera(kind, camera_id)
+    return BridgeCamera(kind, camera_id, mode=mode)
 
 
 def _mismatch(error: DeviceError, device: str, target: str, read_back: str) -> DeviceError:

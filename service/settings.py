@@ -130,6 +130,10 @@ class Settings(BaseSettings):
     #: ``toftwin_camera_bridge`` beside a real camera, ``toftwin camera-bridge --simulated``
     #: filming the simulated rig's world)
     camera: str = "usb"
+    #: what the camera streams: ``raw`` (royale's raw phase frames, reconstructed by us) or
+    #: ``depth`` (royale's processed depth and grey, ``IDepthDataListener``: for a camera
+    #: without raw access; camera ``royale`` or a bridge; comparisons say so)
+    camera_mode: Literal["raw", "depth"] = "raw"
     #: a campaign paused because its camera (or camera bridge) went away watches this long for
     #: it to deliver frames again and then resumes by itself (:mod:`service.lab.camera_return`);
     #: 0: the operator resumes, as after any other device fault [s]
@@ -164,6 +168,9 @@ class Settings(BaseSettings):
         if self.camera == "royale" and self.simulated:
             raise ValueError("camera: royale opens a real pico flexx; the simulated rig's camera "
                              "is usb or a simulated camera bridge (tcp://HOST:PORT)")
+        if self.camera_mode == "depth" and self.camera == "usb":
+            raise ValueError("camera_mode: royale's processed depth comes from camera royale or "
+                             "a camera bridge (tcp://HOST:PORT); our USB wire format is raw only")
         if self.reality is not None and not self.simulated:
             raise ValueError("reality: a reality file describes the simulated lab's world; it "
                              "needs the simulated rig (TOFTWIN_SIMULATED=true, serve --simulated)")

@@ -37,6 +37,7 @@ from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics
 from sim_core.errors import InvalidInputError
 from sim_core.files import StructuredFileError, atomic_write, load_structured
 from sim_core.json_safe import json_safe
+from sim_core.processed_depth import ProcessedDepthFrame, camera_data, measured_image
 from sim_core.raw import RawFrame, ValidityThresholds, reconstruct_raw
 from sim_core.sensor import SensorParams
 from sim_core.tof import ToFImage
@@ -45,9 +46,13 @@ from sim_core.tof import ToFImage
 FRAME_NPZ = "frame.npz"
 FRAME_JSON = "frame.json"
 RAW_NPZ = "raw.npz"
+#: a measured frame of royale's processed depth (:class:`~sim_core.processed_depth.
+#: ProcessedDepthFrame`) keeps it here instead of ``raw.npz``
+DEPTH_POINTS_NPZ = "depth_points.npz"
 GREY_PNG = "grey.png"
 DEPTH_PNG = "depth.png"
-#: every file a frame folder may hold (measured and simulated)
+#: the files of a frame folder (simulated, or measured from raw frames; a measured frame of
+#: royale's processed depth has ``depth_points.npz`` instead of ``raw.npz``)
 FRAME_FILES = (FRAME_NPZ, FRAME_JSON, GREY_PNG, DEPTH_PNG, RAW_NPZ)
 
 FrameKind = Literal["measured", "simulated"]
@@ -267,7 +272,35 @@ def read_raw(path: str | Path) -> RawFrame:
 TEMPERATURE_KEY = "illumination_temperature_c"
 
 
-def _temperature_meta(raw: RawFrame) -> dict[str, float]:
+#: the per-pixel arrays of ``depth_points.npz`` (a :class:`ProcessedDepthFrame`'s)
+DEPTH_POINT_ARRAYS = ("x_m", "y_m", "z_m", "noise_m", "grey", "confidence")
+
+
+def write_depth_points(path: str | Path, frame: ProcessedDepthFrame) -> None:
+    """Write ``depth_points.npz``: royale's processed depth as the camera gave it
+    (:data:`DEPTH_POINT_ARRAYS`, ``frequencies_hz``, the metadata as JSON)."""
+    arrays = {name: getattr(frame, name) for name in DEPTH_POINT_ARRAYS}
+    arrays["frequencies_hz"] = frame.frequencies_hz
+    arrays["meta_json"] = np.array(json.dumps(json_safe(
+        {"exposure_s": frame.exposure_s, "timestamp_s": frame.timestamp_s, **frame.meta,
+         **_temperature_meta(frame)}), allow_nan=False))
+    write_npz(Path(path), arrays)
+
+
+def read_depth_points(path: str | Path) -> ProcessedDepthFrame:
+    """Read a ``depth_points.npz`` written by :func:`write_depth_points`."""
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta_json"]))
+        exposure = float(meta.pop("exposure_s"))
+        stamp = float(meta.pop("timestamp_s"))
+        temperature = meta.pop(TEMPERATURE_KEY, None)
+        return ProcessedDepthFrame(
+            *(z[name] for name in DEPTH_POINT_ARRAYS), frequencies_hz=z["frequencies_hz"],
+            exposure_s=exposure, timestamp_s=stamp, meta=meta,
+            illumination_temperature_c=None if temperature is None else float(temperature))
+
+
+def _temperature_meta(raw: RawFrame | ProcessedDepthFrame) -> dict[str, float]:
     """``{TEMPERATURE_KEY: T}`` when the frame reports its illumination temperature, else {}."""
     t = raw.illumination_temperature_c
     return {} if t is None else {TEMPERATURE_KEY: float(t)}
@@ -353,9 +386,15 @@ def _adaptive_meta(frame: Any) -> dict:
 
 
 def write_measured(
-    out_dir: str | Path, raw: RawFrame, camera: Camera, extra: dict[str, Any]
+    out_dir: str | Path, raw: RawFrame | ProcessedDepthFrame, camera: Camera,
+    extra: dict[str, Any],
 ) -> tuple[ToFImage, float]:
     """Reconstruct ``raw`` with ``camera``'s intrinsics and write a measured frame folder.
+
+    royale's processed depth (a :class:`~sim_core.processed_depth.ProcessedDepthFrame`) is kept
+    as ``depth_points.npz`` instead of ``raw.npz``, its image is its own (royale's z, its grey
+    scaled by its 99.5th percentile: no ADC scale is known), and ``frame.json`` says
+    ``camera_data``.
 
     ``raw.npz`` as the camera delivered it, ``frame.npz``/``frame.json``/PNGs of its
     reconstruction (:func:`~sim_core.raw.reconstruct_raw`); ``extra`` goes into ``frame.json``.
@@ -369,11 +408,14 @@ def write_measured(
         )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    image = reconstruct_raw(raw, z_over_range(camera.intrinsics))
-    full_scale = grey_full_scale(image.amplitude, image.valid, sensor_adc_bits(raw))
+    image = measured_image(raw, z_over_range(camera.intrinsics))
+    depth = isinstance(raw, ProcessedDepthFrame)  # royale's own grey: no ADC scale known
+    full_scale = grey_full_scale(image.amplitude, image.valid,
+                                 None if depth else sensor_adc_bits(raw))
     arrays = image_arrays(image, full_scale)
     meta = {
         "kind": "measured",
+        "camera_data": camera_data(raw),
         "package_version": package_version(),
         "shape": list(image.range_m.shape),
         "frequencies_hz": image.frequencies_hz.tolist(),
@@ -381,13 +423,17 @@ def write_measured(
         "timestamp_s": raw.timestamp_s,
         "grey_preview_full_scale": full_scale,
         "intrinsics": intrinsics_dict(camera.intrinsics),
-        "validity": ValidityThresholds().to_dict(),
+        "validity": ("royale's depth confidence > 0" if depth else
+                     ValidityThresholds().to_dict()),
         "camera_meta": raw.meta,
         **_temperature_meta(raw),
         "arrays": {k: ARRAY_UNITS[k] for k in arrays},
         **extra,
     }
-    write_raw(out / RAW_NPZ, raw)
+    if depth:
+        write_depth_points(out / DEPTH_POINTS_NPZ, raw)
+    else:
+        write_raw(out / RAW_NPZ, raw)
     _write_image_files(out, arrays, meta)
     return image, full_scale
 
@@ -453,6 +499,8 @@ def read_measured(directory: str | Path) -> Frame:
     from sim_core.camera import z_over_range
 
     d = Path(directory)
+    if not (d / RAW_NPZ).is_file() and (d / DEPTH_POINTS_NPZ).is_file():
+        return _read_measured_depth(d)
     if not (d / RAW_NPZ).is_file():
         raise InvalidInputError("measured_dir", f"'{d}' holds no raw.npz (a measured frame)")
     raw = read_raw(d / RAW_NPZ)
@@ -468,6 +516,18 @@ def read_measured(directory: str | Path) -> Frame:
         fs = grey_full_scale(image.amplitude, image.valid, sensor_adc_bits(raw))
     arrays = _read_arrays(d) if (d / FRAME_NPZ).is_file() else {}
     return Frame("measured", image, arrays, meta, fs, raw)
+
+
+def _read_measured_depth(d: Path) -> Frame:
+    """A measured folder of royale's processed depth (``depth_points.npz``)."""
+    frame = read_depth_points(d / DEPTH_POINTS_NPZ)
+    image = frame.image()
+    meta = _read_meta(d)
+    fs = _recorded_full_scale(meta)
+    if fs is None:
+        fs = grey_full_scale(image.amplitude, image.valid, None)
+    arrays = _read_arrays(d) if (d / FRAME_NPZ).is_file() else {}
+    return Frame("measured", image, arrays, meta, fs, None)
 
 
 def read_simulated(directory: str | Path) -> Frame:

@@ -23,9 +23,8 @@ from drivers.errors import DeviceInputError
 from toftwin_camera_bridge import (
     PROTOCOL_VERSION,
     BridgeError,
-    RawDataCopy,
+    data_from_message,
     encode_message,
-    raw_data_from_message,
     read_message,
 )
 
@@ -77,6 +76,8 @@ class RemoteSource:
         self.disconnect_reason: str | None = None
         self._identity: dict[str, Any] = {}
         self._use_case: str | None = None
+        #: what the camera streams: royale's raw data or its processed depth (``open``)
+        self.mode = "raw"
         self._sock: socket.socket | None = None
         self._ids = itertools.count(1)
         self._pending: dict[int, queue.Queue[dict[str, Any]]] = {}
@@ -126,8 +127,7 @@ class RemoteSource:
 
     def _frame(self, message: dict[str, Any], payload: bytes) -> None:
         try:
-            data: RawDataCopy = raw_data_from_message(message, payload)
-            self.on_frame(data)
+            self.on_frame(data_from_message(message, payload))
         except Exception as exc:  # a garbled frame is counted, the stream goes on
             self.callback_errors.append(repr(exc))
 
@@ -172,7 +172,7 @@ class RemoteSource:
             sock = self._connect()
             if op != "open" and self.camera_id is not None:
                 self._identity = self._send(sock, "open", camera=self.camera_id,
-                                            use_case=self._use_case)
+                                            use_case=self._use_case, mode=self.mode)
                 self._attach(sock)
         result = self._send(sock, op, **fields)
         if op == "open":
@@ -192,8 +192,9 @@ class RemoteSource:
     def list_cameras(self) -> list[str]:
         return list(self._request("list_cameras"))
 
-    def open(self, camera_id: str | None = None) -> dict[str, Any]:
-        self._identity = self._request("open", camera=camera_id)
+    def open(self, camera_id: str | None = None, mode: str = "raw") -> dict[str, Any]:
+        self.mode = mode
+        self._identity = self._request("open", camera=camera_id, mode=mode)
         self.camera_id = self._identity.get("id") or camera_id
         return self.identity()
 
@@ -250,7 +251,7 @@ class BridgeCamera(SourceCamera):
         A simulated bridge (``toftwin camera-bridge --simulated``) films the simulated world
         served there (:class:`drivers.sim.world_link.WorldLinkServer`), attached at every
         connection.
-    use_case, frame_timeout_s, queue_size, value_shift
+    use_case, frame_timeout_s, queue_size, value_shift, mode
         As for :class:`~drivers.camera.source_camera.SourceCamera`.
     """
 
@@ -259,10 +260,10 @@ class BridgeCamera(SourceCamera):
     def __init__(self, url: str, camera_id: str | None = None, *,
                  use_case: str | UseCase = "MODE_5_45FPS_500", frame_timeout_s: float = 2.0,
                  connect_timeout_s: float = 5.0, queue_size: int = 8, value_shift: int = 0,
-                 world_url: str | None = None) -> None:
+                 world_url: str | None = None, mode: str = "raw") -> None:
         parse_bridge_url(url)
         super().__init__(camera_id, use_case=use_case, frame_timeout_s=frame_timeout_s,
-                         queue_size=queue_size, value_shift=value_shift)
+                         queue_size=queue_size, value_shift=value_shift, mode=mode)
         self.url = url
         self.connect_timeout_s = connect_timeout_s
         self.world_url = world_url

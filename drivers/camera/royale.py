@@ -94,16 +94,16 @@ class RoyaleCamera(SourceCamera):
     access_code : str or None
         royale access code (level 2, needed for raw data before royale 5); the environment
         variable ``TOFTWIN_ROYALE_ACCESS_CODE`` when None.
-    use_case, frame_timeout_s, queue_size, value_shift
+    use_case, frame_timeout_s, queue_size, value_shift, mode
         As for :class:`~drivers.camera.source_camera.SourceCamera`.
     """
 
     def __init__(self, camera_id: str | None = None, *,
                  use_case: str | UseCase = "MODE_5_45FPS_500", access_code: str | None = None,
                  frame_timeout_s: float = 2.0, queue_size: int = 8,
-                 value_shift: int = 0) -> None:
+                 value_shift: int = 0, mode: str = "raw") -> None:
         super().__init__(camera_id, use_case=use_case, frame_timeout_s=frame_timeout_s,
-                         queue_size=queue_size, value_shift=value_shift)
+                         queue_size=queue_size, value_shift=value_shift, mode=mode)
         self.access_code = access_code
 
     def _make_source(self) -> RoyaleSource:

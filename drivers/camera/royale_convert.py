@@ -27,10 +27,12 @@ from drivers.camera.wire import (
     raw_to_wire_values,
 )
 from drivers.errors import DeviceInputError, ProtocolError
-from sim_core.raw import RawFrame
-from toftwin_camera_bridge import RawDataCopy
+from sim_core.processed_depth import ProcessedDepthFrame
+from sim_core.raw import RawFrame, reconstruct_raw
+from toftwin_camera_bridge import DEPTH_CHANNELS, DepthDataCopy, RawDataCopy
 
-__all__ = ["RoyaleDataError", "raw_frame_to_royale", "royale_to_raw_frame"]
+__all__ = ["RoyaleDataError", "raw_frame_to_royale", "raw_frame_to_royale_depth",
+           "royale_depth_to_frame", "royale_to_raw_frame"]
 
 
 class RoyaleDataError(ProtocolError):
@@ -228,3 +230,72 @@ def raw_frame_to_royale(raw: RawFrame, use_case: str | UseCase, *, grey_last: bo
         timestamp_us=stamp,
         illumination_temperature_c=raw.illumination_temperature_c,
     )
+
+
+def royale_depth_to_frame(
+    data: DepthDataCopy,
+    *,
+    use_case: str | UseCase,
+    timestamp_s: float | None = None,
+    meta: dict[str, Any] | None = None,
+) -> ProcessedDepthFrame:
+    """One copy of royale's processed depth as a
+    :class:`~sim_core.processed_depth.ProcessedDepthFrame` of ``use_case`` (whose frequencies
+    and exposure it carries: royale's depth data does not say them).
+
+    Raises
+    ------
+    RoyaleDataError
+        Points of another shape than the copy's width and height, or the use case's image size.
+    """
+    uc = get_use_case(use_case)
+    points = np.asarray(data.points, dtype=np.float32)
+    if points.shape != (data.height, data.width, len(DEPTH_CHANNELS)):
+        raise RoyaleDataError(f"depth points of shape {points.shape}; expected ({data.height}, "
+                              f"{data.width}, {len(DEPTH_CHANNELS)})")
+    if (data.height, data.width) != uc.shape:
+        raise RoyaleDataError(f"depth data of {data.width} x {data.height} px; use case "
+                              f"{uc.name} is {uc.width} x {uc.height}")
+    if data.timestamp_us is not None:
+        stamp, stamp_source = data.timestamp_us * 1e-6, "royale"
+    else:
+        stamp = time.time() if timestamp_s is None else timestamp_s
+        stamp_source = "host"
+    info: dict[str, Any] = {"backend": "royale", "camera_data": "depth", "use_case": uc.name,
+                            "exposure_times_us": list(data.exposure_times_us),
+                            "illumination_temperature_c": data.illumination_temperature_c,
+                            "timestamp_source": stamp_source, "stream_id": data.stream_id}
+    info.update(meta or {})
+    exposure_us = data.exposure_times_us[0] if data.exposure_times_us else uc.exposure_us
+    channels = [points[..., k].copy() for k in range(len(DEPTH_CHANNELS))]
+    return ProcessedDepthFrame(
+        *channels, frequencies_hz=np.asarray(uc.frequencies_hz, dtype=np.float64),
+        exposure_s=exposure_us * 1e-6, timestamp_s=stamp, meta=info,
+        illumination_temperature_c=data.illumination_temperature_c)
+
+
+def raw_frame_to_royale_depth(raw: RawFrame, intrinsics: Any, *,
+                              timestamp_us: int | None = None) -> DepthDataCopy:
+    """The processed depth royale would give for ``raw`` seen through ``intrinsics``
+    (:class:`sim_core.camera.Intrinsics`): our reconstruction's z-depth, each pixel's point on
+    its undistorted ray, royale 4's channels (the amplitude as the noise-free grey value, no
+    noise estimate: NaN), confidence 1 where valid. The simulated camera behind the camera
+    bridge serves its depth mode so."""
+    from sim_core.camera import pixel_centre_grid, pixel_to_camera_direction, z_over_range
+
+    image = reconstruct_raw(raw, z_over_range(intrinsics))
+    rays = pixel_to_camera_direction(intrinsics, *pixel_centre_grid(intrinsics)).reshape(
+        *intrinsics.shape, 3)  # unit directions in the camera frame
+    z = image.depth_z_m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = z / rays[..., 2]
+    points = np.stack([rays[..., 0] * scale, rays[..., 1] * scale, z,
+                       np.full(z.shape, np.nan), image.amplitude,
+                       image.valid.astype(np.float64)], axis=-1).astype(np.float32)
+    points[~image.valid, :3] = 0.0  # royale's invalid points are zeros with confidence 0
+    stamp = timestamp_us if timestamp_us is not None else (
+        int(raw.timestamp_s * 1e6) if raw.timestamp_s > 0 else None)
+    return DepthDataCopy(width=z.shape[1], height=z.shape[0], points=points,
+                         exposure_times_us=(round(raw.exposure_s * 1e6),),
+                         timestamp_us=stamp,
+                         illumination_temperature_c=raw.illumination_temperature_c)

@@ -23,11 +23,22 @@ from drivers.camera.protocol import (
     CameraLostError,
     CameraNotFoundError,
 )
-from drivers.camera.royale_convert import RoyaleDataError, royale_to_raw_frame
+from drivers.camera.royale_convert import (
+    RoyaleDataError,
+    royale_depth_to_frame,
+    royale_to_raw_frame,
+)
 from drivers.camera.wire import UseCase, get_use_case
 from drivers.errors import DeviceInputError, DeviceTimeoutError
+from sim_core.processed_depth import ProcessedDepthFrame
 from sim_core.raw import RawFrame
-from toftwin_camera_bridge import BridgeError, RawDataCopy, put_dropping_oldest
+from toftwin_camera_bridge import (
+    MODES,
+    BridgeError,
+    DepthDataCopy,
+    RawDataCopy,
+    put_dropping_oldest,
+)
 
 __all__ = ["SourceCamera", "camera_error"]
 
@@ -69,13 +80,19 @@ class SourceCamera:
         of the use case comes).
     value_shift : int
         See :func:`~drivers.camera.royale_convert.royale_to_raw_frame`.
+    mode : "raw" or "depth"
+        royale's raw data (frames are :class:`~sim_core.raw.RawFrame`), or its processed depth
+        for labs without raw access (:class:`~sim_core.processed_depth.ProcessedDepthFrame`).
     """
 
     backend = "royale"
 
     def __init__(self, camera_id: str | None = None, *,
                  use_case: str | UseCase = "MODE_5_45FPS_500", frame_timeout_s: float = 2.0,
-                 queue_size: int = 8, value_shift: int = 0) -> None:
+                 queue_size: int = 8, value_shift: int = 0, mode: str = "raw") -> None:
+        if mode not in MODES:
+            raise DeviceInputError("camera_mode", f"got {mode!r}; allowed: {', '.join(MODES)}")
+        self.mode = mode
         self.camera_id = camera_id
         self._use_case = get_use_case(use_case)
         self.frame_timeout_s = frame_timeout_s
@@ -112,7 +129,7 @@ class SourceCamera:
             return
         source = self._make_source()
         try:
-            identity = source.open(self.camera_id)
+            identity = source.open(self.camera_id, self.mode)
             self._opened_id = identity.get("id") or self.camera_id
             self._source = source
             self.configure(self._use_case)
@@ -181,9 +198,10 @@ class SourceCamera:
             while True:
                 self._queue.get_nowait()
 
-    def capture(self, n: int = 1) -> list[RawFrame]:
+    def capture(self, n: int = 1) -> list[RawFrame | ProcessedDepthFrame]:
         """The next ``n`` raw frames converted by
-        :func:`~drivers.camera.royale_convert.royale_to_raw_frame`.
+        :func:`~drivers.camera.royale_convert.royale_to_raw_frame` (in depth mode royale's
+        processed depth, by :func:`~drivers.camera.royale_convert.royale_depth_to_frame`).
 
         A one-shot capture (camera not streaming) starts the camera, keeps only frames that
         arrive after the start, and stops it again.
@@ -195,7 +213,7 @@ class SourceCamera:
         if one_shot:
             self._drain()
             self.start()
-        frames: list[RawFrame] = []
+        frames: list[RawFrame | ProcessedDepthFrame] = []
         try:
             while len(frames) < n:
                 arrived, data = self._next(len(frames), n)
@@ -210,12 +228,26 @@ class SourceCamera:
                     _log.warning("%s: stop after capture failed: %s", self._who(), exc)
         return frames
 
-    def _convert(self, arrived: float, data: RawDataCopy) -> RawFrame | None:
+    def _convert(self, arrived: float,
+                 data: RawDataCopy | DepthDataCopy) -> RawFrame | ProcessedDepthFrame | None:
         """One copy as a frame of the configured use case; ``None`` (counted in ``stale``) for a
         well-formed frame of another configuration: one the source took before a use-case switch
         or a reconnection but handed over after it (a source's capture thread and its command
         replies are not ordered). A copy that is no raw frame at all is an error."""
         meta = {"device": self._opened_id or self.camera_id}
+        if isinstance(data, DepthDataCopy) != (self.mode == "depth"):
+            self.stale += 1  # a frame of the mode before a switch (or a reconnection)
+            self.stale_reason = f"a {'depth' if self.mode == 'raw' else 'raw'} frame in " \
+                                f"{self.mode} mode"
+            return None
+        if isinstance(data, DepthDataCopy):
+            try:
+                return royale_depth_to_frame(data, use_case=self._use_case,
+                                             timestamp_s=arrived, meta=meta)
+            except RoyaleDataError as exc:
+                self.stale += 1
+                self.stale_reason = str(exc)
+                return None
         try:
             return royale_to_raw_frame(data, use_case=self._use_case, value_shift=self.value_shift,
                                        timestamp_s=arrived, meta=meta)

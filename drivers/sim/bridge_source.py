@@ -17,10 +17,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from drivers.camera.royale_convert import raw_frame_to_royale
+from drivers.camera.royale_convert import raw_frame_to_royale, raw_frame_to_royale_depth
 from drivers.camera.wire import USE_CASES, UseCase, get_use_case
 from drivers.sim.usb_camera import CameraRequest
-from toftwin_camera_bridge import BridgeError, RawDataCopy
+from toftwin_camera_bridge import MODES, BridgeError, RawDataCopy
 
 __all__ = ["SIMULATED_CAMERA_ID", "SimulatedCameraSource"]
 
@@ -69,6 +69,8 @@ class SimulatedCameraSource:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.extra: dict[str, Any] = {}
+        #: royale's raw data or its processed depth (``open``)
+        self.mode = "raw"
 
     def attach_world(self, url: str) -> None:
         """Film the simulated world served at ``url``
@@ -86,10 +88,13 @@ class SimulatedCameraSource:
     def list_cameras(self) -> list[str]:
         return [SIMULATED_CAMERA_ID]
 
-    def open(self, camera_id: str | None = None) -> dict[str, Any]:
+    def open(self, camera_id: str | None = None, mode: str = "raw") -> dict[str, Any]:
         if camera_id not in (None, SIMULATED_CAMERA_ID):
             raise BridgeError(f"camera {camera_id!r} not among {[SIMULATED_CAMERA_ID]}",
                               "not_found")
+        if mode not in MODES:
+            raise BridgeError(f"mode {mode!r}; allowed: {', '.join(MODES)}", "input")
+        self.mode = mode
         self.camera_id = SIMULATED_CAMERA_ID
         return self.identity()
 
@@ -97,7 +102,8 @@ class SimulatedCameraSource:
         if self.camera_id is None:
             raise BridgeError("no camera is open", "not_found")
         return {"id": self.camera_id, "name": "simulated pico flexx",
-                "use_cases": self.use_cases(), "info": {"SIMULATED": "yes"}, **self.describe()}
+                "use_cases": self.use_cases(), "info": {"SIMULATED": "yes"}, "mode": self.mode,
+                **self.describe()}
 
     def use_cases(self) -> list[str]:
         return list(USE_CASES)
@@ -135,6 +141,16 @@ class SimulatedCameraSource:
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=30.0)
 
+    def depth_intrinsics(self, uc: UseCase) -> Any:
+        """The lens royale's processed depth is computed with, in depth mode: the pico
+        flexx's nominal lens (:data:`sim_core.camera.CAMERA_PRESETS`) at the use case's size; a
+        real royale applies its camera's own calibration."""
+        from sim_core.camera import CAMERA_PRESETS, Intrinsics
+
+        p = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
+        return Intrinsics(uc.width, uc.height, p["fx_px"], p["fy_px"], p["cx_px"], p["cy_px"],
+                          tuple(p.get("distortion", (0.0,) * 5)))
+
     def is_connected(self) -> bool:
         return self.camera_id is not None
 
@@ -152,7 +168,9 @@ class SimulatedCameraSource:
                 request = CameraRequest(uc, self._sequence, self.seed, time.time(), state)
                 self._sequence += 1
                 raw = self.frame_source(request)
-                data = raw_frame_to_royale(raw, uc, grey_last=self.grey_last)
+                data = (raw_frame_to_royale_depth(raw, self.depth_intrinsics(uc))
+                        if self.mode == "depth" else
+                        raw_frame_to_royale(raw, uc, grey_last=self.grey_last))
             except Exception as exc:  # a failing render is counted; the stream goes on
                 self.callback_errors.append(repr(exc))
                 self._stop.wait(period_s)

@@ -77,6 +77,7 @@ def simulated_rig(
     lab_wait: Callable[..., None] | None = None,
     camera_transport: str = "usb",
     camera_bridge: str | None = None,
+    camera_mode: str = "raw",
 ) -> Rig:
     """Start the three simulators and return a rig with real drivers connected to them.
 
@@ -132,6 +133,9 @@ def simulated_rig(
         (``tcp://HOST:PORT``, ``toftwin camera-bridge --simulated``) instead of one in this
         process; it films this rig's world through a
         :class:`drivers.sim.world_link.WorldLinkServer` (closed with the rig).
+    camera_mode : {"raw", "depth"}
+        With the bridge: royale's raw data, or its processed depth
+        (:class:`~sim_core.processed_depth.ProcessedDepthFrame`).
 
     Examples
     --------
@@ -139,6 +143,9 @@ def simulated_rig(
     ...     rig.apply(RigState(30.0, 0.0, False)).turntable_angle_deg
     30.0
     """
+    if camera_mode != "raw" and camera_transport != "bridge":
+        raise DeviceInputError("camera_mode", "the simulated USB camera sends raw frames only; "
+                               "royale's processed depth comes through the camera bridge")
     if camera_transport not in ("usb", "bridge"):
         raise DeviceInputError("camera_transport", f"got {camera_transport!r}; usb or bridge")
     if camera_transport == "bridge" and list(camera_faults):
@@ -201,13 +208,13 @@ def simulated_rig(
                                      _physical_state(tt_sim, solar_sim)).start()
             started.append(bridge.close)
             camera = BridgeCamera(camera_bridge, use_case=use_case, world_url=bridge.url,
-                                  frame_timeout_s=BRIDGE_FRAME_TIMEOUT_S)
+                                  frame_timeout_s=BRIDGE_FRAME_TIMEOUT_S, mode=camera_mode)
         elif camera_transport == "bridge":
             bridge = _camera_bridge(frame_source or cam_sim.frame_source,
                                     _physical_state(tt_sim, solar_sim), seed)
             started.append(bridge.close)
             camera = BridgeCamera(f"tcp://127.0.0.1:{bridge.address[1]}", use_case=use_case,
-                                  frame_timeout_s=BRIDGE_FRAME_TIMEOUT_S)
+                                  frame_timeout_s=BRIDGE_FRAME_TIMEOUT_S, mode=camera_mode)
         else:
             camera = UsbCamera(backend=cam_sim, use_case=use_case, settings=camera_settings)
         camera.connect()

@@ -61,6 +61,11 @@ class MetricsPublic(BaseModel):
     model_config = ConfigDict(extra="allow")
 
     tof: ToFFiguresPublic | None = None
+    camera_data: str | None = Field(
+        None, description="What the camera gave: 'raw' (its raw phase frames, reconstructed by "
+        "toftwin) or 'royale processed depth' (royale's own depth and grey, the camera in depth "
+        "mode; compared over the pixels valid in both, each grey scaled by its 99.5th "
+        "percentile). Null in results stored before it was recorded.")
 
 
 class PosePublic(BaseModel):

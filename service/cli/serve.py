@@ -21,7 +21,8 @@ from service.store.data_lock import make_private
 #: the settings the options of ``serve`` set: field -> option
 OPTION_OF_FIELD = {"host": "--host", "port": "--port", "data_dir": "--data-dir",
                    "simulated": "--simulated", "executor": "--executor", "workers": "--workers",
-                   "faults": "--fault", "reality": "--reality", "camera": "--camera"}
+                   "faults": "--fault", "reality": "--reality", "camera": "--camera",
+                   "camera_mode": "--camera-mode"}
 
 
 def serve(
@@ -65,6 +66,12 @@ def serve(
                      "a camera bridge tcp://HOST:PORT (toftwin-camera-bridge beside the camera; "
                      "with --simulated, toftwin camera-bridge --simulated)."),
     ] = None,
+    camera_mode: Annotated[
+        str | None,
+        typer.Option("--camera-mode", help="raw (default: royale's raw frames, reconstructed "
+                     "by toftwin) or depth (royale's processed depth and grey, for a camera "
+                     "without raw access; --camera royale or a bridge)."),
+    ] = None,
 ) -> None:
     """Start the REST API (uvicorn); --simulated runs on the simulators and the satellite scene."""
     import uvicorn
@@ -79,7 +86,7 @@ def serve(
     token = secrets.token_urlsafe(24) if session else None
     given = {"host": host, "port": port, "data_dir": data_dir, "simulated": simulated or None,
              "executor": executor, "workers": workers, "faults": fault or None,
-             "reality": reality, "camera": camera}
+             "reality": reality, "camera": camera, "camera_mode": camera_mode}
     settings = load_settings(settings_file, OPTION_OF_FIELD, token=token, **given)
     refuse_if_in_use(settings.data_dir)
     refuse_if_no_room(settings.data_dir)

@@ -38,9 +38,11 @@ from calibration.rig_sequence import (
 )
 from calibration.rig_settling import fit_rig_settling, unknown_ringing
 from calibration.verification import TwinComparison, compare_twins, comparison_capture_plan
+from drivers.errors import DeviceInputError
 from drivers.rig import Rig, RigState
 from service.lab.settling import settled_moves, unsettled_moves
 from sim_core.materials import Material
+from sim_core.processed_depth import ProcessedDepthFrame
 from sim_core.render import RenderSettings
 from sim_core.scene import build_camera
 from sim_core.scene_spec import SceneSpec
@@ -108,6 +110,11 @@ def _capture(rig: Rig, step: CaptureStep) -> AveragedCapture:
             rig.wait(step.rest_s)
         # checked against the target for the whole exposure (Rig.capture)
         frames = rig.capture(step.frames, target=target)
+    if any(isinstance(f, ProcessedDepthFrame) for f in frames):
+        raise DeviceInputError(
+            "camera_mode", "the camera streams royale's processed depth (camera mode 'depth'); "
+            "calibrations and object fits measure its raw frames: run them with the camera in "
+            "raw mode (TOFTWIN_CAMERA_MODE=raw, serve --camera-mode raw)")
     return average_frames(frames, keep_frames=step.keep_frames)
 
 

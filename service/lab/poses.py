@@ -51,7 +51,15 @@ from service.store.tables import FrameRow, PoseResultRow
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.edges import edge_depth_error
 from sim_core.errors import InvalidInputError
-from sim_core.raw import RawFrame, reconstruct_raw
+from sim_core.frame_io import grey_full_scale
+from sim_core.processed_depth import (
+    CAMERA_DATA_DEPTH,
+    CAMERA_DATA_RAW,
+    ProcessedDepthFrame,
+    camera_data,
+    measured_image,
+)
+from sim_core.raw import RawFrame
 from sim_core.render_request import AccuracyTarget, RenderRequest, request_from_spec
 from sim_core.scene_spec import SceneSpec
 from sim_core.tof import ToFImage
@@ -128,8 +136,14 @@ class Measurement:
     illumination_temperature_c: float | None = None
     #: the raw frame(s) as captured (a campaign that records them writes these), and the use
     #: case they were taken in
-    raws: list[RawFrame] = field(default_factory=list)
+    raws: list[RawFrame | ProcessedDepthFrame] = field(default_factory=list)
     use_case: str = ""
+
+    @property
+    def camera_data(self) -> str:
+        """What the measurement is: the camera's raw frames, reconstructed by us, or royale's
+        processed depth (:func:`sim_core.processed_depth.camera_data`)."""
+        return camera_data(self.raws[0]) if self.raws else CAMERA_DATA_RAW
 
 
 @dataclass(frozen=True)
@@ -210,7 +224,7 @@ def store_measurement(
         "calibration_hash": plan.twin.hash,
     }
     frame_id, image, grey_full_scale = store.save_measured(raw, camera, extra)
-    second = None if len(raws) < 2 else reconstruct_raw(raws[1], camera_z_over_range(
+    second = None if len(raws) < 2 else measured_image(raws[1], camera_z_over_range(
         camera.intrinsics))
     t3 = time.perf_counter()
     row = queries.frame_row(
@@ -301,11 +315,15 @@ def _finish(
         store.save_files(jobs.fitted[0], fitted.files)
     t2 = time.perf_counter()
     names = [o.name for o in plan.scene.spec.objects]
+    depth_data = m.camera_data == CAMERA_DATA_DEPTH
+    # royale's grey has no known ADC scale: both greys are then scaled by their own 99.5th
+    # percentile (the twin's as the measured frame's is)
+    sim_full_scale = (grey_full_scale(result.image.amplitude, result.image.valid, None)
+                      if depth_data else result.grey_full_scale)
     try:
         mask = build_mask(plan.mask, m.image, result.object_id, names,
                           plan.scene.turntable_object_ids)
-        report = compare(m.image, result.image, mask,
-                         (m.grey_full_scale, result.grey_full_scale))
+        report = compare(m.image, result.image, mask, (m.grey_full_scale, sim_full_scale))
         metrics: dict[str, Any] = report.to_dict()
         metrics["table"] = [list(r) for r in report.table_rows()]
         if m.turning_deg_s:  # captured while turning: how much of the error sits at edges
@@ -313,6 +331,7 @@ def _finish(
                                                 result.image.valid).to_dict()
     except InvalidInputError as exc:  # e.g. no pixel valid in both frames: recorded, not fatal
         report, metrics = None, {"error": str(exc), "table": []}
+    metrics["camera_data"] = m.camera_data  # every result says what the camera gave
     if fitted is not None:
         metrics["explained"] = explained_difference(
             plan.mask, m.image, m.second, m.grey_full_scale, report, fitted.image,

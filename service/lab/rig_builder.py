@@ -50,7 +50,8 @@ def open_rig(settings: Settings, scene: SceneSource) -> tuple[Rig, SimulatedWorl
         )
     return Rig.open(settings.turntable_port, settings.lamp_port, settings.shutter_port,
                     turntable_address=settings.turntable_address,
-                    camera_serial=settings.camera_serial, camera=settings.camera), None
+                    camera_serial=settings.camera_serial, camera=settings.camera,
+                    camera_mode=settings.camera_mode), None
 
 
 def armed_faults(settings: Settings) -> dict[str, list[str]]:
@@ -104,5 +105,6 @@ def _open_simulated(settings: Settings, scene: SceneSource) -> tuple[Rig, Simula
                         turntable_settling=world.reality.turntable.settling,
                         lab_wait=world.clock.wait,
                         camera_transport="usb" if settings.camera == "usb" else "bridge",
-                        camera_bridge=None if settings.camera == "usb" else settings.camera)
+                        camera_bridge=None if settings.camera == "usb" else settings.camera,
+                        camera_mode=settings.camera_mode)
     return rig, world

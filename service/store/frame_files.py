@@ -41,6 +41,7 @@ from sim_core import frame_io
 from sim_core.camera import Camera
 from sim_core.errors import InvalidInputError
 from sim_core.files import fsync_dir
+from sim_core.processed_depth import ProcessedDepthFrame
 from sim_core.raw import RawFrame
 from sim_core.tof import ToFImage
 
@@ -191,7 +192,7 @@ class FrameStore:
         return self._publish(frame_id, write)
 
     def save_measured(
-        self, raw: RawFrame, camera: Camera, extra: dict[str, Any]
+        self, raw: RawFrame | ProcessedDepthFrame, camera: Camera, extra: dict[str, Any]
     ) -> tuple[str, ToFImage, float]:
         """Reconstruct and write a measured frame (:func:`sim_core.frame_io.write_measured`).
 

@@ -14,12 +14,15 @@ Layout (``format`` ``"toftwin-recording"``, ``version`` 1)::
     /                       attrs: format, version, toftwin (version), created_s (epoch s),
                             campaign (JSON: :class:`RecordedCampaign`)
     /frames/NNNNNN          one group per recorded frame, in capture order
-        phase_images        (n_f, 4, H, W) float32 [DN], one chunk, gzip + shuffle
+        phase_images        (n_f, 4, H, W) float32 [DN], one chunk, gzip + shuffle (or, for
+                            royale's processed depth, x_m, y_m, z_m, noise_m, grey and
+                            confidence, each (H, W) float32)
         intensity           (H, W) float32 [DN]
         saturated           (H, W) bool
         sbi_limit           (H, W) bool
         taps                (n_f, 4, 2, H, W) float32 [DN], where the source exposes them
-        attrs               frequencies_hz, exposure_s, timestamp_s,
+        attrs               kind ("raw" or "royale processed depth"), frequencies_hz,
+                            exposure_s, timestamp_s,
                             illumination_temperature_c (NaN: not reported), meta (JSON),
                             use_case, pose_index, repeat, capture (0; 1 for a unit's second
                             capture, the noise ceiling's), turntable_angle_deg, solar_suns,
@@ -46,6 +49,8 @@ import numpy as np
 
 from drivers.rig import RigState
 from sim_core.errors import InvalidInputError
+from sim_core.frame_io import DEPTH_POINT_ARRAYS
+from sim_core.processed_depth import CAMERA_DATA_DEPTH, ProcessedDepthFrame, camera_data
 from sim_core.raw import RawFrame
 
 __all__ = ["FORMAT", "VERSION", "RecordedCampaign", "RecordedUnit", "Recording",
@@ -121,7 +126,7 @@ class RecordedUnit:
     state: RigState
     use_case: str
     turning_deg_s: float
-    raws: list[RawFrame] = field(default_factory=list)
+    raws: list[RawFrame | ProcessedDepthFrame] = field(default_factory=list)
 
 
 class RecordingError(InvalidInputError):
@@ -162,19 +167,25 @@ class RecordingWriter:
                 _write_frame(frames.create_group(f"{len(frames):06d}"), raw, unit, capture)
 
 
-def _write_frame(g: Any, raw: RawFrame, unit: RecordedUnit, capture: int) -> None:
+def _write_frame(g: Any, raw: RawFrame | ProcessedDepthFrame, unit: RecordedUnit,
+                 capture: int) -> None:
     def data(name: str, array: np.ndarray) -> None:
         g.create_dataset(name, data=array, chunks=array.shape, compression="gzip",
                          compression_opts=GZIP_LEVEL, shuffle=True)
 
-    data("phase_images", np.asarray(raw.phase_images, dtype=np.float32))
-    data("intensity", np.asarray(raw.intensity, dtype=np.float32))
-    data("saturated", np.asarray(raw.saturated, dtype=bool))
-    data("sbi_limit", np.asarray(raw.sbi_limit, dtype=bool))
-    if raw.taps is not None:
-        data("taps", np.asarray(raw.taps, dtype=np.float32))
+    if isinstance(raw, ProcessedDepthFrame):  # royale's processed depth (camera mode depth)
+        for name in DEPTH_POINT_ARRAYS:
+            data(name, np.asarray(getattr(raw, name), dtype=np.float32))
+    else:
+        data("phase_images", np.asarray(raw.phase_images, dtype=np.float32))
+        data("intensity", np.asarray(raw.intensity, dtype=np.float32))
+        data("saturated", np.asarray(raw.saturated, dtype=bool))
+        data("sbi_limit", np.asarray(raw.sbi_limit, dtype=bool))
+        if raw.taps is not None:
+            data("taps", np.asarray(raw.taps, dtype=np.float32))
     temp = raw.illumination_temperature_c
     g.attrs.update({
+        "kind": camera_data(raw),
         "frequencies_hz": np.asarray(raw.frequencies_hz, dtype=np.float64),
         "exposure_s": float(raw.exposure_s), "timestamp_s": float(raw.timestamp_s),
         "illumination_temperature_c": math.nan if temp is None else float(temp),
@@ -263,9 +274,16 @@ class Recording:
                                 float(a["turning_deg_s"]), [_read_frame(g) for g in groups])
 
 
-def _read_frame(g: Any) -> RawFrame:
+def _read_frame(g: Any) -> RawFrame | ProcessedDepthFrame:
     a = g.attrs
     temp = float(a["illumination_temperature_c"])
+    if a.get("kind") == CAMERA_DATA_DEPTH:
+        return ProcessedDepthFrame(
+            *(g[name][...] for name in DEPTH_POINT_ARRAYS),
+            frequencies_hz=np.asarray(a["frequencies_hz"], dtype=np.float64),
+            exposure_s=float(a["exposure_s"]), timestamp_s=float(a["timestamp_s"]),
+            meta=json.loads(str(a["meta"])),
+            illumination_temperature_c=None if math.isnan(temp) else temp)
     return RawFrame(
         phase_images=g["phase_images"][...], intensity=g["intensity"][...],
         frequencies_hz=np.asarray(a["frequencies_hz"], dtype=np.float64),

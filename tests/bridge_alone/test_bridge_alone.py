@@ -780,3 +780,82 @@ def test_the_bridge_started_as_a_lab_starts_it_imports_roypy_and_streams():
         proc.terminate()
         proc.wait(timeout=WAIT_S)
     assert proc.returncode != 2, "".join(log)
+
+
+# -- royale's processed depth (IDepthDataListener) ------------------------------------------------
+def _check_depth(data: Any, generation: int) -> None:
+    """``data`` is the double's wall at ``DOUBLE.depth_m`` as royale of ``generation`` gives it:
+    points on the lens's rays, royale 4's noise channel (0), none before or after (NaN), the
+    grey frame's values, confidence scaled to 1."""
+    assert isinstance(data, bridge.DepthDataCopy)
+    assert (data.width, data.height) == (W, H)
+    assert data.points.shape == (H, W, 6) and data.points.dtype == np.float32
+    x, y, z, noise, grey, confidence = (data.points[..., k] for k in range(6))
+    assert np.allclose(z, DOUBLE.depth_m)
+    lens = DOUBLE.lens
+    v, u = np.mgrid[0:H, 0:W]
+    assert np.allclose(x, (u - lens["cx"]) / lens["fx"] * z, atol=1e-6)
+    assert np.allclose(y, (v - lens["cy"]) / lens["fy"] * z, atol=1e-6)
+    assert (noise == 0).all() if generation == 4 else np.isnan(noise).all()
+    assert grey.min() >= 0 and grey.max() <= 4095 and grey.std() > 0
+    assert (confidence == 1.0).all()
+    assert isinstance(data.timestamp_us, int)
+    if generation >= 5:
+        assert data.illumination_temperature_c == _temperature(_index_of(data))
+
+
+@pytest.mark.parametrize("use_case", [MODE5, MODE9])
+def test_royale_source_streams_royales_processed_depth(royale, use_case):
+    """``mode="depth"``: ``IDepthDataListener`` (no access code needed) for royale 3 (the
+    per-point getters), 4 (``npoints()`` with a noise channel) and 5 (``npoints()`` without,
+    confidence 0..1)."""
+    DOUBLE.depth_m = 0.75
+    got: queue.Queue = queue.Queue()
+    source = RoyaleSource(double, got.put, None, mode="depth")
+    ident = source.open()
+    assert ident["mode"] == "depth" and source.mode == "depth"
+    source.set_use_case(use_case)
+    source.start()
+    copies = [got.get(timeout=WAIT_S) for _ in range(2)]
+    source.stop()
+    for data in copies:
+        _check_depth(data, DOUBLE.generation)
+    assert source.callback_errors == [] and DOUBLE.listener_errors == []
+    # open again in raw mode: the raw listener replaces the depth one
+    source.access_code = DOUBLE.L2_CODE
+    assert source.open(None, "raw")["mode"] == "raw"
+    source.start()
+    assert isinstance(got_after(got, RawDataCopy), RawDataCopy)
+    source.close()
+    with pytest.raises(BridgeError, match="mode 'phase'") as info:
+        source.open(None, "phase")
+    assert info.value.kind == "input"
+
+
+def got_after(got: queue.Queue, kind: type) -> Any:
+    """The first copy of ``kind`` (those of the mode before a switch may still come)."""
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline:
+        data = got.get(timeout=WAIT_S)
+        if isinstance(data, kind):
+            return data
+    raise AssertionError(f"no {kind.__name__} within {WAIT_S} s")
+
+
+def test_a_plain_client_gets_royales_processed_depth_through_the_bridge(royale35):
+    with serving() as server, client_of(server) as client:
+        client.ok("hello", protocol=PROTOCOL_VERSION)
+        ident = client.ok("open", camera=None, use_case=MODE5, mode="depth")
+        assert ident["mode"] == "depth"
+        assert client.ok("start") is None
+        for _ in range(2):
+            message, payload = client.push()
+            assert message["op"] == "frame" and message["kind"] == "depth", message
+            assert len(payload) == 4 * 6 * W * H
+            _check_depth(bridge.data_from_message(message, payload), DOUBLE.generation)
+        client.ok("stop")
+        assert client.error("open", camera=None, mode="phase")["kind"] == "input"
+    garbled = {"op": "frame", "kind": "depth", "width": W, "height": H}
+    with pytest.raises(BridgeError, match="depth payload has 8 bytes") as info:
+        bridge.data_from_message(garbled, b"\0" * 8)
+    assert info.value.kind == "protocol"
