@@ -147,7 +147,7 @@ def create_replay(
 def recorded_scene(recorded: RecordedCampaign, settings: Settings) -> SceneSource:
     """The scene a recording was captured with; its files are looked for where they were, else
     in this service's bundled scenes (a recording made on another PC)."""
-    base_dir = Path(recorded.scene_base_dir)
+    base_dir = Path(recorded.scene_base_dir or settings.examples_dir)
     if not base_dir.is_dir():
         base_dir = Path(settings.examples_dir)
     return SceneSource.from_json(json.dumps(recorded.scene), str(base_dir),

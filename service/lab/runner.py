@@ -276,7 +276,8 @@ class CampaignRunner:
         replay = None if camp.replay_path is None else Recording(camp.replay_path)
         if camp.record_path is not None:
             with self.sessions() as s:  # with the object twin, if it was fitted just now
-                recorded = RecordedCampaign.of_row(queries.get_campaign(s, run.id), poses)
+                recorded = RecordedCampaign.of_row(queries.get_campaign(s, run.id), poses,
+                                                   self.settings.examples_dir)
             recorder = RecordingWriter(camp.record_path, recorded)
             run.progress.record = lambda plan, m: recorder.append(recorded_unit(plan, m))
         if camp.turning_deg_s is not None and replay is None:

@@ -78,7 +78,9 @@ class RecordedCampaign:
     name: str
     scene_name: str
     scene: dict[str, Any]
-    scene_base_dir: str
+    #: the folder the scene's files are found in; None: the bundled scenes' (a recording made by
+    #: the service names no folder of the server's)
+    scene_base_dir: str | None
     mask: dict[str, Any]
     seed: int
     spp: int
@@ -95,15 +97,20 @@ class RecordedCampaign:
         return json.dumps(self.__dict__, sort_keys=True, allow_nan=False)
 
     @classmethod
-    def of_row(cls, row: Any, poses: Sequence[Any]) -> RecordedCampaign:
+    def of_row(cls, row: Any, poses: Sequence[Any],
+               bundled_dir: str | Path | None = None) -> RecordedCampaign:
         """The recorded form of a stored campaign (:class:`~service.store.tables.CampaignRow`)
-        and its planned poses."""
+        and its planned poses; a scene of ``bundled_dir`` (the service's bundled scenes) is
+        recorded without its folder."""
         def loads(text: str | None) -> Any:
             return None if text is None else json.loads(text)
 
+        bundled = bundled_dir is not None and (
+            Path(row.scene_base_dir).resolve() == Path(bundled_dir).resolve())
         return cls(
             name=row.name, scene_name=row.scene_name, scene=json.loads(row.scene_json),
-            scene_base_dir=row.scene_base_dir, mask=json.loads(row.mask_json), seed=row.seed,
+            scene_base_dir=None if bundled else row.scene_base_dir,
+            mask=json.loads(row.mask_json), seed=row.seed,
             spp=row.spp, poses=[(p.turntable_deg, p.solar_suns, p.repeats) for p in poses],
             calibration=loads(row.calibration_json), calibration_hash=row.calibration_hash,
             turning_deg_s=row.turning_deg_s, object_fit=loads(row.object_fit_json),

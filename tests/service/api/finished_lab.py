@@ -76,7 +76,7 @@ def finished_lab(client: TestClient) -> Finished:
     """Make one of everything on ``client``'s service (see the module's docstring)."""
     answers = [client.post("/api/v1/simulate", headers=AUTH, json={"solar_suns": 0.0}),
                client.post("/api/v1/devices/camera/capture", headers=AUTH)]
-    cid = start_campaign(client, [{"turntable_deg": 10.0}])
+    cid = start_campaign(client, [{"turntable_deg": 10.0}], record=True)  # its recording too
     wait_campaign(client, cid, lambda s: s["state"] == "completed")
     answers.append(client.post("/api/v1/poses", headers=AUTH,
                                json={"turntable_deg": 20.0, "solar_suns": 1.0}))
