@@ -242,10 +242,7 @@ def write_raw(path: str | Path, raw: RawFrame) -> None:
         "frequencies_hz": raw.frequencies_hz,
         "saturated": raw.saturated,
         "sbi_limit": raw.sbi_limit,
-        "meta_json": np.array(json.dumps(json_safe(
-            {"exposure_s": raw.exposure_s, "timestamp_s": raw.timestamp_s, **raw.meta,
-             **_temperature_meta(raw)}
-        ), allow_nan=False)),
+        "meta_json": _meta_json(raw),
     }
     if raw.taps is not None:
         arrays["taps"] = raw.taps
@@ -255,17 +252,29 @@ def write_raw(path: str | Path, raw: RawFrame) -> None:
 def read_raw(path: str | Path) -> RawFrame:
     """Read a ``raw.npz`` written by :func:`write_raw`."""
     with np.load(path) as z:
-        meta = json.loads(str(z["meta_json"]))
-        exposure = float(meta.pop("exposure_s"))
-        stamp = float(meta.pop("timestamp_s"))
-        temperature = meta.pop(TEMPERATURE_KEY, None)
         return RawFrame(
             phase_images=z["phase_images"], intensity=z["intensity"],
             frequencies_hz=z["frequencies_hz"], saturated=z["saturated"],
-            sbi_limit=z["sbi_limit"], exposure_s=exposure, timestamp_s=stamp,
-            taps=z["taps"] if "taps" in z.files else None, meta=meta,
-            illumination_temperature_c=None if temperature is None else float(temperature),
-        )
+            sbi_limit=z["sbi_limit"], taps=z["taps"] if "taps" in z.files else None,
+            **_frame_fields(z["meta_json"]))
+
+
+def _meta_json(frame: RawFrame | ProcessedDepthFrame) -> np.ndarray:
+    """A measured frame's exposure, timestamp, temperature and metadata as one JSON string
+    (``meta_json`` of ``raw.npz`` and ``depth_points.npz``)."""
+    return np.array(json.dumps(json_safe(
+        {"exposure_s": frame.exposure_s, "timestamp_s": frame.timestamp_s, **frame.meta,
+         **_temperature_meta(frame)}), allow_nan=False))
+
+
+def _frame_fields(meta_json: np.ndarray) -> dict[str, Any]:
+    """The frame fields :func:`_meta_json` wrote (``exposure_s``, ``timestamp_s``, ``meta``,
+    ``illumination_temperature_c``)."""
+    meta = json.loads(str(meta_json))
+    temperature = meta.pop(TEMPERATURE_KEY, None)
+    return {"exposure_s": float(meta.pop("exposure_s")),
+            "timestamp_s": float(meta.pop("timestamp_s")), "meta": meta,
+            "illumination_temperature_c": None if temperature is None else float(temperature)}
 
 
 #: the metadata key of a frame's reported illumination temperature [degC] (raw.npz, frame.json)
@@ -281,23 +290,16 @@ def write_depth_points(path: str | Path, frame: ProcessedDepthFrame) -> None:
     (:data:`DEPTH_POINT_ARRAYS`, ``frequencies_hz``, the metadata as JSON)."""
     arrays = {name: getattr(frame, name) for name in DEPTH_POINT_ARRAYS}
     arrays["frequencies_hz"] = frame.frequencies_hz
-    arrays["meta_json"] = np.array(json.dumps(json_safe(
-        {"exposure_s": frame.exposure_s, "timestamp_s": frame.timestamp_s, **frame.meta,
-         **_temperature_meta(frame)}), allow_nan=False))
+    arrays["meta_json"] = _meta_json(frame)
     write_npz(Path(path), arrays)
 
 
 def read_depth_points(path: str | Path) -> ProcessedDepthFrame:
     """Read a ``depth_points.npz`` written by :func:`write_depth_points`."""
     with np.load(path) as z:
-        meta = json.loads(str(z["meta_json"]))
-        exposure = float(meta.pop("exposure_s"))
-        stamp = float(meta.pop("timestamp_s"))
-        temperature = meta.pop(TEMPERATURE_KEY, None)
         return ProcessedDepthFrame(
             *(z[name] for name in DEPTH_POINT_ARRAYS), frequencies_hz=z["frequencies_hz"],
-            exposure_s=exposure, timestamp_s=stamp, meta=meta,
-            illumination_temperature_c=None if temperature is None else float(temperature))
+            **_frame_fields(z["meta_json"]))
 
 
 def _temperature_meta(raw: RawFrame | ProcessedDepthFrame) -> dict[str, float]:
