@@ -20,19 +20,17 @@ Images in, intrinsics, a per-view report and verdicts out. Any camera, any image
   views' homographies; k3 held at 0 unless asked for (``fit_k3``).
 - **tangential terms only when the views call for them**: p1 and p2 trade off against the
   principal point (a decentred lens and a shifted centre bend the corners alike), so fitting
-  them where the lens has none spends the views' information on noise: on rendered views of a
-  ToF camera whose p1, p2 are 1e-4, freeing them left the residual unchanged (0.102 px either
-  way) and moved cx by 0.8 px. The calibration is done both ways on the same views, and the
-  extra-sum-of-squares F test decides (:data:`TANGENTIAL_P_VALUE`); held at 0, p1 and p2 are
+  them where the lens has next to none spends the views' information on noise: on rendered views
+  of a ToF camera whose p1, p2 are 1e-4, freeing them left the residual unchanged (0.102 px
+  either way) and moved cx by 0.8 px. The calibration is done both ways on the same views, and
+  the extra-sum-of-squares F test decides (:data:`TANGENTIAL_P_VALUE`); held at 0, p1 and p2 are
   written as 0 and their verdicts say ``not determined`` with the test's figures. Holding them
   is an assumption the views could not refute, not a measurement: every other parameter's
-  standard deviation then adds, in quadrature, how far it moved between the two fits (on
-  eleven random realities this kept every principal point within 2 of its standard deviations,
-  where the held fit's own spread alone left two 5 apart).
-
-The verdicts (:mod:`calibration.verdicts`), one per written key (``camera.fx_px`` ...
-``camera.distortion.p2``):
-
+  standard deviation then adds, in quadrature, how far it moved between the two fits (on eleven
+  random realities this kept every principal point within 2 of its standard deviations, where
+  the held fit's own spread alone left two 5 apart).  The verdicts
+  (:mod:`calibration.verdicts`), one per written key (``camera.fx_px`` ...
+  ``camera.distortion.p2``):
 - **explained**: the lens model must explain the corners. Reprojection residuals that depend
   on where a corner is in the image are the model's error; those that differ from view to view
   are the corners' noise (detection, print, a board not quite flat). The image is cut into

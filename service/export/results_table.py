@@ -60,7 +60,7 @@ def result_dict(r: PoseResultRow) -> dict[str, Any]:
 def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
     """``depth_diff_median_mm``, ..., ``grey_ssim``, ``depth_mse``, ... from a
     ``ComparisonReport.to_dict()`` (the ToF figures first)."""
-    flat: dict[str, Any] = {"camera_data": metrics.get("camera_data")}
+    flat: dict[str, Any] = {}
     tof = metrics.get("tof") or {}
     for f in TOF_FIELDS:
         flat[f] = tof.get(f)
@@ -85,6 +85,7 @@ def flat_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
         values = (explained.get(twin) or {}).get("tof") or {}
         for f in TOF_FIELDS:
             flat[f"{twin}_{f}"] = values.get(f)
+    flat["camera_data"] = metrics.get("camera_data")  # raw, or royale's processed depth
     return flat
 
 
