@@ -27,10 +27,12 @@ Images in, intrinsics, a per-view report and verdicts out. Any camera, any image
   written as 0 and their verdicts say ``not determined`` with the test's figures. Holding them
   is an assumption the views could not refute, not a measurement: every other parameter's
   standard deviation then adds, in quadrature, how far it moved between the two fits (on eleven
-  random realities this kept every principal point within 2 of its standard deviations, where
-  the held fit's own spread alone left two 5 apart).  The verdicts
-  (:mod:`calibration.verdicts`), one per written key (``camera.fx_px`` ...
-  ``camera.distortion.p2``):
+  random realities this kept every principal point within 2.5 of its standard deviations,
+  where the held fit's own spread alone left two 5 apart).
+
+The verdicts (:mod:`calibration.verdicts`), one per written key (``camera.fx_px`` ...
+``camera.distortion.p2``):
+
 - **explained**: the lens model must explain the corners. Reprojection residuals that depend
   on where a corner is in the image are the model's error; those that differ from view to view
   are the corners' noise (detection, print, a board not quite flat). The image is cut into
