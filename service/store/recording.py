@@ -155,6 +155,9 @@ class RecordingWriter:
     def __init__(self, path: str | Path, campaign: RecordedCampaign) -> None:
         self.path = Path(path)
         self.campaign = campaign
+        #: the file at ``path`` was checked to be a recording (once: a long campaign appends
+        #: thousands of units, and reading its index each time would grow with it)
+        self._checked = False
 
     def append(self, unit: RecordedUnit) -> None:
         """Write ``unit``'s frames (each a group, in order) and close the file."""
@@ -162,8 +165,9 @@ class RecordingWriter:
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         new = not self.path.exists()
-        if not new:
+        if not new and not self._checked:
             Recording(self.path)  # refuses a file that is not a recording
+        self._checked = True
         with h5py.File(self.path, "a") as f:
             if new:
                 f.attrs.update({"format": FORMAT, "version": VERSION,
@@ -306,9 +310,10 @@ def recorded_poses(campaign: RecordedCampaign,
     """The campaign's poses, each with as many repeats as were recorded in a row from repeat 0
     (a recording stopped early replays the units it holds)."""
     out = []
+    recorded = set(units)
     for i, (angle, suns, _repeats) in enumerate(campaign.poses):
         n = 0
-        while (i, n) in units:
+        while (i, n) in recorded:
             n += 1
         out.append((angle, suns, n))
     return out
