@@ -130,6 +130,12 @@ class SourceCamera:
         source = self._make_source()
         try:
             identity = source.open(self.camera_id, self.mode)
+            served = identity.get("mode", "raw")  # a bridge older than the mode serves raw
+            if served != self.mode:
+                raise CameraError(
+                    f"{self._who()} serves {served} frames, {self.mode} were asked for: this "
+                    "camera bridge predates the camera mode; update toftwin_camera_bridge.py "
+                    "on the camera's PC")
             self._opened_id = identity.get("id") or self.camera_id
             self._source = source
             self.configure(self._use_case)

@@ -24,13 +24,15 @@ from drivers.rig import Rig
 from service.errors import ConflictError, InsufficientStorageError, NotFoundError
 from service.lab.calibration import Twin, active_twin, effective_twin
 from service.lab.poses import check_angle, check_spp
-from service.lab.requests import CampaignCreate
+from service.lab.requests import CampaignCreate, MaskSpec
 from service.lab.runner import CampaignRunner
 from service.lab.scenes import (
     SceneSource,
+    bundled_scenes,
     check_mask,
     image_shape,
     require_mounted,
+    resolve_scene,
     scene_from_request,
 )
 from service.settings import Settings
@@ -102,15 +104,33 @@ def _create_replay(req: CampaignCreate, *, sessions: sessionmaker, settings: Set
     directory's ``recordings/``, replayed with the active calibration (as every campaign)."""
     assert req.recording is not None  # CampaignCreate checked it
     recording = Recording(recordings_dir(settings) / req.recording)
+    recorded = recording.campaign
+    # a recording may come from elsewhere: its scene, mask, spp and poses are checked as a
+    # request's are (a recorded scene as an inline one: no files of this server's)
     scene = (scene_from_request(settings, req.scene) if req.scene is not None
-             else recorded_scene(recording.campaign, settings))
+             else recorded_scene(recorded, settings, trusted=False))
     given = req.model_fields_set
+    mask = req.mask if "mask" in given else _recorded_mask(recorded.mask)
+    check_mask(mask, scene, image_shape(scene, None))
+    spp = check_spp(req.spp if req.spp is not None else recorded.spp, settings)
+    poses = recorded_poses(recorded, recording.units())
+    if len(poses) > settings.max_poses:
+        raise InvalidInputError("recording", f"{len(poses)} poses; allowed: 1 to "
+                                f"{settings.max_poses} (max_poses)")
+    if any(p[2] > settings.max_repeats for p in poses):
+        raise InvalidInputError("recording", f"more than {settings.max_repeats} repeats of a "
+                                "pose (max_repeats)")
     return create_replay(
         sessions, recording, name=req.name, scene=scene,
-        twin=effective_twin(active_twin(sessions), scene),
-        mask=req.mask.model_dump(mode="json") if "mask" in given else None,
-        seed=req.seed if "seed" in given else None,
-        spp=check_spp(req.spp, settings) if req.spp is not None else None)
+        twin=effective_twin(active_twin(sessions), scene), mask=mask.model_dump(mode="json"),
+        seed=req.seed if "seed" in given else None, spp=spp)
+
+
+def _recorded_mask(data: dict[str, Any]) -> MaskSpec:
+    try:
+        return MaskSpec.model_validate(data)
+    except ValueError as exc:
+        raise InvalidInputError("recording", f"its mask is not valid: {exc}") from None
 
 
 def create_replay(
@@ -144,9 +164,26 @@ def create_replay(
     return campaign_id
 
 
-def recorded_scene(recorded: RecordedCampaign, settings: Settings) -> SceneSource:
-    """The scene a recording was captured with; its files are looked for where they were, else
-    in this service's bundled scenes (a recording made on another PC)."""
+def recorded_scene(recorded: RecordedCampaign, settings: Settings,
+                   trusted: bool = True) -> SceneSource:
+    """The scene a recording was captured with.
+
+    A bundled scene (no folder recorded) that this service bundles unchanged is that one.
+    Otherwise a ``trusted`` caller (``toftwin replay``, the user's own files) looks for its
+    files where they were, else among the bundled scenes (a recording made on another PC); the
+    service (not trusted) takes it as an inline scene: checked and bounded as a request's, no
+    files of the server's named.
+    """
+    if recorded.scene_base_dir is None and recorded.scene_name in bundled_scenes(
+            Path(settings.examples_dir)):
+        bundled = resolve_scene(recorded.scene_name, settings.examples_dir,
+                                settings.max_scene_objects)
+        if json.loads(bundled.to_json()) == recorded.scene:
+            return bundled
+    if not trusted:
+        return resolve_scene(recorded.scene, settings.examples_dir, settings.max_scene_objects,
+                             field="recording", max_pixels=settings.max_scene_pixels,
+                             max_triangles=settings.max_scene_triangles)
     base_dir = Path(recorded.scene_base_dir or settings.examples_dir)
     if not base_dir.is_dir():
         base_dir = Path(settings.examples_dir)

@@ -308,9 +308,9 @@ class CampaignRunner:
                 except DeviceError as exc:
                     to, error = self._device_fault(run, exc)
                     break
-                run.progress.record(plan, m)
                 in_flight.append((plan, m, submit(self.executor, plan, m,
                                                   settings.threads_per_job)))
+                run.progress.record(plan, m)  # a failure here removes its frame (in flight)
                 while len(in_flight) >= settings.depth:
                     self._finish(run, *in_flight.popleft())
             while in_flight:
@@ -338,8 +338,13 @@ class CampaignRunner:
                                            run.stop.is_set, current)
             except DeviceError as exc:
                 return self._device_fault(run, exc)
+            try:  # the sweep's frames are recorded once it is through
+                for plan, m in measured:
+                    run.progress.record(plan, m)
+            except BaseException:
+                self.store.delete([m.row.id for _plan, m in measured])
+                raise
             for plan, m in measured:
-                run.progress.record(plan, m)
                 self._finish(run, plan, m, submit(self.executor, plan, m,
                                                   settings.threads_per_job))
             if run.stop.is_set():

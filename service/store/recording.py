@@ -36,6 +36,7 @@ as its last recording.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -175,11 +176,35 @@ class RecordingWriter:
                                 "campaign": self.campaign.to_json()})
             frames = f.require_group("frames")
             for capture, raw in enumerate(unit.raws):
-                _write_frame(frames.create_group(f"{len(frames):06d}"), raw, unit, capture)
+                attrs = _frame_attrs(raw, unit, capture)  # a meta that is no JSON fails here
+                name = f"{len(frames):06d}"
+                try:
+                    _write_frame(frames.create_group(name), raw, attrs)
+                except BaseException:  # no half-written group stays (a full disk)
+                    with contextlib.suppress(Exception):
+                        del frames[name]
+                    raise
 
 
-def _write_frame(g: Any, raw: RawFrame | ProcessedDepthFrame, unit: RecordedUnit,
-                 capture: int) -> None:
+def _frame_attrs(raw: RawFrame | ProcessedDepthFrame, unit: RecordedUnit,
+                 capture: int) -> dict[str, Any]:
+    temp = raw.illumination_temperature_c
+    return {
+        "kind": camera_data(raw),
+        "frequencies_hz": np.asarray(raw.frequencies_hz, dtype=np.float64),
+        "exposure_s": float(raw.exposure_s), "timestamp_s": float(raw.timestamp_s),
+        "illumination_temperature_c": math.nan if temp is None else float(temp),
+        "meta": json.dumps(raw.meta, sort_keys=True, default=_jsonable),
+        "use_case": unit.use_case, "pose_index": unit.pose_index, "repeat": unit.repeat,
+        "capture": capture, "turntable_angle_deg": unit.state.turntable_angle_deg,
+        "solar_suns": unit.state.solar_suns, "shutter_open": unit.state.shutter_open,
+        "turning_deg_s": float(unit.turning_deg_s),
+    }
+
+
+def _write_frame(g: Any, raw: RawFrame | ProcessedDepthFrame, attrs: dict[str, Any]) -> None:
+    """The frame's datasets, then its attributes (a group without them is incomplete: the
+    reader skips it)."""
     def data(name: str, array: np.ndarray) -> None:
         g.create_dataset(name, data=array, chunks=array.shape, compression="gzip",
                          compression_opts=GZIP_LEVEL, shuffle=True)
@@ -194,18 +219,7 @@ def _write_frame(g: Any, raw: RawFrame | ProcessedDepthFrame, unit: RecordedUnit
         data("sbi_limit", np.asarray(raw.sbi_limit, dtype=bool))
         if raw.taps is not None:
             data("taps", np.asarray(raw.taps, dtype=np.float32))
-    temp = raw.illumination_temperature_c
-    g.attrs.update({
-        "kind": camera_data(raw),
-        "frequencies_hz": np.asarray(raw.frequencies_hz, dtype=np.float64),
-        "exposure_s": float(raw.exposure_s), "timestamp_s": float(raw.timestamp_s),
-        "illumination_temperature_c": math.nan if temp is None else float(temp),
-        "meta": json.dumps(raw.meta, sort_keys=True, default=_jsonable),
-        "use_case": unit.use_case, "pose_index": unit.pose_index, "repeat": unit.repeat,
-        "capture": capture, "turntable_angle_deg": unit.state.turntable_angle_deg,
-        "solar_suns": unit.state.solar_suns, "shutter_open": unit.state.shutter_open,
-        "turning_deg_s": float(unit.turning_deg_s),
-    })
+    g.attrs.update(attrs)
 
 
 def _jsonable(value: Any) -> Any:
@@ -228,43 +242,57 @@ class Recording:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
+        name = self.path.name  # messages name the file, never a folder of the server's
         if not self.path.is_file():
-            raise RecordingError("recording", f"'{self.path}' does not exist")
+            raise RecordingError("recording", f"'{name}' does not exist")
+        #: groups without their attributes (a write that failed half-way), skipped
+        self.incomplete: list[str] = []
         try:
             with h5py.File(self.path, "r") as f:
                 if f.attrs.get("format") != FORMAT:
                     raise RecordingError(
-                        "recording", f"'{self.path}' is HDF5 but not a toftwin recording "
+                        "recording", f"'{name}' is HDF5 but not a toftwin recording "
                         f"(its 'format' attribute is {f.attrs.get('format')!r})")
                 version = int(f.attrs.get("version", 0))
                 if version != VERSION:
                     raise RecordingError(
-                        "recording", f"'{self.path}' is version {version}; this toftwin reads "
+                        "recording", f"'{name}' is version {version}; this toftwin reads "
                         f"version {VERSION}")
                 self.campaign = RecordedCampaign.from_json(str(f.attrs["campaign"]))
                 #: (pose_index, repeat) -> the groups of its frames, by capture (the last
                 #: recording of a unit recorded twice)
                 self.index: dict[tuple[int, int], dict[int, str]] = {}
-                for name, g in f.get("frames", {}).items():
-                    key = (int(g.attrs["pose_index"]), int(g.attrs["repeat"]))
+                frames = f.get("frames", {})
+                for group in sorted(frames, key=lambda n: (len(n), n)):  # capture order
+                    a = frames[group].attrs
+                    if "capture" not in a:
+                        self.incomplete.append(group)
+                        continue
+                    key = (int(a["pose_index"]), int(a["repeat"]))
                     captures = self.index.setdefault(key, {})
-                    if int(g.attrs["capture"]) == 0:
+                    if int(a["capture"]) == 0:
                         captures.clear()
-                    captures[int(g.attrs["capture"])] = name
+                    captures[int(a["capture"])] = group
         except OSError as exc:
-            raise RecordingError("recording", f"'{self.path}' is not an HDF5 file: {exc}") \
-                from None
+            raise RecordingError("recording", f"'{name}' is not an HDF5 file: {exc}") from None
+        except (KeyError, ValueError, TypeError) as exc:  # a damaged campaign or frame
+            raise RecordingError("recording", f"'{name}' is damaged: {exc!r}") from None
 
     @property
     def n_frames(self) -> int:
         return sum(len(c) for c in self.index.values())
+
+    def _turning(self, group: str) -> bool:
+        with h5py.File(self.path, "r") as f:
+            return float(f["frames"][group].attrs["turning_deg_s"]) != 0.0
 
     def units(self) -> list[tuple[int, int]]:
         """The recorded units (pose_index, repeat), sorted."""
         return sorted(self.index)
 
     def unit(self, pose_index: int, repeat: int, captures: int = 1) -> RecordedUnit:
-        """The recorded frames of one unit (its first ``captures`` of them).
+        """The recorded frames of one unit (its first ``captures`` of them, or all it has when
+        fewer were captured while turning: a turning sweep takes one frame per unit).
 
         Raises
         ------
@@ -272,6 +300,8 @@ class Recording:
             The unit, or as many captures of it, was not recorded.
         """
         names = self.index.get((pose_index, repeat), {})
+        if 0 in names and captures > len(names) and self._turning(names[0]):
+            captures = len(names)
         if any(k not in names for k in range(captures)):
             raise RecordingError(
                 "recording", f"'{self.path.name}' holds {len(names)} frame(s) of pose "

@@ -29,7 +29,7 @@ from service.api.deps import (
 from service.api.events import status_events
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.api.security_headers import self_contained_document
-from service.errors import NotFoundError
+from service.errors import ConflictError, NotFoundError
 from service.export.bluesky import iter_campaign_documents
 from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
@@ -200,13 +200,17 @@ def get_campaign_report(
 @router.get("/{campaign_id}/recording", response_class=FileResponse, responses={
     200: {"content": {"application/x-hdf5": {}},
           "description": "The campaign's recording (HDF5, docs/recordings.md)"},
-    **errors(404)})
+    **errors(404, 409)})
 def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep) -> FileResponse:
     """The recording a campaign created with ``record: true`` writes: every captured raw frame
     with its rig state, to replay (``toftwin replay``, a campaign with source 'recording') or
     to share. 404 for a campaign that records nothing or has captured nothing yet."""
     with sessions() as s:
         row = queries.require_campaign(s, campaign_id)
+    if row.state == "running" and row.record_path is not None:
+        raise ConflictError(f"campaign {campaign_id} is running and still writing its "
+                            "recording; download it once the campaign is paused, completed or "
+                            "cancelled")
     path = lab_campaigns.recording_file(row)
     if path is None:
         raise NotFoundError(f"campaign {campaign_id} has no recording"

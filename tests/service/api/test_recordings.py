@@ -16,8 +16,16 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from drivers.rig import RigState
 from service.cli import app
-from service.store.recording import FORMAT, Recording
+from service.store.recording import (
+    FORMAT,
+    RecordedCampaign,
+    RecordedUnit,
+    Recording,
+    RecordingWriter,
+)
+from sim_core.raw import RawFrame
 from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 from tests.service.api.test_calibration import CALIBRATION
 
@@ -154,3 +162,48 @@ def test_turning_and_object_fit_campaigns_replay_exactly(make_client, tmp_path, 
         assert replay["object_fit"]["state"] == "fitted"
     else:
         assert all("edges" in r["metrics"] for r in replayed)
+
+
+def _tiny_raw(meta=None, phases=None) -> RawFrame:
+    z = np.zeros((2, 3), np.float32)
+    return RawFrame(np.zeros((1, 4, 2, 3), np.float32) if phases is None else phases, z,
+                    np.array([60.24e6]), z.astype(bool), z.astype(bool), 500e-6, 1.0,
+                    meta=meta or {})
+
+
+def test_a_failed_write_leaves_the_recording_whole(tmp_path):
+    """A unit whose frame cannot be written (metadata that is no JSON, data of the wrong
+    kind: as a full disk fails half-way) leaves no group behind; the units before and after it
+    read back."""
+    camp = RecordedCampaign("x", "s", {}, None, {}, 0, 1, [(0.0, 1.0, 3)])
+    writer = RecordingWriter(tmp_path / "r.h5", camp)
+    state = RigState(0.0, 1.0, True)
+    writer.append(RecordedUnit(0, 0, state, "MODE_5_45FPS_500", 0.0, [_tiny_raw()]))
+    with pytest.raises(TypeError):
+        writer.append(RecordedUnit(0, 1, state, "MODE_5_45FPS_500", 0.0,
+                                   [_tiny_raw(meta={"x": object()})]))
+    with pytest.raises(ValueError):
+        writer.append(RecordedUnit(0, 1, state, "MODE_5_45FPS_500", 0.0,
+                                   [_tiny_raw(phases=np.array(["not a number"]))]))
+    writer.append(RecordedUnit(0, 2, state, "MODE_5_45FPS_500", 0.0, [_tiny_raw()]))
+    rec = Recording(tmp_path / "r.h5")
+    assert rec.units() == [(0, 0), (0, 2)] and rec.incomplete == []
+    assert rec.unit(0, 2).raws[0].timestamp_s == 1.0
+
+
+def test_a_recording_from_elsewhere_is_checked_as_a_request(client, tmp_path):
+    """A recording dropped into recordings/ whose scene names files of the server's is taken as
+    an inline scene, and refused; its messages name no server folder."""
+    scene = {"name": "evil", "calibration": "/etc/passwd", "camera": {
+        "pose": {"position_m": [0, -1, 0], "look_at_m": [0, 0, 0]}}}
+    camp = RecordedCampaign("x", "evil", scene, "/etc", {"kind": "turntable"}, 0, 4,
+                            [(0.0, 1.0, 1)])
+    RecordingWriter(tmp_path / "recordings" / "other.h5", camp).append(
+        RecordedUnit(0, 0, RigState(0.0, 1.0, True), "MODE_5_45FPS_500", 0.0, [_tiny_raw()]))
+    res = client.post("/api/v1/campaigns", headers=AUTH, json={
+        "name": "r", "source": "recording", "recording": "other.h5"})
+    body = problem(res, 422)
+    assert "calibration" in str(body) and str(tmp_path) not in res.text
+    missing = client.post("/api/v1/campaigns", headers=AUTH, json={
+        "name": "r", "source": "recording", "recording": "gone.h5"})
+    assert "gone.h5" in missing.text and str(tmp_path) not in missing.text
