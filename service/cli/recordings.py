@@ -190,6 +190,7 @@ def replay_command(
     """Compare every recorded frame with the twin again, offline: a campaign's results."""
     from service.lab.calibration import Twin
     from service.lab.campaigns import create_replay, recorded_scene
+    from service.store import queries
     from service.store.recording import Recording
     from sim_core.twin_file import load_calibration, parse_twin
 
@@ -214,8 +215,6 @@ def replay_command(
         runner.start(cid)
         runner.wait()
         _write_results(sessions, store, cid, out)
-        from service.store import queries
-
         with sessions() as s:
             row = queries.require_campaign(s, cid)
             state, error, done = row.state, row.error, len(queries.done_units(s, cid))

@@ -282,10 +282,6 @@ class Recording:
     def n_frames(self) -> int:
         return sum(len(c) for c in self.index.values())
 
-    def _turning(self, group: str) -> bool:
-        with h5py.File(self.path, "r") as f:
-            return float(f["frames"][group].attrs["turning_deg_s"]) != 0.0
-
     def units(self) -> list[tuple[int, int]]:
         """The recorded units (pose_index, repeat), sorted."""
         return sorted(self.index)
@@ -300,13 +296,14 @@ class Recording:
             The unit, or as many captures of it, was not recorded.
         """
         names = self.index.get((pose_index, repeat), {})
-        if 0 in names and captures > len(names) and self._turning(names[0]):
-            captures = len(names)
-        if any(k not in names for k in range(captures)):
-            raise RecordingError(
-                "recording", f"'{self.path.name}' holds {len(names)} frame(s) of pose "
-                f"{pose_index} repeat {repeat}; the replay needs {captures}")
         with h5py.File(self.path, "r") as f:
+            first = f["frames"][names[0]].attrs if 0 in names else None
+            if first is not None and float(first["turning_deg_s"]) != 0.0:
+                captures = min(captures, len(names))
+            if any(k not in names for k in range(captures)):
+                raise RecordingError(
+                    "recording", f"'{self.path.name}' holds {len(names)} frame(s) of pose "
+                    f"{pose_index} repeat {repeat}; the replay needs {captures}")
             groups = [f["frames"][names[k]] for k in range(captures)]
             a = groups[0].attrs
             state = RigState(float(a["turntable_angle_deg"]), float(a["solar_suns"]),
