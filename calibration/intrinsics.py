@@ -28,6 +28,40 @@ OUTLIER_FLOOR_PX = 0.5
 #: smallest singular value of the unit board normals (over sqrt(views)) below which the views
 #: are parallel to one line
 MIN_NORMAL_SPREAD = 0.08
+#: a view's corners must span the board's plane: the smaller singular value of their centred
+#: board coordinates at least this fraction of the larger (0: all on one line, whose homography,
+#: OpenCV's start, does not exist)
+MIN_CORNER_SPAN_RATIO = 0.05
+
+
+def corner_span_ratio(object_points_m: np.ndarray) -> float:
+    """How far a view's corners span the board's plane: the smaller over the larger singular
+    value of their centred board coordinates (x, y) [-]; 0 for corners on one line or fewer
+    than three.
+
+    >>> corner_span_ratio(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]))
+    0.0
+    >>> round(corner_span_ratio(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]])), 3)
+    1.0
+    """
+    xy = np.asarray(object_points_m, dtype=np.float64).reshape(len(object_points_m), -1)[:, :2]
+    if len(xy) < 3:
+        return 0.0
+    s = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False)
+    return 0.0 if not s[0] > 0.0 else float(s[1] / s[0])
+
+
+def _unusable_reason(view: BoardView) -> str | None:
+    """Why ``view`` cannot enter a calibration (too few corners, corners on one line), or
+    None."""
+    if len(view.corner_ids) < MIN_CORNERS_PER_VIEW:
+        return f"{len(view.corner_ids)} corners (fewer than {MIN_CORNERS_PER_VIEW})"
+    span = corner_span_ratio(view.object_points_m)
+    if span < MIN_CORNER_SPAN_RATIO:
+        return (f"its {len(view.corner_ids)} corners lie on one line (span ratio {span:.3f}, "
+                f"needs {MIN_CORNER_SPAN_RATIO}): a view must show at least two rows and two "
+                "columns of corners")
+    return None
 
 
 @dataclass(frozen=True)
@@ -127,10 +161,9 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
     (``zero_tangential``: they are then absent from ``std``) when the views do not call for
     them.
     """
-    rejected = [{"name": v.name, "reason": f"{len(v.corner_ids)} corners (fewer than "
-                 f"{MIN_CORNERS_PER_VIEW})"} for v in views
-                if len(v.corner_ids) < MIN_CORNERS_PER_VIEW]
-    use = [v for v in views if len(v.corner_ids) >= MIN_CORNERS_PER_VIEW]
+    reasons = {id(v): _unusable_reason(v) for v in views}
+    rejected = [{"name": v.name, "reason": reasons[id(v)]} for v in views if reasons[id(v)]]
+    use = [v for v in views if reasons[id(v)] is None]
     if len(use) < MIN_VIEWS:
         raise InvalidInputError(
             "intrinsics.views",

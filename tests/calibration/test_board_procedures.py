@@ -159,6 +159,29 @@ def test_an_outlier_view_is_rejected_with_its_reason():
     assert "reprojection RMS" in res.rejected[0]["reason"]
 
 
+@pytest.mark.parametrize(("n", "line", "from_preset"),
+                         [(6, "row", False), (9, "column", False), (7, "row", True)])
+def test_a_view_whose_corners_lie_on_one_line_is_rejected_with_its_reason(n, line,
+                                                                         from_preset):
+    """A view of one row (or column) of corners has no homography, OpenCV's start without a
+    guess (a user's photos: OpenCV asserted on it): it is rejected naming why, and the
+    calibration goes on without it."""
+    views, _, _, _, _ = _synthetic(4)
+    good = views[0]
+    square_m = 0.05
+    k = np.arange(n, dtype=np.float64) * square_m
+    obj = np.stack([k, np.zeros(n), np.zeros(n)] if line == "row"
+                   else [np.zeros(n), k, np.zeros(n)], axis=1)
+    img = np.stack([40.0 + 10.0 * np.arange(n), np.full(n, 80.0)], axis=1)
+    views.append(BoardView("one_line", 0.0, good.mounting, obj, img, np.arange(n),
+                           good.image_shape))
+    res = calibrate_intrinsics(views, (171, 224), guess_from_preset=from_preset,
+                               refuse_degenerate=from_preset)
+    assert [r["name"] for r in res.rejected] == ["one_line"]
+    assert "lie on one line" in res.rejected[0]["reason"]
+    assert "one_line" not in res.per_view_rms_px
+
+
 def test_boards_that_all_contain_one_line_are_refused():
     """Upright boards on one axis: every normal is perpendicular to the axis (degenerate)."""
     upright = tuple(f for f in DEFAULT_FIXTURES if f.tilt_deg == 0.0)
