@@ -208,7 +208,8 @@ def replay_command(
         try:
             source = rig_scene(scene) if scene is not None else recorded_scene(rec.campaign,
                                                                                settings)
-            cid = create_replay(sessions, rec, name=f"replay of {recording.name}",
+            cid = create_replay(sessions, rec, settings.data_dir,
+                                name=f"replay of {recording.name}",
                                 scene=source, twin=Twin.of(cal), spp=spp)
         except InvalidInputError as exc:
             fail_invalid(exc)

@@ -39,7 +39,13 @@ from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
-from service.store.recording import RecordedCampaign, Recording, recorded_poses
+from service.store.recording import (
+    RecordedCampaign,
+    Recording,
+    recorded_poses,
+    resolve_stored_path,
+    stored_path,
+)
 from sim_core.errors import InvalidInputError
 
 
@@ -88,8 +94,9 @@ def create_campaign(
             calibration_hash=twin.hash,
             object_fit=None if fit is None else fit.model_dump(mode="json"),
             turning_deg_s=req.turning_deg_s,
-            record_path=(str(recordings_dir(settings) / f"{campaign_id}.h5") if req.record
-                         else None),
+            record_path=(stored_path(settings.data_dir,
+                                     recordings_dir(settings) / f"{campaign_id}.h5")
+                         if req.record else None),
         )
     return campaign_id
 
@@ -121,7 +128,7 @@ def _create_replay(req: CampaignCreate, *, sessions: sessionmaker, settings: Set
         raise InvalidInputError("recording", f"more than {settings.max_repeats} repeats of a "
                                 "pose (max_repeats)")
     return create_replay(
-        sessions, recording, name=req.name, scene=scene,
+        sessions, recording, settings.data_dir, name=req.name, scene=scene,
         twin=effective_twin(active_twin(sessions), scene), mask=mask.model_dump(mode="json"),
         seed=req.seed if "seed" in given else None, spp=spp)
 
@@ -134,7 +141,8 @@ def _recorded_mask(data: dict[str, Any]) -> MaskSpec:
 
 
 def create_replay(
-    sessions: sessionmaker, recording: Recording, *, name: str, scene: SceneSource, twin: Twin,
+    sessions: sessionmaker, recording: Recording, data_dir: str | Path, *, name: str,
+    scene: SceneSource, twin: Twin,
     mask: dict[str, Any] | None = None, seed: int | None = None, spp: int | None = None,
 ) -> str:
     """Store a campaign that replays ``recording`` (:mod:`service.store.recording`); returns
@@ -160,7 +168,8 @@ def create_replay(
             object_twin=(None if recorded.object_twin is None else
                          (recorded.object_twin, recorded.object_twin_hash,
                           recorded.object_fit_report)),
-            turning_deg_s=recorded.turning_deg_s, replay_path=str(recording.path))
+            turning_deg_s=recorded.turning_deg_s,
+            replay_path=stored_path(data_dir, recording.path))
     return campaign_id
 
 
@@ -248,7 +257,8 @@ def campaign_status(
         "updated_at": row.updated_at, "finished_at": row.finished_at,
         "links": {k: f"{base}/{k}" for k in ("events", "results", "report", "documents")}
         | {"self": base}
-        | ({"recording": f"{base}/recording"} if recording_file(row) is not None else {}),
+        | ({"recording": f"{base}/recording"}
+           if recording_file(row, runner.settings.data_dir) is not None else {}),
     }
 
 
@@ -257,12 +267,14 @@ def _recording_name(row: Any) -> str | None:
     return None if path is None else Path(path).name
 
 
-def recording_file(row: Any) -> Path | None:
-    """The recording a campaign wrote (``"record": true``), once it holds a frame; None
-    otherwise (a replay's is the one it read, named in its ``recording``)."""
-    if row.record_path is None or not Path(row.record_path).is_file():
+def recording_file(row: Any, data_dir: str | Path) -> Path | None:
+    """The recording a campaign wrote (``"record": true``) in the data directory ``data_dir``,
+    once it holds a frame; None otherwise (a replay's is the one it read, named in its
+    ``recording``)."""
+    if row.record_path is None:
         return None
-    return Path(row.record_path)
+    path = resolve_stored_path(data_dir, row.record_path)
+    return path if path.is_file() else None
 
 
 def object_fit_public(row) -> dict[str, Any] | None:

@@ -66,7 +66,13 @@ from service.settings import Settings
 from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
-from service.store.recording import RecordedCampaign, RecordedUnit, Recording, RecordingWriter
+from service.store.recording import (
+    RecordedCampaign,
+    RecordedUnit,
+    Recording,
+    RecordingWriter,
+    resolve_stored_path,
+)
 from sim_core.errors import InvalidInputError
 from sim_core.twin_file import twin_hash
 
@@ -273,12 +279,14 @@ class CampaignRunner:
         todo = [(p, r) for p in poses for r in range(p.repeats) if (p.pose_index, r) not in done]
         in_flight: collections.deque[tuple[PosePlan, Measurement, Any]] = collections.deque()
         to, error = "completed", None
-        replay = None if camp.replay_path is None else Recording(camp.replay_path)
+        data_dir = self.settings.data_dir
+        replay = (None if camp.replay_path is None
+                  else Recording(resolve_stored_path(data_dir, camp.replay_path)))
         if camp.record_path is not None:
             with self.sessions() as s:  # with the object twin, if it was fitted just now
                 recorded = RecordedCampaign.of_row(queries.get_campaign(s, run.id), poses,
                                                    self.settings.examples_dir)
-            recorder = RecordingWriter(camp.record_path, recorded)
+            recorder = RecordingWriter(resolve_stored_path(data_dir, camp.record_path), recorded)
             run.progress.record = lambda plan, m: recorder.append(recorded_unit(plan, m))
         if camp.turning_deg_s is not None and replay is None:
             plans = [PosePlan(scene, p.turntable_deg, p.solar_suns, mask, camp.seed, camp.spp,

@@ -48,6 +48,10 @@ from sim_core.tof import ToFImage
 FRAME_ID = re.compile(r"^[0-9a-f]{32}$")
 #: the files of a frame folder (:data:`sim_core.frame_io.FRAME_FILES`)
 SIMULATED_FILES = frame_io.FRAME_FILES
+#: the files a folder that does not read is searched for the damaged one: a measured folder of
+#: royale's processed depth keeps ``depth_points.npz`` instead of ``raw.npz`` (a file that is
+#: not there is no damage)
+DIAGNOSED_FILES = (*SIMULATED_FILES, frame_io.DEPTH_POINTS_NPZ)
 _PARTIAL = ".partial-"
 
 
@@ -152,7 +156,7 @@ class FrameStore:
         try:
             return frame_io.read_frame(folder)
         except _READ_ERRORS as exc:
-            for name in SIMULATED_FILES:  # which file: the first that does not read whole
+            for name in DIAGNOSED_FILES:  # which file: the first that does not read whole
                 why = file_damage(folder / name)
                 if why is not None:
                     raise self.damaged(frame_id, name, why) from exc

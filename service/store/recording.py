@@ -55,7 +55,8 @@ from sim_core.processed_depth import CAMERA_DATA_DEPTH, ProcessedDepthFrame, cam
 from sim_core.raw import RawFrame
 
 __all__ = ["FORMAT", "VERSION", "RecordedCampaign", "RecordedUnit", "Recording",
-           "RecordingError", "RecordingWriter", "recorded_poses"]
+           "RecordingError", "RecordingWriter", "recorded_poses", "resolve_stored_path",
+           "stored_path"]
 
 #: the root attribute ``format`` of every recording
 FORMAT = "toftwin-recording"
@@ -63,6 +64,37 @@ FORMAT = "toftwin-recording"
 VERSION = 1
 #: gzip level of the frames' datasets (6: zlib's default; level 9 saves ~1 % more, 3x slower)
 GZIP_LEVEL = 6
+
+
+def stored_path(data_dir: str | Path, path: str | Path) -> str:
+    """How a campaign row names a recording file: relative to the data directory when the file
+    is inside it (``recordings/<id>.h5``: the folder can be moved or restored elsewhere), else
+    absolute (a recording ``toftwin replay`` reads from wherever it is).
+
+    >>> stored_path("/srv/toftwin", "/srv/toftwin/recordings/a.h5")
+    'recordings/a.h5'
+    >>> stored_path("/srv/toftwin", "/mnt/share/b.h5")
+    '/mnt/share/b.h5'
+    """
+    base, file = Path(data_dir).absolute(), Path(path).absolute()
+    try:
+        return file.relative_to(base).as_posix()
+    except ValueError:
+        return str(file)
+
+
+def resolve_stored_path(data_dir: str | Path, stored: str) -> Path:
+    """The file a campaign row's recording path (:func:`stored_path`) names, in ``data_dir``;
+    an absolute one (rows written before paths were stored relative, or a file outside the
+    data directory) as it is.
+
+    >>> resolve_stored_path("/srv/toftwin", "recordings/a.h5").as_posix()
+    '/srv/toftwin/recordings/a.h5'
+    >>> resolve_stored_path("/srv/toftwin", "/old/place/recordings/a.h5").as_posix()
+    '/old/place/recordings/a.h5'
+    """
+    path = Path(stored)
+    return path if path.is_absolute() else Path(data_dir) / path
 
 
 @dataclass(frozen=True)

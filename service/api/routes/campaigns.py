@@ -201,7 +201,8 @@ def get_campaign_report(
     200: {"content": {"application/x-hdf5": {}},
           "description": "The campaign's recording (HDF5, docs/recordings.md)"},
     **errors(404, 409)})
-def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep) -> FileResponse:
+def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep,
+                           settings: SettingsDep) -> FileResponse:
     """The recording a campaign created with ``record: true`` writes: every captured raw frame
     with its rig state, to replay (``toftwin replay``, a campaign with source 'recording') or
     to share. 404 for a campaign that records nothing or has captured nothing yet."""
@@ -211,7 +212,7 @@ def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep) -> Fi
         raise ConflictError(f"campaign {campaign_id} is running and still writing its "
                             "recording; download it once the campaign is paused, completed or "
                             "cancelled")
-    path = lab_campaigns.recording_file(row)
+    path = lab_campaigns.recording_file(row, settings.data_dir)
     if path is None:
         raise NotFoundError(f"campaign {campaign_id} has no recording"
                             + ("" if row.record_path is None else " yet"))

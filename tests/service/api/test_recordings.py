@@ -207,3 +207,43 @@ def test_a_recording_from_elsewhere_is_checked_as_a_request(client, tmp_path):
     missing = client.post("/api/v1/campaigns", headers=AUTH, json={
         "name": "r", "source": "recording", "recording": "gone.h5"})
     assert "gone.h5" in missing.text and str(tmp_path) not in missing.text
+
+
+def test_a_data_directory_moved_elsewhere_keeps_its_recordings(make_client, tmp_path):
+    """A campaign row names its recording inside the data directory relative to it: after the
+    folder is moved (a lab restores its data on another machine), the recording still downloads,
+    a replay created before the move runs, and a recording campaign created before it writes
+    into the folder where it is now."""
+    import shutil
+
+    poses = POSES[:2]
+    before = tmp_path / "before"
+    client = make_client(before)
+    cid, live = _run(client, poses, record=True)
+    res = client.post("/api/v1/campaigns", headers=AUTH, json={
+        "name": "replay", "source": "recording", "recording": f"{cid}.h5"})
+    assert res.status_code == 201, res.text
+    replay_id = res.json()["id"]
+    res = client.post("/api/v1/campaigns", headers=AUTH,
+                      json={"name": "later", "poses": poses, "record": True})
+    assert res.status_code == 201, res.text
+    later_id = res.json()["id"]
+    client.__exit__(None, None, None)
+
+    after = tmp_path / "elsewhere" / "after"
+    shutil.move(before, after)
+    moved = make_client(after)
+    status = moved.get(f"/api/v1/campaigns/{cid}").json()
+    res = moved.get(status["links"]["recording"])
+    assert res.status_code == 200
+    assert res.content == (after / "recordings" / f"{cid}.h5").read_bytes()
+    for started in (replay_id, later_id):
+        assert moved.post(f"/api/v1/campaigns/{started}/start",
+                          headers=AUTH).status_code == 200
+        status = wait_campaign(moved, started, lambda s: s["state"] not in ("running",
+                                                                            "created"),
+                               timeout_s=300)
+        assert status["state"] == "completed", status
+    assert _comparable(_results(moved, replay_id)) == _comparable(live)
+    assert Recording(after / "recordings" / f"{later_id}.h5").units() == [(0, 0), (1, 0)]
+    assert not before.exists()
