@@ -25,6 +25,7 @@ from calibration.photo_intrinsics import (
 )
 from sim_core.errors import InvalidInputError
 from tests.calibration.opencv_samples import PUBLISHED, SQUARES, opencv_samples_dir
+from tests.calibration.realities import random_reality, reality_seeds
 
 # -- a synthetic camera: a chessboard drawn through a known lens ------------------------------
 TRUE_K = np.array([[600.0, 0.0, 322.0], [0.0, 598.0, 236.0], [0.0, 0.0, 1.0]])
@@ -193,6 +194,49 @@ def test_a_synthetic_camera_is_recovered_and_judged(synthetic_dir, tmp_path):
     assert apply_to_spec(wide, loaded).camera.cx_px == pytest.approx(p["cx_px"])
 
 
+@pytest.mark.parametrize("tangential", [True, False])
+def test_the_one_step_jackknife_is_the_refitted_one(synthetic_dir, tangential):
+    """Each view left out: one Gauss-Newton step from the full fit gives what OpenCV's
+    calibration of the other views gives, to a few percent of the jackknife's spread (the
+    refit, started from the full fit, is what the one step replaced)."""
+    from calibration.intrinsics import calibrate_intrinsics
+    from calibration.photo_intrinsics import detect_corners, one_step_leave_outs
+    from calibration.rig_verdicts import jackknife_std
+
+    board = make_board("chessboard", "10x7", 30.0)
+    views = []
+    from calibration.board_views import BoardView
+
+    for path in sorted(synthetic_dir.iterdir()):
+        det = detect_corners(load_grey(path), board)
+        views.append(BoardView(path.name, 0.0, "photo", det.object_points_m,
+                               det.image_points_px, det.corner_ids, (480, 640)))
+    full = calibrate_intrinsics(views, (480, 640), guess_from_preset=False,
+                                refuse_degenerate=False, zero_tangential=not tangential)
+    one = one_step_leave_outs(views, full, False, tangential)
+    k = full.intrinsics
+    kmat = np.array([[k.fx_px, 0, k.cx_px], [0, k.fy_px, k.cy_px], [0, 0, 1]])
+    flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3
+             | (0 if tangential else cv2.CALIB_ZERO_TANGENT_DIST))
+    refit = []
+    for i in range(len(views)):
+        rest = [v for j, v in enumerate(views) if j != i]
+        _, km, d, _, _ = cv2.calibrateCamera(
+            [v.object_points_m.astype(np.float32) for v in rest],
+            [v.image_points_px.astype(np.float32).reshape(-1, 1, 2) for v in rest], (640, 480),
+            kmat.copy(), np.asarray(k.distortion, dtype=np.float64),
+            flags=flags, criteria=(cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12))
+        d = d.ravel()
+        refit.append([km[0, 0], km[1, 1], km[0, 2], km[1, 2], d[0], d[1]]
+                     + ([d[2], d[3]] if tangential else []))
+    refit = np.asarray(refit)
+    assert one.shape == refit.shape == (len(views), 8 if tangential else 6)
+    spread = jackknife_std(refit)
+    assert np.all(spread > 0)
+    assert np.all(np.abs(one - refit) <= 0.05 * spread), np.abs(one - refit) / spread
+    assert np.allclose(jackknife_std(one), spread, rtol=0.05)
+
+
 def test_a_lens_without_tangential_terms_gets_none(tmp_path):
     """The synthetic camera with p1 = p2 = 0: freeing them does not reduce the residual beyond
     chance, so they are held at 0 (written as 0, not determined, the test's figures in the
@@ -270,68 +314,96 @@ RENDER_BOARD = {"kind": "charuco_board", "squares_x": 8, "squares_y": 6, "square
                 "marker_m": 0.042, "dictionary": "DICT_4X4_50"}
 
 
-def _render_views(reality, out: Path) -> None:
-    """Views of RENDER_BOARD in three tilts at two distances off the axis, turned -40 to 40
-    deg: half as 16-bit PNGs of the amplitude, half as frame folders (frame.npz)."""
-    from calibration.fixtures import BoardFixture, board_object
+#: a user's board sequence in front of the ToF camera (:func:`_render_views`): views, the
+#: board's distance [m], its largest tilt about either of its axes and turn about its normal [deg]
+RENDER_VIEWS, RENDER_DISTANCE_M, RENDER_TILT_DEG, RENDER_TURN_DEG = 216, (0.55, 0.85), 40.0, 25.0
+
+
+def _render_views(reality, out: Path, seed: int) -> None:
+    """RENDER_VIEWS views of RENDER_BOARD held before the camera as a user waves it through a
+    frame sequence: its centre aimed at each cell of a 3 x 3 grid over the image in turn
+    (anywhere in the cell's middle 70 %), RENDER_DISTANCE_M away, tilted up to RENDER_TILT_DEG
+    about both its axes and turned up to RENDER_TURN_DEG about its normal (drawn from ``[seed,
+    28]``); half as 16-bit PNGs of the amplitude, half as frame folders (frame.npz). Spp 8 with
+    the sensor's noise, through the reality's lens."""
+    from scipy.spatial.transform import Rotation
+
     from sim_core.frame_io import write_simulated
     from sim_core.pipeline import simulate
     from sim_core.render import RenderSettings
     from sim_core.render_request import RenderRequest
-    from sim_core.scene import build_scene
-    from sim_core.scene_spec import load_scene_spec
+    from sim_core.scene import build_camera, build_scene
+    from sim_core.scene_spec import ObjectSpec, load_scene_spec
     from tests.sim_core.scenes import EXAMPLES
 
     spec0 = load_scene_spec(EXAMPLES / "satellite_ground_test.yaml")
-    k = 0
-    for tilt in (30.0, -30.0, 0.0):
-        for off in (0.2, 0.4):
-            fixture = BoardFixture(f"t{tilt:+.0f}_{off * 1e3:.0f}", tilt, centre_height_m=0.3,
-                                   towards_camera_m=off)
-            obj = board_object(RENDER_BOARD, fixture, spec0)
-            spec = spec0.model_copy(update={"objects": [o for o in spec0.objects
-                                                        if not o.on_turntable] + [obj]})
-            for angle in range(-40, 41, 10):
-                scene = build_scene(spec, EXAMPLES, turntable_deg=angle, solar_suns=0.0,
-                                    twin=reality)
-                frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=8,
-                                                                     seed=k)),
-                                 noise_rng=np.random.default_rng(k))
-                name = f"{fixture.name}_{angle:+d}"
-                if k % 2:
-                    write_simulated(out / name, frame)
-                else:
-                    a = np.nan_to_num(frame.image.amplitude)
-                    a16 = np.clip(a / np.percentile(a, 99.9) * 60000, 0, 65535)
-                    cv2.imwrite(str(out / f"{name}.png"), a16.astype(np.uint16))
-                k += 1
+    camera = build_camera(spec0)
+    world_from_camera, k = camera.world_from_camera, camera.intrinsics
+    # the board facing the camera, upright: its x along the image's, its y up, its +z to the lens
+    facing = np.diag([1.0, -1.0, -1.0])
+    rng = np.random.default_rng([seed, 28])
+    fixed = [o for o in spec0.objects if not o.on_turntable]
+    for i in range(RENDER_VIEWS):
+        cell = i % 9
+        u = (cell % 3 + rng.uniform(0.15, 0.85)) / 3 * k.width_px
+        v = (cell // 3 + rng.uniform(0.15, 0.85)) / 3 * k.height_px
+        ray = np.array([(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, 1.0])
+        centre_cam = rng.uniform(*RENDER_DISTANCE_M) * ray / np.linalg.norm(ray)
+        tilt = Rotation.from_euler("xyz", [rng.uniform(-RENDER_TILT_DEG, RENDER_TILT_DEG),
+                                           rng.uniform(-RENDER_TILT_DEG, RENDER_TILT_DEG),
+                                           rng.uniform(-RENDER_TURN_DEG, RENDER_TURN_DEG)],
+                                   degrees=True).as_matrix()
+        board_in_world = world_from_camera[:3, :3] @ tilt @ facing
+        centre_world = world_from_camera[:3, :3] @ centre_cam + world_from_camera[:3, 3]
+        board = ObjectSpec(name="calibration_board", mesh=RENDER_BOARD, pose={
+            "position_m": [float(x) for x in centre_world],
+            "rotation_deg": [float(x) for x in Rotation.from_matrix(board_in_world)
+                             .as_euler("xyz", degrees=True)]})
+        scene = build_scene(spec0.model_copy(update={"objects": [*fixed, board]}), EXAMPLES,
+                            turntable_deg=0.0, solar_suns=0.0, twin=reality)
+        frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=8,
+                                                             seed=i)),
+                         noise_rng=np.random.default_rng([seed, i]))
+        if i % 2:
+            write_simulated(out / f"view{i:03d}", frame)
+        else:
+            a = np.nan_to_num(frame.image.amplitude)
+            a16 = np.clip(a / np.percentile(a, 99.9) * 60000, 0, 65535)
+            cv2.imwrite(str(out / f"view{i:03d}.png"), a16.astype(np.uint16))
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [151, 152, 153])
+@pytest.mark.parametrize("seed", reality_seeds([154]))
 def test_rendered_views_of_a_random_reality_meet_the_targets(seed, tmp_path):
-    from tests.calibration.realities import random_reality
-
+    """Issue 28's targets on a random reality's ToF camera: fx, fy within 0.5 %, cx, cy within
+    0.5 px, each determined; and issue 27's: a key called determined is within 3 of its
+    standard deviations or within its target. CI runs reality 154 (its tangential terms, 7.9e-4
+    and -5.6e-4, pulled the principal point 0.7 px off on the 54 turntable views this test
+    rendered before); ``TOFTWIN_REALITY_SEEDS=151-170`` runs more (docs/calibration.md has
+    their table)."""
     reality = random_reality(seed)
-    _render_views(reality, tmp_path / "views")
+    _render_views(reality, tmp_path / "views", seed)
     board = make_board("charuco", "8x6", 70.0, 42.0, "DICT_4X4_50")
     cal = calibrate_photos([tmp_path / "views"], board)
     p, truth = cal.parameters, reality.camera
-    assert sum(v.used for v in cal.views) >= 40
+    used = sum(v.used for v in cal.views)
+    print(f"\nreality {seed}: {used} views used; fx {100 * (p['fx_px'] / truth.fx_px - 1):+.3f} "
+          f"%, fy {100 * (p['fy_px'] / truth.fy_px - 1):+.3f} %, cx "
+          f"{p['cx_px'] - truth.cx_px:+.3f} px (std {cal.verdicts['camera.cx_px'].std:.3f}), cy "
+          f"{p['cy_px'] - truth.cy_px:+.3f} px (std {cal.verdicts['camera.cy_px'].std:.3f}); "
+          f"p1, p2 {cal.verdicts['camera.distortion.p1'].verdict}")
+    assert used >= RENDER_VIEWS // 2
     assert abs(p["fx_px"] / truth.fx_px - 1) < 0.005
     assert abs(p["fy_px"] / truth.fy_px - 1) < 0.005
+    assert abs(p["cx_px"] - truth.cx_px) < 0.5
+    assert abs(p["cy_px"] - truth.cy_px) < 0.5
     assert not any(v.verdict == "unexplained" for v in cal.verdicts.values())
-    # The principal point: issue 28 asks 0.5 px. With p1, p2 held at 0 when the views do not
-    # call for them (these realities' are 5e-5 to 1e-3), realities 151-161 gave |cx - truth| of
-    # 0.08 to 0.74 px (RMS 0.39; fitting p1, p2 too: up to 1.08, RMS 0.55) and |cy - truth| up to
-    # 0.55 px; docs/calibration.md has the table. What must hold on every
-    # reality is issue 27's: a key called determined is within 3 of its standard deviations or
-    # within its target.
-    for name in ("cx_px", "cy_px"):
+    for name in ("fx_px", "fy_px", "cx_px", "cy_px"):
         verdict = cal.verdicts[f"camera.{name}"]
+        assert verdict.determined, (name, verdict)
+        target = 0.5 if name.startswith("c") else 0.005 * getattr(truth, name)
         err = abs(p[name] - getattr(truth, name))
-        if verdict.determined:
-            assert err < max(3 * verdict.std, 0.5), (name, err, verdict)
+        assert err < max(3 * verdict.std, target), (name, err, verdict)
 
 
 # -- OpenCV's public photographs -------------------------------------------------------------
