@@ -167,7 +167,8 @@ def calibrate_intrinsics(views: list[BoardView], image_shape: tuple[int, int],
     if len(use) < MIN_VIEWS:
         raise InvalidInputError(
             "intrinsics.views",
-            f"the board was detected in {len(use)} views with enough corners; at least "
+            f"the board was detected in {len(use)} usable views (enough corners, not on one "
+            f"line); at least "
             f"{MIN_VIEWS} are needed: check the board is in view, lit and in focus, or add "
             "views (more turntable angles, another fixture)")
     guess = CAMERA_PRESETS[preset] if guess_from_preset else None

@@ -493,7 +493,7 @@ def calibrate_photos(sources: Sequence[str | Path], board: PhotoBoard, *,
     used = [v for v in views if v.name in result.per_view_rms_px]
     result, tangential = _tangential_terms(used, result, shape, fit_k3)
     model = model_test(used, result, shape)
-    jack = _jackknife(used, result, shape, fit_k3, tangential.fitted)
+    jack = _jackknife(used, result, fit_k3, tangential.fitted)
     radius = _corner_radius(used, result)
     cal = PhotoCalibration(result, [reports[_view_name(p, i, paths)] for i, p in
                                     enumerate(paths)], shape, board, model, jack, radius,
@@ -584,15 +584,19 @@ def _param_vector(result: IntrinsicsResult, fit_k3: bool) -> np.ndarray:
     return np.asarray(values + ([k.distortion[4]] if fit_k3 else []), dtype=np.float64)
 
 
-def _jackknife(views: Sequence[BoardView], result: IntrinsicsResult, shape: tuple[int, int],
-               fit_k3: bool, fit_tangential: bool = True) -> dict[str, float]:
+def _jackknife(views: Sequence[BoardView], result: IntrinsicsResult, fit_k3: bool,
+               fit_tangential: bool = True) -> dict[str, float]:
     """The delete-one-view jackknife's standard deviation of each parameter fitted
-    (:func:`calibration.rig_verdicts.jackknife_std` of :func:`one_step_leave_outs`)."""
+    (:func:`calibration.rig_verdicts.jackknife_std` of :func:`one_step_leave_outs`); inf for
+    every parameter when a view's removal leaves them undetermined (a row that is not finite:
+    the spread of the others would hide it)."""
     names = ["fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2"] + (
         ["p1", "p2"] if fit_tangential else []) + (["k3"] if fit_k3 else [])
     if len(views) < 3:
         return dict.fromkeys(names, math.inf)
     estimates = one_step_leave_outs(views, result, fit_k3, fit_tangential)
+    if not np.all(np.isfinite(estimates)):
+        return dict.fromkeys(names, math.inf)
     return dict(zip(names, (float(s) for s in jackknife_std(estimates)), strict=True))
 
 

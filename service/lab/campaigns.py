@@ -40,6 +40,7 @@ from service.store import queries
 from service.store.disk_space import free_bytes, is_disk_full, low_space_message
 from service.store.frame_files import FrameStore
 from service.store.recording import (
+    RECORDINGS_DIR,
     RecordedCampaign,
     Recording,
     recorded_poses,
@@ -103,7 +104,7 @@ def create_campaign(
 
 def recordings_dir(settings: Settings) -> Path:
     """Where the service's recordings are: ``recordings/`` in the data directory."""
-    return Path(settings.data_dir) / "recordings"
+    return Path(settings.data_dir) / RECORDINGS_DIR
 
 
 def _create_replay(req: CampaignCreate, *, sessions: sessionmaker, settings: Settings) -> str:

@@ -62,6 +62,8 @@ __all__ = ["FORMAT", "VERSION", "RecordedCampaign", "RecordedUnit", "Recording",
 FORMAT = "toftwin-recording"
 #: the layout's version (the module docstring)
 VERSION = 1
+#: the data directory's folder of recordings
+RECORDINGS_DIR = "recordings"
 #: gzip level of the frames' datasets (6: zlib's default; level 9 saves ~1 % more, 3x slower)
 GZIP_LEVEL = 6
 
@@ -86,15 +88,27 @@ def stored_path(data_dir: str | Path, path: str | Path) -> str:
 def resolve_stored_path(data_dir: str | Path, stored: str) -> Path:
     """The file a campaign row's recording path (:func:`stored_path`) names, in ``data_dir``;
     an absolute one (rows written before paths were stored relative, or a file outside the
-    data directory) as it is.
+    data directory) as it is, unless it is gone from a ``recordings/`` folder that this data
+    directory's ``recordings/`` took over (a file of its name is there, or the old folder is
+    gone too): a row older than relative paths, in a data directory that was moved.
 
     >>> resolve_stored_path("/srv/toftwin", "recordings/a.h5").as_posix()
     '/srv/toftwin/recordings/a.h5'
-    >>> resolve_stored_path("/srv/toftwin", "/old/place/recordings/a.h5").as_posix()
-    '/old/place/recordings/a.h5'
+    >>> resolve_stored_path("/srv/toftwin", "/mnt/share/a.h5").as_posix()
+    '/mnt/share/a.h5'
+    >>> resolve_stored_path("/srv/toftwin", "/gone/data/recordings/a.h5").as_posix()
+    '/srv/toftwin/recordings/a.h5'
     """
     path = Path(stored)
-    return path if path.is_absolute() else Path(data_dir) / path
+    if not path.is_absolute():
+        return Path(data_dir) / path
+    # a row written before paths were stored relative names the folder's old place: the same
+    # recording in this data directory's recordings/ is the one it meant
+    moved = Path(data_dir) / RECORDINGS_DIR / path.name
+    if (path.parent.name == RECORDINGS_DIR and not path.exists()
+            and (moved.exists() or not path.parent.is_dir())):
+        return moved
+    return path
 
 
 @dataclass(frozen=True)

@@ -247,3 +247,24 @@ def test_a_data_directory_moved_elsewhere_keeps_its_recordings(make_client, tmp_
     assert _comparable(_results(moved, replay_id)) == _comparable(live)
     assert Recording(after / "recordings" / f"{later_id}.h5").units() == [(0, 0), (1, 0)]
     assert not before.exists()
+
+
+def test_a_row_older_than_relative_paths_finds_its_recording_in_the_moved_folder(tmp_path):
+    """Rows written before recording paths were stored relative hold the folder's old absolute
+    place: once the folder has moved, a recording of that name in its new ``recordings/`` is
+    the one meant (and a file outside any data directory stays where it is)."""
+    from service.store.recording import resolve_stored_path, stored_path
+
+    old, new = tmp_path / "old" / "data", tmp_path / "new" / "data"
+    (new / "recordings").mkdir(parents=True)
+    (new / "recordings" / "a.h5").write_bytes(b"x")
+    assert resolve_stored_path(new, str(old / "recordings" / "a.h5")) == (
+        new / "recordings" / "a.h5")
+    # not yet written (a recording campaign created before the move): the old folder is gone
+    assert resolve_stored_path(new, str(old / "recordings" / "b.h5")) == (
+        new / "recordings" / "b.h5")
+    elsewhere = tmp_path / "share" / "c.h5"
+    elsewhere.parent.mkdir()
+    elsewhere.write_bytes(b"x")
+    assert resolve_stored_path(new, stored_path(new, elsewhere)) == elsewhere
+    assert stored_path(new, new / "recordings" / "a.h5") == "recordings/a.h5"
