@@ -332,8 +332,11 @@ def test_a_short_calibration_job_runs_to_done_with_progress_and_can_be_activated
     assert done["progress"] == 1.0 and done["error"] is None and done["activated"] is False
     assert done["files"]["calibration.yaml"] == f"/api/v1/calibrations/{jid}/files/calibration.yaml"
     out = tmp_path / "data" / "calibrations" / jid
-    assert {"calibration.yaml", "verdicts.json", "report.json", "report.html"} <= {
-        p.name for p in out.iterdir()}
+    assert {"calibration.yaml", "verdicts.json", "report.json", "report.html",
+            "opencv_intrinsics.yml"} <= {p.name for p in out.iterdir()}
+    opencv = client.get(done["files"]["opencv_intrinsics.yml"])  # the camera in OpenCV's form
+    assert opencv.status_code == 200 and opencv.headers["content-type"].startswith(
+        "application/yaml") and b"camera_matrix" in opencv.content
     cal = load_calibration(out / "calibration.yaml")
     # the status gives every key's verdict, as verdicts.json holds them
     keys = calibration_keys(cal)
@@ -381,7 +384,8 @@ def test_a_job_whose_data_cannot_calibrate_fails_with_what_to_do(client, tmp_pat
     assert res.status_code == 201, res.text
     status = wait_job(client, res.json()["id"])
     assert status["state"] == "failed" and status["files"] == {}
-    assert re.search(r"board was detected in [0-5] views with enough corners; at least 6",
+    assert re.search(r"board was detected in [0-5] usable views \(enough corners, not on one "
+                     r"line\); at least 6",
                      status["error"]), status["error"]
     assert "start a new job" in status["error"]
     assert client.post(f"/api/v1/calibrations/{status['id']}/activate",
