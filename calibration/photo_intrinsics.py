@@ -80,6 +80,7 @@ from scipy import stats
 
 from calibration.board_detection import BoardDetection, detect_board, to_8bit
 from calibration.board_views import BoardView
+from calibration.camera_forms import OPENCV_FILE, write_opencv_camera
 from calibration.intrinsics import (
     MIN_CORNERS_PER_VIEW,
     MIN_NORMAL_SPREAD,
@@ -721,7 +722,6 @@ def model_chi2_limit(model: ModelTest) -> float:
 
 # -- output ----------------------------------------------------------------------------------
 CALIBRATION_FILE = "calibration.yaml"
-OPENCV_FILE = "opencv_intrinsics.yml"
 
 
 def procedure_record(cal: PhotoCalibration) -> dict[str, Any]:
@@ -789,35 +789,21 @@ def write_calibration_yaml(path: str | Path, cal: PhotoCalibration,
 
 
 def write_opencv_yaml(path: str | Path, cal: PhotoCalibration) -> Path:
-    """OpenCV's FileStorage form (``cv2.FileStorage(path, READ)`` reads it):
-    ``camera_matrix`` (3 x 3), ``distortion_coefficients`` (1 x 5: k1, k2, p1, p2, k3),
-    ``image_width``, ``image_height`` [px], ``avg_reprojection_error`` [px],
+    """OpenCV's FileStorage form (:func:`calibration.camera_forms.write_opencv_camera`:
+    ``camera_matrix``, ``distortion_coefficients``, ``image_width``, ``image_height``), with
+    what OpenCV's calibration sample adds: ``avg_reprojection_error`` [px],
     ``per_view_reprojection_errors`` (views used, in order) and their names, ``nr_of_frames``,
     ``board_width``/``board_height`` (inner corners), ``square_size`` [m]."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    k = cal.result.intrinsics
-    h, w = cal.image_shape
-    fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_WRITE)
-    try:
-        fs.write("image_width", int(w))
-        fs.write("image_height", int(h))
-        fs.write("board_width", cal.board.squares_x - 1)
-        fs.write("board_height", cal.board.squares_y - 1)
-        fs.write("square_size", float(cal.board.square_m))
-        fs.write("nr_of_frames", len(cal.result.per_view_rms_px))
-        fs.write("camera_matrix", np.array([[k.fx_px, 0.0, k.cx_px], [0.0, k.fy_px, k.cy_px],
-                                            [0.0, 0.0, 1.0]], dtype=np.float64))
-        fs.write("distortion_coefficients",
-                 np.asarray(k.distortion, dtype=np.float64).reshape(1, 5))
-        fs.write("avg_reprojection_error", float(cal.result.rms_px))
-        fs.write("per_view_reprojection_errors",
-                 np.asarray(list(cal.result.per_view_rms_px.values()),
-                            dtype=np.float64).reshape(-1, 1))
-        fs.write("view_names", " ".join(cal.result.per_view_rms_px))
-    finally:
-        fs.release()
-    return p
+    return write_opencv_camera(path, cal.result.intrinsics, {
+        "board_width": cal.board.squares_x - 1,
+        "board_height": cal.board.squares_y - 1,
+        "square_size": float(cal.board.square_m),
+        "nr_of_frames": len(cal.result.per_view_rms_px),
+        "avg_reprojection_error": float(cal.result.rms_px),
+        "per_view_reprojection_errors": np.asarray(
+            list(cal.result.per_view_rms_px.values()), dtype=np.float64).reshape(-1, 1),
+        "view_names": " ".join(cal.result.per_view_rms_px),
+    })
 
 
 def write_outputs(out: str | Path, cal: PhotoCalibration, created_utc: str = "") -> dict[str, Path]:

@@ -1,5 +1,6 @@
-"""The calibration's outputs: ``calibration.yaml``, ``verdicts.json``, ``report.json`` and
-``report.html``.
+"""The calibration's outputs: ``calibration.yaml``, ``verdicts.json``, ``report.json``,
+``report.html`` and the camera in OpenCV's form, ``opencv_intrinsics.yml``
+(:func:`calibration.camera_forms.write_camera_form`).
 
 The HTML page (a Jinja2 template, ``calibration/templates/report.html.j2``, in the project's one
 environment: :func:`sim_core.html.jinja_environment`) lists every key's verdict
@@ -15,6 +16,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from calibration.camera_forms import OPENCV_FILE, write_camera_form
 from calibration.verdicts import VERDICTS_FILE, count_line, write_verdicts
 from sim_core.html import jinja_environment, number
 from sim_core.twin_file import dump_yaml, twin_hash, write_calibration
@@ -84,7 +86,8 @@ def write_report(out_dir: str | Path, result) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=False)
     cal = result.calibration
     paths = {"calibration": write_calibration(out / "calibration.yaml", cal),
-             "verdicts": write_verdicts(out / VERDICTS_FILE, result.verdicts)}
+             "verdicts": write_verdicts(out / VERDICTS_FILE, result.verdicts),
+             "opencv": write_camera_form(out / OPENCV_FILE, cal, "opencv")}
     prov = cal.provenance
     data = {
         "calibration_hash": twin_hash(cal),

@@ -17,6 +17,7 @@ from service.cli import (
     compare,
     correct,
     devices,
+    export,
     fit_object,
     recordings,
     schema,
@@ -62,6 +63,7 @@ def build_app() -> typer.Typer:
     app.command("fit-object")(fit_object.fit_object_command)
     app.command("record")(recordings.record_command)
     app.command("replay")(recordings.replay_command)
+    app.add_typer(export.export_app, name="export")
     return app
 
 

@@ -4,9 +4,10 @@ Runs the calibration sequence (:func:`service.lab.acquisition.run_rig_calibratio
 acquired on the rig, then fitted) on the real rig (the operator swaps the board and the test
 object when asked) or on the simulated lab (``--simulated``, optionally
 ``--reality FILE``: the lab's hidden truth), and writes ``DIR/calibration.yaml``,
-``DIR/verdicts.json`` (every key's verdict), ``DIR/report.json`` and ``DIR/report.html`` with the
-residual plots; it prints how many keys are determined, not determined and unexplained, and
-the reason of each key that is not determined.
+``DIR/verdicts.json`` (every key's verdict), ``DIR/report.json``, ``DIR/report.html`` with the
+residual plots and ``DIR/opencv_intrinsics.yml`` (the camera in OpenCV's form); it prints how
+many keys are determined, not determined and unexplained, and the reason of each key that is
+not determined.
 """
 
 from __future__ import annotations
@@ -136,7 +137,8 @@ def rig_command(
     ] = False,
 ) -> None:
     """Run the whole calibration sequence and write DIR/calibration.yaml, DIR/verdicts.json
-    (determined, not determined or unexplained, per key) and its report."""
+    (determined, not determined or unexplained, per key), its report and the camera in
+    OpenCV's form (DIR/opencv_intrinsics.yml)."""
     from calibration.report import write_report
     from calibration.rig_sequence import build_rig_plan, rig_capture_plan, stage_counts
     from service.lab.acquisition import run_rig_calibration

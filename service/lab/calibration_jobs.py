@@ -45,6 +45,7 @@ from typing import Any
 
 from sqlalchemy.orm import sessionmaker
 
+from calibration.camera_forms import OPENCV_FILE
 from drivers.errors import DeviceError
 from service.errors import ConflictError, GoneError, NotFoundError
 from service.lab.background import BackgroundRunner, Ending, Kind, Run, Stop, Stopped
@@ -63,6 +64,9 @@ _log = logging.getLogger(__name__)
 KIND = "calibration job"
 #: what a done job wrote, beside the report's plots (``GET /calibrations/{id}/files/{name}``)
 OUTPUT_FILES = ("calibration.yaml", "verdicts.json", "report.json", "report.html")
+#: files a done job lists where its folder has them: the camera in OpenCV's form (jobs done
+#: before it was written have none)
+OPTIONAL_FILES = (OPENCV_FILE,)
 _PARTIAL = ".partial-"
 #: what a job interrupted by the service's end says
 INTERRUPTED = ("the service stopped while the calibration ran; a calibration cannot be resumed: "
@@ -319,6 +323,8 @@ def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
     files = {}
     if row.state == "done":  # their URLs: where the server keeps them is its own business
         files = {n: f"{base}/files/{n}" for n in OUTPUT_FILES}
+        files |= {n: f"{base}/files/{n}" for n in OPTIONAL_FILES
+                  if (Path(row.out_dir) / n).is_file()}
     links = {"self": base, "events": f"{base}/events"}
     if row.state == "done":
         links |= {"activate": f"{base}/activate", "report": f"{base}/files/report.html",

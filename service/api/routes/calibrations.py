@@ -30,12 +30,12 @@ from service.store import queries
 
 router = APIRouter(prefix="/calibrations", tags=["calibration"])
 JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="A calibration job id.")]
-FileName = Annotated[str, Path(pattern=r"^[A-Za-z0-9_-]{1,64}\.(yaml|json|html|png)$",
-                               description="calibration.yaml, report.json, report.html or a "
-                               "plot of the report.")]
+FileName = Annotated[str, Path(pattern=r"^[A-Za-z0-9_-]{1,64}\.(yaml|yml|json|html|png)$",
+                               description="calibration.yaml, verdicts.json, report.json, "
+                               "report.html, opencv_intrinsics.yml or a plot of the report.")]
 COMMAND = errors(401, 404, 409)
-_MEDIA = {"yaml": "application/yaml", "json": "application/json", "html": "text/html",
-          "png": "image/png"}
+_MEDIA = {"yaml": "application/yaml", "yml": "application/yaml", "json": "application/json",
+          "html": "text/html", "png": "image/png"}
 
 @router.post("", response_model=CalibrationJobPublic, status_code=201,
              responses=errors(401, 409, 503, 507))
@@ -90,8 +90,9 @@ def activate_calibration_job(job_id: JobId, calibrations: CalibrationsDep, _: To
 @router.get("/{job_id}/files/{name}", response_class=FileResponse,
             responses=errors(404, 409, 410), dependencies=[Depends(self_contained_document)])
 def get_calibration_job_file(job_id: JobId, name: FileName, sessions: SessionsDep) -> FileResponse:
-    """An output file of a ``done`` job: ``calibration.yaml``, ``report.json``,
-    ``report.html`` (its plots load from beside it)."""
+    """An output file of a ``done`` job: ``calibration.yaml``, ``verdicts.json``,
+    ``report.json``, ``report.html`` (its plots load from beside it), and the camera in
+    OpenCV's form, ``opencv_intrinsics.yml`` (docs/export.md)."""
     path = job_file(sessions, job_id, name)
     return FileResponse(path, media_type=_MEDIA[path.suffix.lstrip(".")])
 

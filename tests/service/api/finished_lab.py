@@ -20,6 +20,7 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from calibration.camera_forms import OPENCV_FILE, write_camera_form
 from calibration.verdicts import VERDICTS_FILE, Verdict, Verdicts, write_verdicts
 from service.export.panels import PANEL_NAMES
 from service.export.plots import PLOTS
@@ -29,7 +30,8 @@ from tests.service.api.conftest import AUTH, start_campaign, wait_campaign
 
 JOB_ID = "d" * 32
 CALIBRATION = {"camera": {"fx_px": 236.0}, "provenance": {"rig": "test bench"}}
-JOB_FILES = ("calibration.yaml", "verdicts.json", "report.json", "report.html")
+JOB_FILES = ("calibration.yaml", "verdicts.json", "report.json", "report.html",
+             "opencv_intrinsics.yml")
 #: the done job's verdicts: one determined, one not (its reason text with markup characters, as
 #: a reason may hold any text: the page must show it as text)
 VERDICTS = Verdicts({
@@ -61,6 +63,7 @@ def done_calibration_job(app: Any, job_id: str = JOB_ID) -> Path:
     out.mkdir(parents=True)
     write_calibration(out / "calibration.yaml", parse_calibration(CALIBRATION))
     write_verdicts(out / VERDICTS_FILE, VERDICTS)
+    write_camera_form(out / OPENCV_FILE, parse_calibration(CALIBRATION), "opencv")
     (out / "report.json").write_text(json.dumps({"calibration": CALIBRATION}))
     (out / "report.html").write_text("<!doctype html><title>report</title><style>p{}</style>"
                                      "<p>calibration report</p>")

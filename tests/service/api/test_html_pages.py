@@ -81,6 +81,12 @@ def test_a_calibration_s_provenance_is_text_on_the_page_and_in_its_report(client
             f'<td class="what">{ESCAPED}</td></tr>') in html
     assert '<td class="num">0.0001, 0.0002, 0</td>' in html
     assert read_verdicts(paths["verdicts"]) == verdicts
+    # and the camera in OpenCV's form (issue 29)
+    import cv2
+
+    fs = cv2.FileStorage(str(paths["opencv"]), cv2.FILE_STORAGE_READ)
+    assert fs.getNode("camera_matrix").mat()[0, 0] == CALIBRATION["camera"]["fx_px"]
+    fs.release()
 
 
 def test_a_pose_s_figures_look_the_same_on_the_page_and_in_the_report(client):

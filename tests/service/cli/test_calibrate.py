@@ -56,6 +56,14 @@ def test_a_full_run_writes_the_calibration_and_its_report(tmp_path):
     assert report["provenance"]["rig"] == "simulated" and report["calibration_hash"]
     html = (out / "report.html").read_text()
     assert "intrinsics.png" in html and "Reprojection RMS" in html
+    # the camera in OpenCV's form beside it (issue 29), what cv2.FileStorage reads
+    import cv2
+
+    fs = cv2.FileStorage(str(out / "opencv_intrinsics.yml"), cv2.FILE_STORAGE_READ)
+    k = fs.getNode("camera_matrix").mat()
+    fs.release()
+    assert (k[0, 0], k[1, 1], k[0, 2], k[1, 2]) == (cal.camera.fx_px, cal.camera.fy_px,
+                                                    cal.camera.cx_px, cal.camera.cy_px)
     assert (out / "intrinsics.png").stat().st_size > 1000
     # every key of the file has its verdict, counted in one line
     verdicts = read_verdicts(out / "verdicts.json")

@@ -126,6 +126,8 @@ ERROR_CALLS = {
                "an .h5 file"),
     "replay": (lambda t: ["replay", str(t / "none.h5"), "--out", str(t / "o")], 2,
                "does not exist"),
+    "export calibration": (lambda t: ["export", "calibration", str(t / "none.yaml"), "--to",
+                                      "ros", "--out", str(t / "c.yaml")], 2, "does not exist"),
 }
 
 
