@@ -27,7 +27,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import yaml
 
@@ -84,7 +83,10 @@ def write_opencv_camera(path: str | Path, k: Intrinsics,
                         extra: Mapping[str, Any] | None = None) -> Path:
     """OpenCV's FileStorage YAML of camera ``k`` (module docstring), with ``extra`` keys after
     (numbers, strings or arrays, as ``cv2.FileStorage.write`` takes them); the folder is made.
-    Returns the path."""
+    Returns the path. (OpenCV is imported here: the service runs without it until a file in
+    OpenCV's form is written.)"""
+    import cv2
+
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_WRITE)

@@ -1,10 +1,14 @@
-"""``toftwin schema``: the JSON Schema of the scene format, for editors and other tools.
+"""``toftwin schema``: the JSON Schemas of the files a user writes or reads, for editors and
+other tools.
 
-The schema is generated from the pydantic models (:class:`sim_core.scene_spec.SceneSpec`); the
-copy in ``docs/scene.schema.json`` is regenerated with ``toftwin schema scene --out
-docs/scene.schema.json`` (a test fails when it is stale). What the schema cannot say (finite
-numbers only, unique object names, one of ``preset``/``kind``, ranges of material parameters) is
-still checked when a scene is loaded.
+``toftwin schema scene`` (:class:`sim_core.scene_spec.SceneSpec`), ``calibration``
+(:class:`sim_core.twin_file.CalibrationFile`), ``reality`` (:class:`~sim_core.twin_file.
+RealityFile`, the simulated lab's hidden truth) and ``object`` (:class:`~sim_core.twin_file.
+ObjectTwinFile`, ``toftwin fit-object``'s ``object.yaml``): each generated from the pydantic
+models that read the file. The copies in ``docs/`` (:data:`SCHEMAS`) are regenerated with
+``toftwin schema NAME --out docs/NAME.schema.json`` (a test fails when one is stale). What a
+schema cannot say (finite numbers only, unique object names, one of ``preset``/``kind``, ranges
+of material parameters, a lens that fits its image) is still checked when the file is loaded.
 """
 
 from __future__ import annotations
@@ -24,6 +28,19 @@ SCENE_SCHEMA_ID = "urn:toftwin:schema:scene"
 SCENE_SCHEMA_FILE = "docs/scene.schema.json"
 
 schema_app = command_group("JSON Schemas of the file formats.")
+
+
+#: the other files' schemas: name -> (model's import path, title, the doc that describes it)
+MODEL_SCHEMAS: dict[str, tuple[str, str, str]] = {
+    "calibration": ("sim_core.twin_file:CalibrationFile", "toftwin calibration",
+                    "docs/calibration.md"),
+    "reality": ("sim_core.twin_file:RealityFile", "toftwin reality (the simulated lab's truth)",
+                "docs/calibration.md"),
+    "object": ("sim_core.twin_file:ObjectTwinFile", "toftwin object twin",
+               "docs/calibration.md"),
+}
+#: every schema and its committed copy
+SCHEMAS = {"scene": SCENE_SCHEMA_FILE} | {n: f"docs/{n}.schema.json" for n in MODEL_SCHEMAS}
 
 
 def scene_schema() -> dict[str, Any]:
@@ -48,6 +65,35 @@ def scene_schema() -> dict[str, Any]:
     }
 
 
+def model_schema(name: str) -> dict[str, Any]:
+    """The JSON Schema of the file ``name`` of :data:`MODEL_SCHEMAS`, with ``$schema``, ``$id``
+    (``urn:toftwin:schema:NAME``) and a title.
+
+    >>> s = model_schema("calibration")
+    >>> s["$id"], s["additionalProperties"], sorted(s["properties"])[:2]
+    ('urn:toftwin:schema:calibration', False, ['camera', 'illumination'])
+    """
+    import importlib
+
+    target, title, doc = MODEL_SCHEMAS[name]
+    module, cls = target.split(":")
+    model = getattr(importlib.import_module(module), cls)
+    body = _without_redundant_enums(model.model_json_schema())
+    return {
+        "$schema": DIALECT,
+        "$id": f"urn:toftwin:schema:{name}",
+        **body,
+        "title": title,
+        "description": f"A {title} file ({doc}); regenerate with `toftwin schema {name} --out "
+        f"{SCHEMAS[name]}`.",
+    }
+
+
+def schema_of(name: str) -> dict[str, Any]:
+    """The schema ``name`` of :data:`SCHEMAS`."""
+    return scene_schema() if name == "scene" else model_schema(name)
+
+
 def _without_redundant_enums(node: Any) -> Any:
     """Drop ``enum: [x]`` beside ``const: x``: pydantic before 2.10 writes both for a one-value
     ``Literal``, later releases only ``const``; without this the file would depend on the
@@ -67,17 +113,38 @@ def schema_text(schema: dict[str, Any]) -> str:
     return json.dumps(schema, indent=2, ensure_ascii=False) + "\n"
 
 
-@schema_app.command("scene")
-def scene(
-    out: Annotated[
-        Path | None, typer.Option("--out", help="File to write (default: print to stdout).")
-    ] = None,
-) -> None:
-    """The JSON Schema of scene files; point an editor's YAML support at it."""
-    text = schema_text(scene_schema())
+def _write(text: str, out: Path | None) -> None:
     if out is None:
         sys.stdout.write(text)
         return
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     err_console.print(f"wrote {out}")
+
+
+OutOption = Annotated[
+    Path | None, typer.Option("--out", help="File to write (default: print to stdout).")]
+
+
+@schema_app.command("scene")
+def scene(out: OutOption = None) -> None:
+    """The JSON Schema of scene files; point an editor's YAML support at it."""
+    _write(schema_text(scene_schema()), out)
+
+
+@schema_app.command("calibration")
+def calibration(out: OutOption = None) -> None:
+    """The JSON Schema of calibration files (calibration.yaml)."""
+    _write(schema_text(model_schema("calibration")), out)
+
+
+@schema_app.command("reality")
+def reality(out: OutOption = None) -> None:
+    """The JSON Schema of reality files (the simulated lab's hidden truth, --reality FILE)."""
+    _write(schema_text(model_schema("reality")), out)
+
+
+@schema_app.command("object")
+def object_twin(out: OutOption = None) -> None:
+    """The JSON Schema of object twin files (fit-object's object.yaml)."""
+    _write(schema_text(model_schema("object")), out)

@@ -11,7 +11,7 @@ import yaml
 from typer.testing import CliRunner
 
 from service.cli import app
-from service.cli.schema import SCENE_SCHEMA_FILE, scene_schema, schema_text
+from service.cli.schema import SCENE_SCHEMA_FILE, SCHEMAS, scene_schema, schema_text
 
 ROOT = Path(__file__).resolve().parents[3]
 COMMITTED = ROOT / SCENE_SCHEMA_FILE
@@ -66,3 +66,80 @@ def test_the_schema_rejects_what_the_loader_rejects(validator):
     assert not validator.is_valid({**scene, "colour": "red"})  # unknown field
     assert not validator.is_valid({**scene, "render": {"spp": 0}})  # below the range
     assert not validator.is_valid({k: v for k, v in scene.items() if k != "camera"})
+
+
+# -- the other files' schemas (issue 29): calibration, reality, object twin -------------------
+@pytest.mark.parametrize("name", sorted(set(SCHEMAS) - {"scene"}))
+def test_every_committed_schema_is_current_and_printed(name):
+    from service.cli.schema import schema_of
+
+    path = ROOT / SCHEMAS[name]
+    assert path.is_file(), f"{SCHEMAS[name]} is missing: `toftwin schema {name} --out {path}`"
+    assert path.read_text(encoding="utf-8") == schema_text(schema_of(name)), (
+        f"{SCHEMAS[name]} differs from its models; regenerate it with `toftwin schema {name} "
+        f"--out {SCHEMAS[name]}` and commit it")
+    res = runner.invoke(app, ["schema", name])
+    assert res.exit_code == 0 and json.loads(res.stdout) == schema_of(name)
+    jsonschema.Draft202012Validator.check_schema(json.loads(res.stdout))
+
+
+def _validator(name: str) -> jsonschema.Draft202012Validator:
+    return jsonschema.Draft202012Validator(
+        json.loads((ROOT / SCHEMAS[name]).read_text(encoding="utf-8")))
+
+
+def _errors(validator, data) -> list[str]:
+    return [f"{'.'.join(map(str, e.absolute_path))}: {e.message}"
+            for e in validator.iter_errors(data)]
+
+
+def test_files_our_commands_write_pass_their_schemas(tmp_path):
+    """A calibration as ``write_calibration`` writes it, a random reality with issue 27's
+    effects as the tests' lab is given it, an object twin as the object fit writes it: each
+    read back as YAML passes its schema, and the model that reads the file takes it."""
+    from sim_core.twin_file import (
+        ObjectTwinFile,
+        load_object_twin,
+        load_reality,
+        parse_calibration,
+        write_calibration,
+    )
+    from tests.calibration.realities import random_reality, with_world_effects
+    from tests.service.api.test_calibration import CALIBRATION
+
+    path = write_calibration(tmp_path / "calibration.yaml", parse_calibration(CALIBRATION))
+    assert not _errors(_validator("calibration"), yaml.safe_load(path.read_text()))
+
+    reality = with_world_effects(random_reality(151, object_twin_names=["body"]), 151)
+    (tmp_path / "reality.yaml").write_text(yaml.safe_dump(reality.model_dump(mode="json")))
+    data = yaml.safe_load((tmp_path / "reality.yaml").read_text())
+    assert not _errors(_validator("reality"), data)
+    assert load_reality(tmp_path / "reality.yaml") == reality
+
+    obj = ObjectTwinFile.model_validate({
+        "mount": {"pose_offset": {"position_m": [0.001, -0.002, 0.0],
+                                  "rotation_deg": [0.1, 0.0, -0.2]}},
+        "objects": {"body": {"reflectance_scale": 0.95}},
+        "provenance": {"rig": "simulated"}})
+    (tmp_path / "object.yaml").write_text(yaml.safe_dump(obj.model_dump(mode="json")))
+    assert not _errors(_validator("object"), yaml.safe_load((tmp_path / "object.yaml")
+                                                            .read_text()))
+    assert load_object_twin(tmp_path / "object.yaml") == obj
+
+
+@pytest.mark.parametrize(("name", "data"), [
+    ("calibration", {"camera": {"fx": 210.0}}),  # an unknown key
+    ("calibration", {"turntable": {"settling": {"amplitude_deg": -1.0, "frequency_hz": 2.0,
+                                                "damping_ratio": 0.1}}}),  # below its range
+    ("reality", {"camera": {"stray_light": {"fraction": 2.0, "kernel_radius_px": 30.0}}}),
+    ("object", {"objects": {"body": {"reflectance_scale": "bright"}}}),
+])
+def test_the_schemas_reject_what_the_loaders_reject(name, data):
+    from sim_core.errors import InvalidInputError
+    from sim_core.twin_file import parse_calibration, parse_object_twin, parse_reality
+
+    assert _errors(_validator(name), data)
+    parse = {"calibration": parse_calibration, "reality": parse_reality,
+             "object": parse_object_twin}[name]
+    with pytest.raises(InvalidInputError):
+        parse(data)
