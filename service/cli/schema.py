@@ -95,16 +95,25 @@ def schema_of(name: str) -> dict[str, Any]:
 
 
 def _without_redundant_enums(node: Any) -> Any:
-    """Drop ``enum: [x]`` beside ``const: x``: pydantic before 2.10 writes both for a one-value
-    ``Literal``, later releases only ``const``; without this the file would depend on the
-    pydantic version that generated it."""
+    """The schema as every supported pydantic writes it (the floor, 2.9, and later releases),
+    so the committed file does not depend on the version that generated it:
+
+    - ``enum: [x]`` beside ``const: x`` goes: pydantic before 2.10 writes both for a one-value
+      ``Literal``, later releases only ``const``;
+    - ``additionalProperties: true`` goes: later releases write it for a ``dict[str, Any]``'s
+      values, 2.9 leaves it out, and it is JSON Schema's default;
+    - ``propertyNames`` goes: later releases write a mapping's key constraints (an object
+      name's 1-100 characters), 2.9 does not; the loader still checks them.
+    """
     if isinstance(node, list):
         return [_without_redundant_enums(v) for v in node]
     if not isinstance(node, dict):
         return node
-    out = {k: _without_redundant_enums(v) for k, v in node.items()}
+    out = {k: _without_redundant_enums(v) for k, v in node.items() if k != "propertyNames"}
     if "const" in out and out.get("enum") == [out["const"]]:
         del out["enum"]
+    if out.get("additionalProperties") is True:
+        del out["additionalProperties"]
     return out
 
 
