@@ -22,7 +22,6 @@ Pixel coordinates are OpenCV's (pixel centres at integers), which ROS's camera m
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -32,12 +31,15 @@ import yaml
 
 from sim_core.camera import CAMERA_PRESETS, Intrinsics
 from sim_core.errors import InvalidInputError
+from sim_core.files import atomic_write
 from sim_core.twin_file import TwinParameters
 
 #: the camera a calibration file describes (its keys' defaults)
 PRESET = "pmd-camboard-pico-flexx"
 #: ``camera_name`` of a ROS camera_info file unless given
 ROS_CAMERA_NAME = "pico_flexx"
+#: a camera name camera_info_manager takes without a warning: letters, digits and underscores
+ROS_CAMERA_NAME_PATTERN = r"[A-Za-z0-9_]{1,100}"
 #: the forms :func:`write_camera_form` writes
 FORMS = ("opencv", "ros")
 #: the OpenCV form's name beside a calibration the calibration commands write
@@ -79,28 +81,29 @@ def camera_matrix(k: Intrinsics) -> np.ndarray:
                     dtype=np.float64)
 
 
-def write_opencv_camera(path: str | Path, k: Intrinsics,
-                        extra: Mapping[str, Any] | None = None) -> Path:
-    """OpenCV's FileStorage YAML of camera ``k`` (module docstring), with ``extra`` keys after
-    (numbers, strings or arrays, as ``cv2.FileStorage.write`` takes them); the folder is made.
-    Returns the path. (OpenCV is imported here: the service runs without it until a file in
-    OpenCV's form is written.)"""
+def opencv_camera_text(k: Intrinsics, extra: Mapping[str, Any] | None = None) -> str:
+    """OpenCV's FileStorage YAML of camera ``k`` (module docstring) as text, with ``extra`` keys
+    after (numbers, strings or arrays, as ``cv2.FileStorage.write`` takes them). (OpenCV is
+    imported here: the service runs without it until a file in OpenCV's form is written.)"""
     import cv2
 
+    fs = cv2.FileStorage(".yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    fs.write("image_width", int(k.width_px))
+    fs.write("image_height", int(k.height_px))
+    fs.write("camera_matrix", camera_matrix(k))
+    fs.write("distortion_coefficients", np.asarray(k.distortion, dtype=np.float64).reshape(1, 5))
+    for name, value in (extra or {}).items():
+        fs.write(name, value)
+    return fs.releaseAndGetString()
+
+
+def write_opencv_camera(path: str | Path, k: Intrinsics,
+                        extra: Mapping[str, Any] | None = None) -> Path:
+    """:func:`opencv_camera_text` written to ``path`` whole or not at all
+    (:func:`sim_core.files.atomic_write`); the folder is made. Returns the path."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_WRITE)
-    try:
-        fs.write("image_width", int(k.width_px))
-        fs.write("image_height", int(k.height_px))
-        fs.write("camera_matrix", camera_matrix(k))
-        fs.write("distortion_coefficients",
-                 np.asarray(k.distortion, dtype=np.float64).reshape(1, 5))
-        for name, value in (extra or {}).items():
-            fs.write(name, value)
-    finally:
-        fs.release()
-    return p
+    return atomic_write(p, opencv_camera_text(k, extra))
 
 
 def ros_camera_info(k: Intrinsics, camera_name: str = ROS_CAMERA_NAME) -> dict[str, Any]:
@@ -131,22 +134,13 @@ def ros_camera_info(k: Intrinsics, camera_name: str = ROS_CAMERA_NAME) -> dict[s
 def write_camera_form(path: str | Path, cal: TwinParameters, form: str,
                       camera_name: str = ROS_CAMERA_NAME) -> Path:
     """Write calibration ``cal``'s camera (:func:`calibrated_intrinsics`) in ``form`` (one of
-    :data:`FORMS`) to ``path``, whole or not at all (written beside it, then renamed over it);
+    :data:`FORMS`) to ``path``, whole or not at all (:func:`sim_core.files.atomic_write`);
     returns the path."""
     if form not in FORMS:
         raise InvalidInputError("--to", f"{form!r}; allowed: {', '.join(FORMS)}")
     k = calibrated_intrinsics(cal)
+    text = (opencv_camera_text(k) if form == "opencv"
+            else yaml.safe_dump(ros_camera_info(k, camera_name), sort_keys=False))
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    # the same suffix: FileStorage picks its format by the file's name
-    partial = p.with_name(f".{p.stem}.partial{p.suffix}")
-    try:
-        if form == "opencv":
-            write_opencv_camera(partial, k)
-        else:
-            partial.write_text(yaml.safe_dump(ros_camera_info(k, camera_name),
-                                              sort_keys=False), encoding="utf-8")
-        os.replace(partial, p)
-    finally:
-        partial.unlink(missing_ok=True)
-    return p
+    return atomic_write(p, text)

@@ -39,6 +39,7 @@ from pydantic import (
     Tag,
     ValidationError,
     ValidationInfo,
+    WithJsonSchema,
     field_validator,
     model_validator,
 )
@@ -199,6 +200,15 @@ DriftMmPerC = Annotated[float, Field(ge=-MAX_DEPTH_DRIFT_MM_PER_C, le=MAX_DEPTH_
                                      allow_inf_nan=False)]
 
 
+#: ``depth_drift_mm_per_c`` as a file may give it: one number for every frequency, or 1-4, one
+#: per frequency [mm/degC]
+_DRIFT_ITEM_SCHEMA = {"type": "number", "minimum": -MAX_DEPTH_DRIFT_MM_PER_C,
+                      "maximum": MAX_DEPTH_DRIFT_MM_PER_C}
+_DRIFT_JSON_SCHEMA = {"title": "Depth Drift Mm Per C", "anyOf": [
+    _DRIFT_ITEM_SCHEMA,
+    {"type": "array", "items": _DRIFT_ITEM_SCHEMA, "minItems": 1, "maxItems": 4}]}
+
+
 class CameraTemperature(_Strict):
     """The illumination's warm-up and the depth drift it causes (issue 27; TI's calibration model).
 
@@ -213,8 +223,10 @@ class CameraTemperature(_Strict):
     illumination_start_c: TemperatureC
     illumination_end_c: TemperatureC
     time_constant_s: Annotated[float, Field(gt=0.0, le=1e6, allow_inf_nan=False)]
-    #: one entry applies to every frequency (a single number is read as that)
-    depth_drift_mm_per_c: list[DriftMmPerC] = Field(min_length=1, max_length=4)
+    #: one entry applies to every frequency (a single number is read as that; the file's
+    #: JSON Schema says both forms, :data:`_DRIFT_JSON_SCHEMA`)
+    depth_drift_mm_per_c: Annotated[list[DriftMmPerC], Field(min_length=1, max_length=4),
+                                    WithJsonSchema(_DRIFT_JSON_SCHEMA)]
 
     @field_validator("depth_drift_mm_per_c", mode="before")
     @classmethod

@@ -322,8 +322,9 @@ class CalibrationJobPublic(BaseModel):
     calibration_hash: str | None = Field(description="The result's hash, once done.")
     activated: bool = Field(description="Whether its result has been made the active calibration.")
     files: dict[str, str] = Field(description="Output files once done: calibration.yaml, "
-                                  "verdicts.json, report.json, report.html (paths on the "
-                                  "server).")
+                                  "verdicts.json, report.json, report.html, and the camera "
+                                  "in OpenCV's form, opencv_intrinsics.yml (jobs since it was "
+                                  "written), each by its URL.")
     verdicts: dict[str, VerdictPublic] | None = Field(
         None, description="Once done: every key of calibration.yaml (camera.fx_px, "
         "turntable.zero_offset_deg, ...) with its verdict (verdicts.json, "

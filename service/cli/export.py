@@ -29,25 +29,46 @@ def export_calibration(
                                                  "(camera_info YAML).")],
     out: Annotated[Path, typer.Option("--out", help="File to write (.yml/.yaml); an existing "
                                                     "one is refused unless --force.")],
-    camera_name: Annotated[str, typer.Option("--camera-name", help="ROS camera_name.")] = (
+    camera_name: Annotated[str, typer.Option("--camera-name", help="ROS camera_name: 1-100 "
+                                                                    "letters, digits or _.")] = (
         "pico_flexx"),
     force: Annotated[bool, typer.Option("--force", help="Replace an existing --out.")] = False,
 ) -> None:
     """Write a calibration's camera in OpenCV's or ROS's calibration form."""
-    from calibration.camera_forms import FORMS, write_camera_form
+    import re
+
+    from calibration.camera_forms import FORMS, ROS_CAMERA_NAME_PATTERN, write_camera_form
     from sim_core.twin_file import load_calibration
 
     try:
         if to not in FORMS:
             raise InvalidInputError("--to", f"{to!r}; allowed: {', '.join(FORMS)}")
-        if out.suffix.lower() not in (".yml", ".yaml"):
-            raise InvalidInputError("--out", f"'{out}': a .yml or .yaml file")
-        if out.exists() and not force:
-            raise InvalidInputError("--out", f"'{out}' exists; use --force to replace it")
-        if not camera_name.strip() or len(camera_name) > 100:
-            raise InvalidInputError("--camera-name", "1 to 100 characters")
+        if not re.fullmatch(ROS_CAMERA_NAME_PATTERN, camera_name):
+            raise InvalidInputError("--camera-name", f"{camera_name!r}: 1 to 100 letters, "
+                                    "digits or underscores (what camera_info_manager takes)")
+        _check_out(out, file, force)
         cal = load_calibration(file)
-        path = write_camera_form(out, cal, to, camera_name)
+        try:
+            path = write_camera_form(out, cal, to, camera_name)
+        except OSError as exc:
+            raise InvalidInputError("--out", f"'{out}' could not be written: "
+                                    f"{exc.strerror or exc}") from None
     except InvalidInputError as exc:
         fail_invalid(exc)
     console.print(f"{to} calibration written to {path}")
+
+
+def _check_out(out: Path, source: Path, force: bool) -> None:
+    """Refuse an ``--out`` that is no file to write: not .yml/.yaml, a folder, in a folder that
+    is a file, the calibration it is made from, or an existing file without ``--force``."""
+    if out.suffix.lower() not in (".yml", ".yaml"):
+        raise InvalidInputError("--out", f"'{out}': a .yml or .yaml file")
+    if out.is_dir():
+        raise InvalidInputError("--out", f"'{out}' is a folder; give a file in it")
+    parent = next((p for p in out.absolute().parents if p.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise InvalidInputError("--out", f"'{parent}' is a file, not a folder")
+    if out.exists() and source.exists() and out.resolve() == source.resolve():
+        raise InvalidInputError("--out", f"'{out}' is the calibration it is made from")
+    if out.exists() and not force:
+        raise InvalidInputError("--out", f"'{out}' exists; use --force to replace it")

@@ -94,9 +94,16 @@ def schema_of(name: str) -> dict[str, Any]:
     return scene_schema() if name == "scene" else model_schema(name)
 
 
-def _without_redundant_enums(node: Any) -> Any:
+#: schema keywords whose value maps names to schemas (the names are data, not keywords)
+_NAMED_SCHEMAS = ("properties", "$defs", "definitions", "patternProperties", "dependentSchemas")
+#: schema keywords whose value is instance data, never a schema
+_DATA = ("default", "const", "enum", "examples")
+
+
+def _without_redundant_enums(schema: Any) -> Any:
     """The schema as every supported pydantic writes it (the floor, 2.9, and later releases),
-    so the committed file does not depend on the version that generated it:
+    so the committed file does not depend on the version that generated it; only keywords are
+    touched (never a property's name, never a default's or a constant's value):
 
     - ``enum: [x]`` beside ``const: x`` goes: pydantic before 2.10 writes both for a one-value
       ``Literal``, later releases only ``const``;
@@ -104,12 +111,25 @@ def _without_redundant_enums(node: Any) -> Any:
       values, 2.9 leaves it out, and it is JSON Schema's default;
     - ``propertyNames`` goes: later releases write a mapping's key constraints (an object
       name's 1-100 characters), 2.9 does not; the loader still checks them.
+
+    >>> _without_redundant_enums({"properties": {"propertyNames": {"const": 1, "enum": [1]}},
+    ...                           "propertyNames": {"maxLength": 3}, "default": {"enum": [2]}})
+    {'properties': {'propertyNames': {'const': 1}}, 'default': {'enum': [2]}}
     """
-    if isinstance(node, list):
-        return [_without_redundant_enums(v) for v in node]
-    if not isinstance(node, dict):
-        return node
-    out = {k: _without_redundant_enums(v) for k, v in node.items() if k != "propertyNames"}
+    if isinstance(schema, list):
+        return [_without_redundant_enums(v) for v in schema]
+    if not isinstance(schema, dict):
+        return schema
+    out: dict[str, Any] = {}
+    for key, value in schema.items():
+        if key == "propertyNames":
+            continue
+        if key in _DATA:
+            out[key] = value
+        elif key in _NAMED_SCHEMAS and isinstance(value, dict):
+            out[key] = {name: _without_redundant_enums(v) for name, v in value.items()}
+        else:
+            out[key] = _without_redundant_enums(value)
     if "const" in out and out.get("enum") == [out["const"]]:
         del out["enum"]
     if out.get("additionalProperties") is True:

@@ -323,8 +323,9 @@ def job_public(row: Any, live: dict[str, Any] | None) -> dict[str, Any]:
     files = {}
     if row.state == "done":  # their URLs: where the server keeps them is its own business
         files = {n: f"{base}/files/{n}" for n in OUTPUT_FILES}
-        files |= {n: f"{base}/files/{n}" for n in OPTIONAL_FILES
-                  if (Path(row.out_dir) / n).is_file()}
+        files |= {n: f"{base}/files/{n}" for n in OPTIONAL_FILES  # as the file route serves
+                  if (Path(row.out_dir) / n).is_file()
+                  and not (Path(row.out_dir) / n).is_symlink()}
     links = {"self": base, "events": f"{base}/events"}
     if row.state == "done":
         links |= {"activate": f"{base}/activate", "report": f"{base}/files/report.html",

@@ -123,3 +123,28 @@ def test_an_existing_file_is_kept_unless_forced_and_a_lens_without_its_image_is_
     assert not out.exists()
     res, _ = _export(tmp_path, CALIBRATION, "opencv", "o.json")
     assert res.exit_code == 2 and ".yml or .yaml" in res.stderr
+
+
+@pytest.mark.parametrize("case", ["folder", "parent is a file", "the source", "camera name"])
+def test_an_out_that_is_no_file_to_write_is_refused_naming_it(tmp_path, case):
+    src = tmp_path / "calibration.yaml"
+    src.write_text(yaml.safe_dump(CALIBRATION))
+    before = src.read_bytes()
+    extra: list[str] = ["--force"]
+    if case == "folder":
+        out, says = tmp_path / "dir.yml", "is a folder"
+        out.mkdir()
+    elif case == "parent is a file":
+        (tmp_path / "f.yml").write_text("x")
+        out, says = tmp_path / "f.yml" / "x.yml", "is a file, not a folder"
+    elif case == "the source":
+        src = src.rename(tmp_path / "calibration.yml")
+        out, says = src, "is the calibration it is made from"
+    else:
+        out, says = tmp_path / "c.yml", "--camera-name"
+        extra = ["--camera-name", "pico-flexx"]
+    res = runner.invoke(app, ["export", "calibration", str(src), "--to", "ros", "--out",
+                              str(out), *extra])
+    assert res.exit_code == 2, (res.stdout, res.stderr)
+    assert says in " ".join(res.stderr.split()) and res.stdout == "", res.stderr
+    assert src.read_bytes() == before

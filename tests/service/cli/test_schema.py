@@ -95,14 +95,17 @@ def _errors(validator, data) -> list[str]:
 
 def test_files_our_commands_write_pass_their_schemas(tmp_path):
     """A calibration as ``write_calibration`` writes it, a random reality with issue 27's
-    effects as the tests' lab is given it, an object twin as the object fit writes it: each
-    read back as YAML passes its schema, and the model that reads the file takes it."""
+    effects as the tests' lab is given it, an object twin as ``write_object_twin`` (the object
+    fit's writer) writes it, and a hand-written drift of one number: each passes its schema,
+    and the model that reads the file takes it."""
     from sim_core.twin_file import (
         ObjectTwinFile,
         load_object_twin,
         load_reality,
         parse_calibration,
+        parse_reality,
         write_calibration,
+        write_object_twin,
     )
     from tests.calibration.realities import random_reality, with_world_effects
     from tests.service.api.test_calibration import CALIBRATION
@@ -121,10 +124,17 @@ def test_files_our_commands_write_pass_their_schemas(tmp_path):
                                   "rotation_deg": [0.1, 0.0, -0.2]}},
         "objects": {"body": {"reflectance_scale": 0.95}},
         "provenance": {"rig": "simulated"}})
-    (tmp_path / "object.yaml").write_text(yaml.safe_dump(obj.model_dump(mode="json")))
-    assert not _errors(_validator("object"), yaml.safe_load((tmp_path / "object.yaml")
-                                                            .read_text()))
-    assert load_object_twin(tmp_path / "object.yaml") == obj
+    path = write_object_twin(tmp_path / "object.yaml", obj)
+    assert not _errors(_validator("object"), yaml.safe_load(path.read_text()))
+    assert load_object_twin(path) == obj
+
+    # what a user writes by hand in the forms the loaders take: the drift as one number
+    by_hand = {"camera": {"temperature": {"illumination_start_c": 25.0,
+                                          "illumination_end_c": 45.0, "time_constant_s": 600.0,
+                                          "depth_drift_mm_per_c": 0.3}}}
+    for name, parse in (("calibration", parse_calibration), ("reality", parse_reality)):
+        assert not _errors(_validator(name), by_hand), name
+        assert parse(by_hand).camera.temperature.depth_drift_mm_per_c == [0.3]
 
 
 @pytest.mark.parametrize(("name", "data"), [
@@ -133,6 +143,9 @@ def test_files_our_commands_write_pass_their_schemas(tmp_path):
                                                 "damping_ratio": 0.1}}}),  # below its range
     ("reality", {"camera": {"stray_light": {"fraction": 2.0, "kernel_radius_px": 30.0}}}),
     ("object", {"objects": {"body": {"reflectance_scale": "bright"}}}),
+    ("calibration", {"camera": {"temperature": {
+        "illumination_start_c": 25.0, "illumination_end_c": 45.0, "time_constant_s": 600.0,
+        "depth_drift_mm_per_c": [0.1, 0.2, 0.3, 0.4, 0.5]}}}),  # more frequencies than any
 ])
 def test_the_schemas_reject_what_the_loaders_reject(name, data):
     from sim_core.errors import InvalidInputError
