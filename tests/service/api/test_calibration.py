@@ -299,8 +299,10 @@ def lab_without_sun(tmp_path) -> Path:
 @pytest.mark.slow  # about 27 s on two cores: over the fast tests' budget
 def test_a_short_calibration_job_runs_to_done_with_progress_and_can_be_activated(
         make_client, tmp_path, lab_without_sun):
+    # the event stream samples the job's status every sse_interval_s: at the default 0.5 s it
+    # can miss a fixture whose four captures take less (it did once, in a loaded CI run)
     client = make_client(tmp_path / "data", examples_dir=lab_without_sun, scene="lab",
-                         camera_spp=4)
+                         camera_spp=4, sse_interval_s=0.02)
     res = client.post("/api/v1/calibrations", headers=AUTH, json=SHORT_PLAN)
     assert res.status_code == 201, res.text
     job = res.json()
