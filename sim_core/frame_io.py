@@ -370,9 +370,21 @@ def write_simulated(out_dir: str | Path, frame: Any, scene_name: str = "") -> Pa
         "effect_plan": frame.plan.to_dict(),
         **_adaptive_meta(frame),
         "sensor": None if frame.raw is None else frame.raw.meta.get("sensor"),
+        **_camera_meta(frame),
         **frame.extra,
     }
     _write_image_files(out, arrays, meta)
+    return out
+
+
+def _camera_meta(frame: Any) -> dict:
+    """``intrinsics`` and ``world_from_camera`` (4 x 4 nested lists, camera frame to the
+    scene's world, metres) of a simulated frame, where it carries them."""
+    out: dict[str, Any] = {}
+    if getattr(frame, "intrinsics", None) is not None:
+        out["intrinsics"] = intrinsics_dict(frame.intrinsics)
+    if getattr(frame, "world_from_camera", None) is not None:
+        out["world_from_camera"] = np.asarray(frame.world_from_camera, dtype=float).tolist()
     return out
 
 
@@ -402,14 +414,29 @@ def write_measured(
     reconstruction (:func:`~sim_core.raw.reconstruct_raw`); ``extra`` goes into ``frame.json``.
     Returns the reconstruction and its grey full scale.
     """
+    frame = measured_frame(raw, camera, extra)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if isinstance(raw, ProcessedDepthFrame):
+        write_depth_points(out / DEPTH_POINTS_NPZ, raw)
+    else:
+        write_raw(out / RAW_NPZ, raw)
+    _write_image_files(out, frame.arrays, frame.meta)
+    return frame.image, frame.grey_full_scale
+
+
+def measured_frame(
+    raw: RawFrame | ProcessedDepthFrame, camera: Camera, extra: dict[str, Any],
+) -> Frame:
+    """A measured frame as :func:`write_measured` writes it and :func:`read_measured` reads it
+    back, without a folder: ``raw`` reconstructed with ``camera``'s intrinsics, the arrays of
+    ``frame.npz`` and the ``frame.json`` (``extra`` merged in)."""
     from sim_core.camera import z_over_range
 
     if raw.shape != camera.intrinsics.shape:
         raise ValueError(
             f"measured frame is {raw.shape}, the camera model {camera.intrinsics.shape}"
         )
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     image = measured_image(raw, z_over_range(camera.intrinsics))
     depth = isinstance(raw, ProcessedDepthFrame)  # royale's own grey: no ADC scale known
     full_scale = grey_full_scale(image.amplitude, image.valid,
@@ -432,12 +459,8 @@ def write_measured(
         "arrays": {k: ARRAY_UNITS[k] for k in arrays},
         **extra,
     }
-    if depth:
-        write_depth_points(out / DEPTH_POINTS_NPZ, raw)
-    else:
-        write_raw(out / RAW_NPZ, raw)
-    _write_image_files(out, arrays, meta)
-    return image, full_scale
+    return Frame("measured", image, arrays, json.loads(json.dumps(json_safe(meta))),
+                 full_scale, None if depth else raw)
 
 
 # -- reading frame folders -------------------------------------------------------------------

@@ -28,6 +28,7 @@ import numpy as np
 
 from sim_core import frame_io
 from sim_core.adaptive import MAX_SPP, AdaptiveReport, render_adaptive
+from sim_core.camera import Intrinsics
 from sim_core.camera import z_over_range as camera_z_over_range
 from sim_core.optics import apply_mtf
 from sim_core.plan import EffectPlan, plan_effects
@@ -67,6 +68,10 @@ class SimulatedFrame:
     render_thread_seconds: dict[str, float] = field(default_factory=dict)
     #: :func:`sim_core.twin_file.twin_hash` of the calibration the scene applied, if any
     calibration_hash: str | None = None
+    #: the camera the frame was rendered with: its intrinsics and pose (camera frame to the
+    #: scene's world, 4 x 4), written into frame.json so other tools can make points of it
+    intrinsics: Intrinsics | None = None
+    world_from_camera: np.ndarray | None = field(default=None, repr=False)
 
 
 def z_over_range(scene: Scene) -> np.ndarray:
@@ -305,6 +310,8 @@ def expose_light(
         grey_full_scale=grey_full_scale,
         adaptive=rendered.adaptive,
         calibration_hash=scene.twin_hash,
+        intrinsics=scene.camera.intrinsics,
+        world_from_camera=np.array(scene.camera.world_from_camera, dtype=np.float64),
         extra={} if steps is None else {"subframes_rendered": len({id(s) for s in steps})},
     )
 

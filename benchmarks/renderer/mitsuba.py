@@ -17,8 +17,9 @@ its LLVM backend on all cores), and the benchmark reports:
    high-spp Mitsuba reference, then both renderers swept over spp and the time each needs to
    reach a target relative RMSE against that reference, interpolated in log-log.
 
-How the scene is matched in Mitsuba (and what differs): :mod:`benchmarks.renderer.mitsuba_scene`;
-how Mitsuba is loaded (its LLVM backend proven in a child process first):
+How the scene is matched in Mitsuba (and what differs): :mod:`sim_core.mitsuba_scene`, the
+converter ``toftwin export mitsuba`` writes its files with (here its ``load_dict`` form); how
+Mitsuba is loaded (its LLVM backend proven in a child process first):
 :mod:`benchmarks.renderer.mitsuba_backend`. Mitsuba is a benchmark dependency only (extra
 ``bench``), imported lazily, so the CLI works without it.
 """
@@ -37,10 +38,12 @@ from rich.console import Console
 from rich.table import Table
 
 from benchmarks.renderer.mitsuba_backend import MITSUBA_VARIANT, load_mitsuba
-from benchmarks.renderer.mitsuba_scene import (
+from sim_core.mitsuba_scene import (
+    MitsubaIntegrator,
     camera_mismatch_deg,
-    mitsuba_integrator,
-    mitsuba_scene_dict,
+    describe_scene,
+    integrator_dict,
+    scene_dict,
 )
 from sim_core.render import RenderSettings, render
 from sim_core.scene import Scene, build_scene
@@ -170,14 +173,16 @@ class _Ours:
 class _Mitsuba:
     def __init__(self, mi, scene: Scene, rr_from_bounce: int) -> None:
         self.mi = mi
+        desc = describe_scene(scene, rr_from_bounce=rr_from_bounce)
         with tempfile.TemporaryDirectory(prefix="toftwin-mitsuba-") as tmp:
-            self.scene = mi.load_dict(mitsuba_scene_dict(mi, scene, Path(tmp)))
+            self.scene = mi.load_dict(scene_dict(mi, desc, Path(tmp)))
         self.rr = rr_from_bounce
         self.integrators: dict[int, object] = {}
 
     def integrator(self, bounces: int):
         if bounces not in self.integrators:
-            self.integrators[bounces] = mitsuba_integrator(self.mi, bounces, self.rr)
+            self.integrators[bounces] = self.mi.load_dict(
+                integrator_dict(MitsubaIntegrator.matching(bounces, self.rr)))
         return self.integrators[bounces]
 
     def render(self, spp: int, bounces: int, seed: int):

@@ -4,6 +4,14 @@
 (:func:`calibration.camera_forms.calibrated_intrinsics`: its lens keys, the pico flexx preset's
 where it holds none) as OpenCV's FileStorage YAML or ROS's camera_info YAML
 (:mod:`calibration.camera_forms`, docs/export.md).
+
+``toftwin export frame DIR [DIR ...] --to hdf5|ply --out FILE`` writes frame folders as NeXus
+HDF5 or a frame's valid pixels as a PLY point cloud (:mod:`service.cli.export_frame`,
+docs/export-hdf5.md, docs/export-ply.md).
+
+``toftwin export mitsuba SCENE --out DIR`` writes a scene as a Mitsuba 3 scene, ``DIR/scene.xml``
+and its meshes as PLY files, which Mitsuba renders to the same DC image as ours
+(:mod:`service.cli.export_mitsuba`, :mod:`sim_core.mitsuba_scene`, docs/export-mitsuba.md).
 """
 
 from __future__ import annotations
@@ -14,9 +22,11 @@ from typing import Annotated
 import typer
 
 from service.cli.common import command_group, console, fail_invalid
+from service.cli.out_files import check_out_file
 from sim_core.errors import InvalidInputError
 
-export_app = command_group("Our data in other tools' forms (OpenCV, ROS).")
+export_app = command_group("Our data in other tools' forms (NeXus HDF5, PLY, OpenCV, ROS, "
+                           "Mitsuba 3).")
 
 
 @export_app.command("calibration")
@@ -59,16 +69,12 @@ def export_calibration(
 
 
 def _check_out(out: Path, source: Path, force: bool) -> None:
-    """Refuse an ``--out`` that is no file to write: not .yml/.yaml, a folder, in a folder that
-    is a file, the calibration it is made from, or an existing file without ``--force``."""
-    if out.suffix.lower() not in (".yml", ".yaml"):
-        raise InvalidInputError("--out", f"'{out}': a .yml or .yaml file")
-    if out.is_dir():
-        raise InvalidInputError("--out", f"'{out}' is a folder; give a file in it")
-    parent = next((p for p in out.absolute().parents if p.exists()), None)
-    if parent is not None and not parent.is_dir():
-        raise InvalidInputError("--out", f"'{parent}' is a file, not a folder")
-    if out.exists() and source.exists() and out.resolve() == source.resolve():
-        raise InvalidInputError("--out", f"'{out}' is the calibration it is made from")
-    if out.exists() and not force:
-        raise InvalidInputError("--out", f"'{out}' exists; use --force to replace it")
+    """Refuse an ``--out`` that is no calibration form to write (:func:`check_out_file`)."""
+    check_out_file(out, [source], force, (".yml", ".yaml"), made_from="the calibration")
+
+
+from service.cli.export_frame import export_frame  # noqa: E402
+from service.cli.export_mitsuba import export_mitsuba  # noqa: E402
+
+export_app.command("frame")(export_frame)
+export_app.command("mitsuba")(export_mitsuba)

@@ -4,9 +4,12 @@ other tools.
 ``toftwin schema scene`` (:class:`sim_core.scene_spec.SceneSpec`), ``calibration``
 (:class:`sim_core.twin_file.CalibrationFile`), ``reality`` (:class:`~sim_core.twin_file.
 RealityFile`, the simulated lab's hidden truth) and ``object`` (:class:`~sim_core.twin_file.
-ObjectTwinFile`, ``toftwin fit-object``'s ``object.yaml``): each generated from the pydantic
-models that read the file. The copies in ``docs/`` (:data:`SCHEMAS`) are regenerated with
-``toftwin schema NAME --out docs/NAME.schema.json`` (a test fails when one is stale). What a
+ObjectTwinFile`, ``toftwin fit-object``'s ``object.yaml``), ``material`` (:class:`sim_core.
+materials.material_file.MaterialFile`, ``toftwin calibrate brdf``'s output) and ``frame``
+(:class:`sim_core.frame_meta.FrameJson`, a frame folder's ``frame.json``): each generated from
+the pydantic models that state the file. The copies in ``docs/`` (:data:`SCHEMAS`) are
+regenerated with ``toftwin schema NAME --out docs/NAME.schema.json`` (a test fails when one is
+stale). What a
 schema cannot say (finite numbers only, unique object names, one of ``preset``/``kind``, ranges
 of material parameters, a lens that fits its image) is still checked when the file is loaded.
 """
@@ -38,6 +41,10 @@ MODEL_SCHEMAS: dict[str, tuple[str, str, str]] = {
                 "docs/calibration.md"),
     "object": ("sim_core.twin_file:ObjectTwinFile", "toftwin object twin",
                "docs/calibration.md"),
+    "material": ("sim_core.materials.material_file:MaterialFile",
+                 "toftwin material (a BRDF fit's output)", "docs/brdf-fitting.md"),
+    "frame": ("sim_core.frame_meta:FrameJson", "toftwin frame.json (a frame folder's metadata)",
+              "docs/frame-format.md"),
 }
 #: every schema and its committed copy
 SCHEMAS = {"scene": SCENE_SCHEMA_FILE} | {n: f"docs/{n}.schema.json" for n in MODEL_SCHEMAS}
@@ -177,3 +184,15 @@ def reality(out: OutOption = None) -> None:
 def object_twin(out: OutOption = None) -> None:
     """The JSON Schema of object twin files (fit-object's object.yaml)."""
     _write(schema_text(model_schema("object")), out)
+
+
+@schema_app.command("material")
+def material(out: OutOption = None) -> None:
+    """The JSON Schema of material files (calibrate brdf's fit.yaml, a scene's material file)."""
+    _write(schema_text(model_schema("material")), out)
+
+
+@schema_app.command("frame")
+def frame(out: OutOption = None) -> None:
+    """The JSON Schema of a frame folder's frame.json."""
+    _write(schema_text(model_schema("frame")), out)

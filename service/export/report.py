@@ -152,7 +152,10 @@ def _pose_context(store: FrameStore, r: dict[str, Any]) -> dict[str, Any]:
            "solar_suns": r["solar_suns"], "ssim_grey": metric("grey", "ssim")(r),
            "ssim_depth": metric("depth", "ssim")(r), "error": r["metrics"].get("error"),
            "tof": r["metrics"].get("tof"), "ceiling": ceiling_tof(r["metrics"]),
-           "gap": None, "panels": []}
+           "gap": None, "panels": [],
+           "frames": [(label, r[key]) for label, key in (
+               ("measured", "measured_frame_id"), ("simulated", "simulated_frame_id"),
+               ("fitted", "fitted_frame_id")) if r.get(key)]}
     try:
         out["panels"] = inline_panels(
             pose_panels(store, r["measured_frame_id"], r["simulated_frame_id"]))

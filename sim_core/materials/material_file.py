@@ -16,15 +16,36 @@ from __future__ import annotations
 import math
 import numbers
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
 
 from sim_core.errors import InvalidInputError
 from sim_core.files import StructuredFileError, load_structured
+from sim_core.materials.presets import MATERIAL_KINDS
 
-__all__ = ["MATERIAL_FILE_KEYS", "read_material_file"]
+_KINDS = tuple(MATERIAL_KINDS)
+
+__all__ = ["MATERIAL_FILE_KEYS", "MaterialFile", "read_material_file"]
 
 #: the top-level keys a material file may have
 MATERIAL_FILE_KEYS = ("kind", "params", "fit")
+
+
+class MaterialFile(BaseModel):
+    """A material file as its JSON Schema states it (``toftwin schema material``): what
+    :func:`read_material_file` accepts, with ``kind`` one of the material kinds
+    (:data:`sim_core.materials.presets.MATERIAL_KINDS`; the scene checks it, and each
+    parameter's range, when it makes the material)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    kind: Literal[tuple(_KINDS)] = Field(  # type: ignore[valid-type]
+        description="The material model (docs/scene-format.md, Materials).")
+    params: dict[str, Annotated[float, Field(allow_inf_nan=False)] | str] = Field(
+        default_factory=dict, description="The model's parameters: finite numbers or names.")
+    fit: dict[str, Any] | None = Field(
+        None, description="The report of the fit that made the file (ignored when read).")
 
 
 def read_material_file(path: str | Path) -> tuple[str, dict[str, Any]]:

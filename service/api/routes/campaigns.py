@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 from collections.abc import AsyncIterator
 from contextlib import aclosing
 from functools import partial
@@ -11,6 +13,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Depends, Path, Query, Response
 from fastapi.responses import FileResponse, HTMLResponse, StreamingResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
+from starlette.background import BackgroundTask
 
 from service.api.deps import (
     LeaseDep,
@@ -31,6 +34,7 @@ from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.api.security_headers import self_contained_document
 from service.errors import ConflictError, NotFoundError
 from service.export.bluesky import iter_campaign_documents
+from service.export.frame_forms import write_campaign_nexus
 from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
 from service.export.results_table import result_dict, result_rows, results_csv
@@ -217,6 +221,27 @@ def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep,
         raise NotFoundError(f"campaign {campaign_id} has no recording"
                             + ("" if row.record_path is None else " yet"))
     return FileResponse(path, media_type="application/x-hdf5", filename=path.name)
+
+
+@router.get("/{campaign_id}/frames.h5", response_class=FileResponse, responses={
+    200: {"content": {"application/x-hdf5": {}},
+          "description": "The campaign's frames as NeXus HDF5 (docs/export-hdf5.md)"},
+    **errors(404)})
+def get_campaign_frames(campaign_id: CampaignId, sessions: SessionsDep,
+                        store: StoreDep) -> FileResponse:
+    """Every pose result's measured and simulated frames (and the fitted twin's, where each
+    result has one) in one NeXus HDF5 file, pose by pose, with each result's metrics; a
+    result whose frame folders are gone is left out (the file's ``skipped_pose_indices``)."""
+    fd, tmp = tempfile.mkstemp(prefix=f"toftwin-{campaign_id}-", suffix=".h5")
+    os.close(fd)
+    try:
+        write_campaign_nexus(sessions, store, campaign_id, tmp)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    return FileResponse(tmp, media_type="application/x-hdf5",
+                        filename=f"campaign-{campaign_id}.h5",
+                        background=BackgroundTask(os.unlink, tmp))
 
 
 @router.get("/{campaign_id}/plots/{name}.svg", response_class=Response, responses={

@@ -5,15 +5,17 @@ from __future__ import annotations
 import json
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Path
+from fastapi import APIRouter, Path, Query
 from fastapi.responses import FileResponse, Response
 
 from service.api.deps import PageDep, SessionDep, SessionsDep, StoreDep, TokenDep, errors
 from service.api.schemas import FramePublic
 from service.errors import NotFoundError
+from service.export.frame_forms import stored_frame_nexus, stored_frame_ply
 from service.lab import campaigns as lab_campaigns
 from service.store import queries
 from sim_core import frame_io
+from sim_core.frame_points import POINT_FRAMES
 from sim_core.json_safe import json_safe
 
 router = APIRouter(prefix="/frames", tags=["frames"])
@@ -77,6 +79,41 @@ def get_frame_preview(
     return FileResponse(store.checked_file(frame_id, f"{kind}.png"), media_type="image/png")
 
 
+@router.get("/{frame_id}/export.h5", response_class=Response, responses={
+    200: {"content": {"application/x-hdf5": {}},
+          "description": "The frame as NeXus HDF5 (docs/export-hdf5.md)"}, **errors(404, 410)})
+def get_frame_nexus(frame_id: FrameIdPath, store: StoreDep, session: SessionDep) -> Response:
+    """The frame as one NeXus HDF5 file: depth, range, grey, amplitude, intensity, valid,
+    phase (and the raw phase images and taps where it has them) as NXdata with axes and units;
+    intrinsics, pose, rig state and its frame.json as NXcollections."""
+    _row(session, frame_id)
+    return Response(stored_frame_nexus(store, frame_id), media_type="application/x-hdf5",
+                    headers=_attachment(f"{frame_id}.h5"))
+
+
+@router.get("/{frame_id}/points.ply", response_class=Response, responses={
+    200: {"content": {"application/octet-stream": {}},
+          "description": "The valid pixels as a PLY point cloud (docs/export-ply.md)"},
+    **errors(404, 410)})
+def get_frame_points(
+    frame_id: FrameIdPath, store: StoreDep, session: SessionDep,
+    frame: Annotated[Literal[POINT_FRAMES], Query(  # type: ignore[valid-type]
+        description="camera (x right, y down, z forward) or world (needs the frame's pose: "
+                    "a simulated frame has it)")] = "camera",
+) -> Response:
+    """The frame's valid pixels as points x, y, z [m] with column, row, grey and a noise
+    estimate [m] per point (binary PLY); 422 for the world frame of a frame whose pose is not
+    known."""
+    _row(session, frame_id)
+    return Response(stored_frame_ply(store, frame_id, frame),
+                    media_type="application/octet-stream",
+                    headers=_attachment(f"{frame_id}-{frame}.ply"))
+
+
+def _attachment(filename: str) -> dict[str, str]:
+    return {"Content-Disposition": f'attachment; filename="{filename}"'}
+
+
 def _row(session, frame_id: str):
     row = queries.get_frame(session, frame_id)
     if row is None:
@@ -95,5 +132,6 @@ def frame_public(store, row, with_metadata: bool = True) -> dict:
         "rig": json.loads(row.rig_json),
         "summary": json.loads(row.summary_json), "metadata": meta,
         "links": {"self": base, "arrays": f"{base}/arrays", "raw": f"{base}/raw",
-                  "grey": f"{base}/preview/grey.png", "depth": f"{base}/preview/depth.png"},
+                  "grey": f"{base}/preview/grey.png", "depth": f"{base}/preview/depth.png",
+                  "hdf5": f"{base}/export.h5", "ply": f"{base}/points.ply"},
     })

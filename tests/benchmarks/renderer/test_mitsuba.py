@@ -19,7 +19,6 @@ from rich.console import Console
 
 from benchmarks.renderer import mitsuba as bm
 from benchmarks.renderer import mitsuba_backend as backend
-from benchmarks.renderer import mitsuba_scene
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -185,32 +184,6 @@ def test_loglog_crossing():
     assert x == pytest.approx(16.0) and extrapolated
     x, _ = bm.loglog_crossing(t, np.full(4, 0.1), 0.05)  # not decreasing
     assert math.isnan(x)
-
-
-def test_ply_writer_and_camera_refusals(tmp_path):
-    tris = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 1], [1, 0, 1], [0, 1, 1]]], float)
-    path = tmp_path / "m.ply"
-    mitsuba_scene.write_ply(path, tris)
-    data = path.read_bytes()
-    head, body = data.split(b"end_header\n")
-    assert b"element vertex 6" in head and b"element face 2" in head
-    assert len(body) == 6 * 12 + 2 * 13
-    np.testing.assert_array_equal(np.frombuffer(body[:72], "<f4").reshape(2, 3, 3), tris)
-
-    from sim_core.camera import Camera, Intrinsics, look_at
-    from sim_core.scene import build_scene
-    from sim_core.scene_spec import load_scene_spec
-
-    scene = build_scene(load_scene_spec(bm.CORNER_SCENE), base_dir=bm.CORNER_SCENE.parent)
-    pose = look_at([1.5, 1.5, 1.5], [0, 0, 0], [0, 0, 1])
-    for intr, what in (
-        (Intrinsics(224, 171, 200.0, 210.0, 111.5, 85.0), "square pixels"),
-        (Intrinsics(224, 171, 200.0, 200.0, 111.5, 85.0, (0.1, 0, 0, 0, 0)), "distortion"),
-    ):
-        cam = Camera(intr, pose)
-        bad = type(scene)(**{**scene.__dict__, "camera": cam})
-        with pytest.raises(ValueError, match=what):
-            mitsuba_scene.mitsuba_sensor_dict(None, bad)
 
 
 def test_find_libllvm_returns_the_newest_library_found_or_none():

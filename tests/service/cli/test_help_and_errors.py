@@ -129,6 +129,10 @@ ERROR_CALLS = {
                "does not exist"),
     "export calibration": (lambda t: ["export", "calibration", str(t / "none.yaml"), "--to",
                                       "ros", "--out", str(t / "c.yaml")], 2, "does not exist"),
+    "export mitsuba": (lambda t: ["export", "mitsuba", str(t / "none.yaml"), "--out",
+                                  str(t / "m")], 2, "does not exist"),
+    "export frame": (lambda t: ["export", "frame", str(t / "none"), "--to", "hdf5", "--out",
+                                str(t / "f.h5")], 2, "is not a frame folder"),
 }
 
 

@@ -8,6 +8,8 @@ from pathlib import Path
 import jsonschema
 import pytest
 import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from service.cli import app
@@ -156,3 +158,86 @@ def test_the_schemas_reject_what_the_loaders_reject(name, data):
              "object": parse_object_twin}[name]
     with pytest.raises(InvalidInputError):
         parse(data)
+
+
+# -- the material file and frame.json (issue 29) -----------------------------------------------
+def test_a_fitted_material_file_passes_its_schema_and_reads(tmp_path):
+    """A material file as ``toftwin calibrate brdf`` writes it passes the schema, and the
+    loader and the model take it alike."""
+    from calibration.brdf import fit_brdf
+    from calibration.brdf.material_file import write_material_file
+    from sim_core.materials import make_material
+    from sim_core.materials.material_file import MaterialFile, read_material_file
+    from tests.calibration.brdf.synthetic import measure
+
+    fit = fit_brdf(measure(make_material("lambertian", albedo=0.4), 2, noise=0.03).table,
+                   "lambertian", seed=2)
+    path = write_material_file(tmp_path / "fit.yaml", fit)
+    data = yaml.safe_load(path.read_text())
+    assert not _errors(_validator("material"), data)
+    model = MaterialFile.model_validate(data)
+    assert read_material_file(path) == (model.kind, model.params)
+
+
+_VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=5),
+                    st.booleans(), st.none(), st.lists(st.integers(), max_size=2))
+
+
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(data=st.dictionaries(
+    st.sampled_from(["kind", "params", "fit", "kd", "preset"]),
+    st.one_of(st.sampled_from(["lambertian", "cook-torrance", "hapke", "marble"]),
+              st.dictionaries(st.sampled_from(["albedo", "kd", "m", "fresnel_angle"]), _VALUES,
+                              max_size=3), _VALUES), max_size=4))
+def test_the_material_schema_takes_what_the_loader_takes(tmp_path_factory, data):
+    """On random documents: what the schema accepts the loader reads; what the loader reads
+    with a known material kind the schema accepts (the loader leaves the kind to the scene)."""
+    from sim_core.errors import InvalidInputError
+    from sim_core.materials import MATERIAL_KINDS
+    from sim_core.materials.material_file import read_material_file
+
+    path = tmp_path_factory.mktemp("material") / "m.json"
+    try:
+        path.write_text(json.dumps(data, allow_nan=False))
+    except ValueError:  # NaN or inf: no JSON document at all
+        return
+    try:
+        read_material_file(path)
+        loads = True
+    except InvalidInputError:
+        loads = False
+    valid = not _errors(_validator("material"), data)
+    if valid:
+        assert loads, data
+    if loads and data.get("kind") in MATERIAL_KINDS and data.get("params") is not None:
+        assert valid, (data, _errors(_validator("material"), data))
+
+
+def test_frame_json_of_each_kind_passes_its_schema_and_states_the_camera(tmp_path):
+    """A simulated frame's and a measured frame's frame.json pass the schema; the model's
+    intrinsics are the ones the frame reader uses, and a simulated frame carries its pose."""
+    from sim_core import frame_io
+    from sim_core.frame_meta import FrameJson
+    from sim_core.pipeline import save_frame, simulate
+    from sim_core.render import RenderSettings
+    from sim_core.render_request import RenderRequest
+    from tests.sim_core.scenes import small_example
+
+    scene = small_example("corner", width=16)
+    frame = simulate(scene, RenderRequest(RenderSettings(integrator="direct", spp=1)))
+    sim = save_frame(tmp_path / "sim", frame, scene_name="corner")
+    frame_io.write_measured(tmp_path / "meas", frame.raw, scene.camera,
+                            {"frame_id": "b" * 32, "rig": {"turntable_deg": 5.0}})
+    for folder in (sim, tmp_path / "meas"):
+        data = json.loads((folder / frame_io.FRAME_JSON).read_text())
+        assert not _errors(_validator("frame"), data), folder
+        model = FrameJson.model_validate(data)
+        intr = frame_io.intrinsics_from_meta(data, tuple(data["shape"]))
+        assert model.intrinsics is not None
+        assert model.intrinsics.model_dump() == frame_io.intrinsics_dict(intr)
+        assert intr == scene.camera.intrinsics
+    assert FrameJson.model_validate(json.loads((sim / "frame.json").read_text())) \
+        .world_from_camera == scene.camera.world_from_camera.tolist()
+    broken = {**data, "shape": [171], "world_from_camera": [[1.0, 0.0]]}
+    assert len(_errors(_validator("frame"), broken)) == 2
