@@ -21,6 +21,7 @@ import typer
 
 from service.cli import ranges
 from service.cli.common import choice, console, fail_invalid, number_option
+from service.cli.render_options import CalibrationFileOption, SppOption, TurntableDegOption
 from sim_core.errors import InvalidInputError
 
 
@@ -31,10 +32,7 @@ def export_mitsuba(
     out: Annotated[Path, typer.Option("--out", help="Folder to write scene.xml and meshes/ "
                                                     "into; a new or empty one, or an earlier "
                                                     "export with --force.")],
-    spp: Annotated[
-        int | None, number_option("--spp", help="Samples per pixel of the sensor "
-                                  "(default: the scene's).", allowed=ranges.SPP)
-    ] = None,
+    spp: SppOption = None,
     max_bounces: Annotated[
         int | None, number_option("--max-bounces", help="Surface interactions per path of the "
                                   "path integrator (default: the scene's).",
@@ -43,21 +41,14 @@ def export_mitsuba(
     integrator: Annotated[
         str | None, typer.Option(help="direct (max_depth 2) or path (default: the scene's).")
     ] = None,
-    turntable_deg: Annotated[
-        float | None, number_option("--turntable-deg", help="Override the turntable angle [deg].",
-                                    allowed=ranges.TURNTABLE_DEG)
-    ] = None,
+    turntable_deg: TurntableDegOption = None,
     solar_suns: Annotated[
         float | None, number_option("--solar-suns", help="Override the solar simulator level "
                                     "[sun]: the export carries no ambient light, so a scene "
                                     "with a solar simulator needs 0 (its shutter closed).",
                                     allowed=ranges.SOLAR_SUNS_OR_OFF)
     ] = None,
-    calibration: Annotated[
-        Path | None,
-        typer.Option("--calibration", help="Calibration file to apply (docs/calibration.md); "
-                     "replaces the scene's own 'calibration'."),
-    ] = None,
+    calibration: CalibrationFileOption = None,
     force: Annotated[bool, typer.Option("--force", help="Replace an earlier export in "
                                                         "--out.")] = False,
 ) -> None:

@@ -17,6 +17,12 @@ from service.cli.common import (
     print_error,
     progress_bar,
 )
+from service.cli.render_options import (
+    CalibrationFileOption,
+    IntegratorOption,
+    MaxBouncesOption,
+    TurntableDegOption,
+)
 from sim_core.errors import InvalidInputError
 
 
@@ -27,17 +33,12 @@ def simulate(
         int | None, number_option("--spp", help="Samples per pixel (default: the scene's).",
                                   allowed=ranges.SPP)
     ] = None,
-    max_bounces: Annotated[
-        int | None, number_option("--max-bounces", help="Surface interactions per path.",
-                                  allowed=ranges.MAX_BOUNCES)
-    ] = None,
+    max_bounces: MaxBouncesOption = None,
     seed: Annotated[
         int | None, number_option("--seed", help="Random seed.",
                                   allowed=ranges.SEED)
     ] = None,
-    integrator: Annotated[
-        str | None, typer.Option(help="direct or path (default: the scene's).")
-    ] = None,
+    integrator: IntegratorOption = None,
     ideal: Annotated[
         bool, typer.Option("--ideal", help="Ideal sensor: no noise, SBI or ADC.")
     ] = False,
@@ -54,10 +55,7 @@ def simulate(
         int | None, number_option("--threads", help="Embree threads (default: all cores).",
                                   allowed=ranges.THREADS)
     ] = None,
-    turntable_deg: Annotated[
-        float | None, number_option("--turntable-deg", help="Override the turntable angle [deg].",
-                                    allowed=ranges.TURNTABLE_DEG)
-    ] = None,
+    turntable_deg: TurntableDegOption = None,
     quiet: QuietOption = False,
     target_range_error_mm: Annotated[
         float | None,
@@ -76,11 +74,7 @@ def simulate(
                       "grey) is above this fraction of the sensor's own noise.",
                       allowed=ranges.NOISE_FRACTION),
     ] = None,
-    calibration: Annotated[
-        Path | None,
-        typer.Option("--calibration", help="Calibration file to apply (docs/calibration.md); "
-                     "replaces the scene's own 'calibration'."),
-    ] = None,
+    calibration: CalibrationFileOption = None,
 ) -> None:
     """Render SCENE and write frame.npz, frame.json and PNG previews into --out."""
     from sim_core.pipeline import save_frame
