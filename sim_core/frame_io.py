@@ -25,6 +25,7 @@ reader never sees a half-written file and a crash leaves at most a stray ``*.tmp
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -214,9 +215,28 @@ def _atomic_write(path: Path, write) -> None:
     atomic_write(path, write)
 
 
+#: zlib level of the frame files' compression (``.npz`` and PNG). Level 1 writes a frame's
+#: arrays 2-6 times faster than the default 6 (numpy's ``savez_compressed``, PIL's PNG) and
+#: makes the files 3-14 % larger (a 224 x 171 frame.npz: 66 against 119 ms, 2.50 against
+#: 2.44 MB; raw.npz: 29 against 163 ms, 0.68 against 0.60 MB; the 16-bit depth PNG: 3 against
+#: 32 ms, 55 against 53 kB): in a campaign the files were the larger part of a pose after the
+#: renders. Readers are unaffected (any level inflates alike).
+COMPRESS_LEVEL = 1
+
+
+def _savez(fh, arrays: dict[str, np.ndarray]) -> None:
+    """``np.savez_compressed`` at :data:`COMPRESS_LEVEL`: one ``NAME.npy`` member per array, as
+    ``np.load`` reads it."""
+    with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED,
+                         compresslevel=COMPRESS_LEVEL) as zf:
+        for name, value in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+
+
 def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write arrays (compressed) atomically."""
-    _atomic_write(Path(path), lambda fh: np.savez_compressed(fh, **arrays))
+    """Write arrays (compressed, :data:`COMPRESS_LEVEL`) atomically."""
+    _atomic_write(Path(path), lambda fh: _savez(fh, arrays))
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
@@ -230,7 +250,8 @@ def write_png(path: Path, image: np.ndarray) -> None:
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"PNG previews must be uint8 or uint16, got {image.dtype}")
     img = Image.fromarray(np.ascontiguousarray(image))
-    _atomic_write(Path(path), lambda fh: img.save(fh, format="PNG"))
+    _atomic_write(Path(path), lambda fh: img.save(fh, format="PNG",
+                                                  compress_level=COMPRESS_LEVEL))
 
 
 # -- raw.npz ---------------------------------------------------------------------------------
