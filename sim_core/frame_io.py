@@ -57,6 +57,7 @@ DEPTH_PNG = "depth.png"
 FRAME_FILES = (FRAME_NPZ, FRAME_JSON, GREY_PNG, DEPTH_PNG, RAW_NPZ)
 
 FrameKind = Literal["measured", "simulated"]
+FRAME_KINDS: tuple[FrameKind, ...] = ("measured", "simulated")
 
 # -- arrays ----------------------------------------------------------------------------------
 #: what each ``frame.npz`` array holds, written into frame.json (``arrays``)
@@ -194,20 +195,85 @@ def intrinsics_dict(intr: Intrinsics) -> dict[str, Any]:
 
 
 def intrinsics_from_meta(meta: dict, shape: tuple[int, int]) -> Intrinsics:
-    """The intrinsics a measured frame was reconstructed with.
+    """The intrinsics a frame was reconstructed (measured) or rendered (simulated) with.
 
-    Without ``intrinsics`` in ``frame.json``: the pico flexx preset's focal lengths with the
-    principal point at the image centre.
+    Without ``intrinsics`` in ``frame.json`` (a measured frame of an old version, a simulated
+    frame written before they were recorded): the pico flexx preset's focal lengths with the
+    principal point at the image centre (:func:`intrinsics_known` says which). Keys that are
+    there are checked as :class:`sim_core.frame_meta.FrameIntrinsics` states them.
+
+    Raises
+    ------
+    InvalidInputError
+        ``frame.json``: intrinsics with a missing key or a value out of its range.
     """
     if "intrinsics" in meta:
-        i = meta["intrinsics"]
-        return Intrinsics(
-            i["width_px"], i["height_px"], i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"],
-            tuple(i.get("distortion", (0.0,) * 5)),
-        )
+        from pydantic import ValidationError
+
+        from sim_core.frame_meta import FrameIntrinsics
+
+        try:
+            i = FrameIntrinsics.model_validate(meta["intrinsics"])
+        except ValidationError as exc:
+            e = exc.errors()[0]
+            where = ".".join(str(p) for p in e["loc"])
+            raise InvalidInputError("frame.json", f"intrinsics.{where}: {e['msg']}") from None
+        return Intrinsics(i.width_px, i.height_px, i.fx_px, i.fy_px, i.cx_px, i.cy_px,
+                          tuple(i.distortion))
     p = CAMERA_PRESETS["pmd-camboard-pico-flexx"]
     h, w = shape
     return Intrinsics(w, h, p["fx_px"], p["fy_px"], (w - 1) / 2.0, (h - 1) / 2.0)
+
+
+def intrinsics_known(meta: dict) -> bool:
+    """Whether ``frame.json`` records the frame's intrinsics (else :func:`intrinsics_from_meta`
+    falls back to the preset's)."""
+    return "intrinsics" in meta
+
+
+def image_intrinsics(meta: dict, shape: tuple[int, int]) -> Intrinsics:
+    """:func:`intrinsics_from_meta` of a frame whose image is ``shape`` (H, W): its size must be
+    the image's (else an input error naming ``frame.json``)."""
+    intr = intrinsics_from_meta(meta, shape)
+    if intr.shape != tuple(shape):
+        raise InvalidInputError("frame.json", f"intrinsics of a {intr.width_px} x "
+                                f"{intr.height_px} image, but the frame is {shape[1]} x "
+                                f"{shape[0]}")
+    return intr
+
+
+#: how far a pose's rotation may be from orthonormal (rounding of a written matrix)
+POSE_TOLERANCE = 1e-6
+
+
+def pose_from_meta(meta: dict) -> np.ndarray | None:
+    """``world_from_camera`` (4 x 4) of a frame.json: the rigid transform from the camera frame
+    to the scene's world; None where the frame does not record it (its pose is not known).
+
+    Raises
+    ------
+    InvalidInputError
+        ``frame.json``: a ``world_from_camera`` that is not a finite rigid 4 x 4 transform
+        (rotation orthonormal within :data:`POSE_TOLERANCE`, last row 0 0 0 1).
+    """
+    m = meta.get("world_from_camera")
+    if m is None:
+        return None
+    try:
+        a = np.asarray(m, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    ok = a.shape == (4, 4) and bool(np.all(np.isfinite(a)))
+    if ok:
+        r = a[:3, :3]
+        with np.errstate(over="ignore", invalid="ignore"):  # a huge entry: inf, not rigid
+            gram = r.T @ r
+        ok = (np.allclose(gram, np.eye(3), rtol=0, atol=POSE_TOLERANCE)
+              and np.allclose(a[3], [0.0, 0.0, 0.0, 1.0], rtol=0, atol=POSE_TOLERANCE))
+    if not ok:
+        raise InvalidInputError("frame.json", "world_from_camera is not a finite rigid 4 x 4 "
+                                "transform (orthonormal rotation, last row 0 0 0 1)")
+    return a
 
 
 # -- atomic files ----------------------------------------------------------------------------
@@ -598,6 +664,9 @@ def read_frame(directory: str | Path) -> Frame:
     if not d.is_dir():
         raise FileNotFoundError(f"no frame folder {d}")
     meta = _read_meta(d)
+    if meta.get("kind") not in (None, *FRAME_KINDS):
+        raise InvalidInputError("frame.json", f"kind {meta.get('kind')!r}; allowed: "
+                                f"{', '.join(FRAME_KINDS)}")
     measured = meta.get("kind") == "measured" or (
         not (d / FRAME_NPZ).is_file() and (d / RAW_NPZ).is_file()
     )

@@ -9,12 +9,15 @@ records its camera's), the points can be given in the scene's world frame too.
 
 Per point the PLY carries the pixel's column and row, its grey level (``grey.png``) and a noise
 estimate [m]: the local robust spread of the range's second differences
-(:func:`sim_core.flying_pixels.second_difference_noise_m`), which needs no sensor model and so
-means the same for a measured and a simulated frame.
+(:func:`sim_core.flying_pixels.second_difference_noise_m`) over sqrt(6), which for independent
+Gaussian range noise of standard deviation sigma estimates sigma. It needs no sensor model and
+so means the same for a measured and a simulated frame; at an edge or on a curved surface the
+scene's own shape adds to it.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -26,8 +29,11 @@ from sim_core.camera import pixel_to_camera_direction
 from sim_core.errors import InvalidInputError
 from sim_core.files import atomic_write
 from sim_core.flying_pixels import second_difference_noise_m
-from sim_core.frame_io import Frame, intrinsics_from_meta
-from sim_core.nexus import frame_pose
+from sim_core.frame_io import Frame, image_intrinsics, intrinsics_known, pose_from_meta
+
+#: second differences of independent range noise of standard deviation sigma have sqrt(6) sigma
+#: (1 + 4 + 1 times its variance)
+SECOND_DIFFERENCE_PER_SIGMA = math.sqrt(6.0)
 
 PointFrame = Literal["camera", "world"]
 POINT_FRAMES: tuple[PointFrame, ...] = ("camera", "world")
@@ -47,6 +53,9 @@ class FramePoints:
         The frame's grey level at the pixel.
     noise_m : (n,) float64
         Local range-noise estimate [m] (NaN where the image has no second difference).
+    intrinsics_known : bool
+        Whether frame.json records the intrinsics the points were made with (else the pico
+        flexx preset's, with the principal point at the image centre).
     world_from_camera : (4, 4) float64 or None
         The frame's pose, where known.
     """
@@ -57,6 +66,7 @@ class FramePoints:
     grey: np.ndarray
     noise_m: np.ndarray
     world_from_camera: np.ndarray | None
+    intrinsics_known: bool = True
 
     def xyz_m(self, frame: PointFrame = "camera") -> np.ndarray:
         """The points in the camera frame, or in the world frame (the pose must be known)."""
@@ -78,13 +88,14 @@ def frame_points(frame: Frame) -> FramePoints:
     rng = np.asarray(im.range_m, dtype=np.float64)
     keep = np.asarray(im.valid, dtype=bool) & np.isfinite(rng) & (rng > 0.0)
     rows, cols = np.nonzero(keep)
-    intr = intrinsics_from_meta(frame.meta, rng.shape)
+    intr = image_intrinsics(frame.meta, rng.shape)
     directions = pixel_to_camera_direction(intr, cols.astype(np.float64), rows.astype(np.float64))
-    noise = second_difference_noise_m(rng, keep)
+    noise = second_difference_noise_m(rng, keep) / SECOND_DIFFERENCE_PER_SIGMA
     return FramePoints(
         xyz_camera_m=directions * rng[rows, cols][:, None],
         column_px=cols, row_px=rows, grey=frame.grey_8bit()[rows, cols],
-        noise_m=noise[rows, cols], world_from_camera=frame_pose(frame.meta))
+        noise_m=noise[rows, cols], world_from_camera=pose_from_meta(frame.meta),
+        intrinsics_known=intrinsics_known(frame.meta))
 
 
 def ply_bytes(points: FramePoints, frame: PointFrame = "camera") -> bytes:
@@ -101,7 +112,9 @@ def ply_bytes(points: FramePoints, frame: PointFrame = "camera") -> bytes:
     comments = (f"comment toftwin point cloud: x y z in metres, {frame} frame"
                 + (" (x right, y down, z along the optical axis)" if frame == "camera" else
                    " (the scene's world, via frame.json's world_from_camera)")
-                + "\ncomment grey: the frame's grey level; noise_m: local range-noise estimate\n")
+                + "\ncomment grey: the frame's grey level; noise_m: local range-noise estimate\n"
+                + ("" if points.intrinsics_known else "comment intrinsics: the pico flexx "
+                   "preset's (the frame records none)\n"))
     first = data.index(b"\n", data.index(b"format")) + 1  # after the format line
     return data[:first] + comments.encode("ascii") + data[first:]
 

@@ -14,7 +14,8 @@ Layout (``frame`` is present only in a stack)::
                                      where the source exposes them (the simulator)
       camera                NXcollection  width_px ... cy_px, distortion (k1 k2 p1 p2 k3),
                                      camera_matrix (3 x 3), world_from_camera (4 x 4, where
-                                     the pose is known: the camera frame to the scene's world)
+                                     the pose is known: the camera frame to the scene's world;
+                                     else NaN), intrinsics_source
       rig                   NXcollection  the rig state's numbers (turntable angle, suns, ...)
       metadata              NXcollection  frame_json (the whole frame.json), kind, frame_id,
                                      scene_hash, calibration_hash, use_case, package_version
@@ -23,8 +24,8 @@ Layout (``frame`` is present only in a stack)::
 Every image is the frame folder's own array (:mod:`sim_core.frame_io`): nothing is resampled
 or rescaled. Missing values are NaN (numbers) or "" (text). A single-frame file is written to a
 temporary name and renamed (:func:`sim_core.files.atomic_write`); a stack grows frame by frame
-(:class:`NexusFrameStack`), each append flushed, so a reader following a scan's
-StreamResource/StreamDatum documents finds every frame they announce.
+(:class:`NexusFrameStack`), each append flushed, and a frame that cannot join it (another
+shape or form) is refused before anything of it is written.
 """
 
 from __future__ import annotations
@@ -40,7 +41,13 @@ import numpy as np
 
 from sim_core.errors import InvalidInputError
 from sim_core.files import atomic_write
-from sim_core.frame_io import Frame, intrinsics_from_meta, package_version
+from sim_core.frame_io import (
+    Frame,
+    image_intrinsics,
+    intrinsics_known,
+    package_version,
+    pose_from_meta,
+)
 from sim_core.json_safe import json_safe
 
 #: the (H, W) NXdata groups of every frame: group -> (frame array, long name)
@@ -62,11 +69,16 @@ GZIP_LEVEL = 4
 
 def frame_unit(frame: Frame, array: str) -> str:
     """The unit of a frame array as NeXus writes it: DN where the frame was read out by a
-    sensor (a raw frame), ``W m^-2 sr^-1`` for an ideal-sensor simulation."""
+    sensor (measured, or simulated with a sensor: frame.json's ``ideal_sensor`` false),
+    ``W m^-2 sr^-1`` for an ideal-sensor simulation (a frame.json without ``ideal_sensor``:
+    by whether the folder has a raw frame)."""
     if array in ("depth_z_m", "range_m"):
         return "m"
     if array in ("amplitude", "intensity"):
-        return "DN" if (frame.raw is not None or frame.kind == "measured") else "W m^-2 sr^-1"
+        ideal = frame.meta.get("ideal_sensor")
+        if frame.kind == "measured" or ideal is False or (ideal is None and frame.raw is not None):
+            return "DN"
+        return "W m^-2 sr^-1"
     return ""
 
 
@@ -90,32 +102,20 @@ def frame_images(frame: Frame) -> dict[str, np.ndarray]:
     return out
 
 
-def frame_pose(meta: Mapping[str, Any]) -> np.ndarray | None:
-    """``world_from_camera`` (4 x 4) of a frame.json, or None where the pose is not known (or
-    not a finite rigid 4 x 4)."""
-    m = meta.get("world_from_camera")
-    if m is None:
-        return None
-    try:
-        a = np.asarray(m, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    if a.shape != (4, 4) or not np.all(np.isfinite(a)):
-        return None
-    return a
-
-
-def camera_fields(frame: Frame) -> dict[str, np.ndarray]:
-    """``/entry/camera``: the intrinsics the frame was reconstructed with, its camera matrix and
-    (NaN where unknown) its pose."""
-    intr = intrinsics_from_meta(frame.meta, frame.image.range_m.shape)
+def camera_fields(frame: Frame) -> dict[str, Any]:
+    """``/entry/camera``: the intrinsics the frame was reconstructed with, its camera matrix,
+    (NaN where unknown) its pose, and where the intrinsics come from (``intrinsics_source``:
+    ``frame.json``, or the preset's where frame.json records none)."""
+    intr = image_intrinsics(frame.meta, frame.image.range_m.shape)
     out = {k: np.asarray(getattr(intr, k), dtype=np.int64 if k.endswith(("width_px",
            "height_px")) else np.float64) for k in CAMERA_KEYS}
     out["distortion"] = np.asarray(intr.distortion, dtype=np.float64)
     out["camera_matrix"] = np.array([[intr.fx_px, 0.0, intr.cx_px], [0.0, intr.fy_px, intr.cy_px],
                                      [0.0, 0.0, 1.0]])
-    pose = frame_pose(frame.meta)
+    pose = pose_from_meta(frame.meta)
     out["world_from_camera"] = np.full((4, 4), np.nan) if pose is None else pose
+    out["intrinsics_source"] = ("frame.json" if intrinsics_known(frame.meta) else
+                                "pico flexx preset (frame.json records no intrinsics)")
     return out
 
 
@@ -143,10 +143,21 @@ def metadata_fields(frame: Frame) -> dict[str, str]:
 
 
 def _finite_metrics(metrics: Mapping[str, Any] | None) -> dict[str, float]:
+    """The numbers of ``metrics`` as floats, NaN for a missing (None) or non-finite one."""
     if not metrics:
         return {}
-    return {k: float(v) if np.isfinite(v) else float("nan") for k, v in sorted(metrics.items())
-            if isinstance(v, int | float) and not isinstance(v, bool)}
+    return {k: float(v) if v is not None and np.isfinite(v) else float("nan")
+            for k, v in sorted(metrics.items())
+            if v is None or (isinstance(v, int | float) and not isinstance(v, bool))}
+
+
+#: units of the collections' fields by the suffix of their names
+_SUFFIX_UNITS = (("_mm", "mm"), ("_m", "m"), ("_px", "pixel"), ("_deg", "deg"), ("_s", "s"),
+                 ("_hz", "Hz"), ("_c", "degC"), ("_suns", "sun"))
+
+
+def _field_units(name: str) -> str | None:
+    return next((u for suffix, u in _SUFFIX_UNITS if name.endswith(suffix)), None)
 
 
 # -- writing -----------------------------------------------------------------------------------
@@ -225,23 +236,29 @@ class _Writer:
         self.entry.create_dataset("program_name", data=f"toftwin {package_version()}")
 
     def _collection(self, name: str, fields: Mapping[str, Any]) -> None:
+        """An NXcollection of ``fields``; in a stack a field first seen at a later frame is
+        added then, with NaN (or "") for the frames before, and one a frame lacks gets NaN."""
         group = self.entry.get(name)
         if group is None:
             group = _set_class(self.entry.create_group(name), "NXcollection")
-            for k, v in fields.items():
-                ds = _dataset(group, k, v, self.stacked)
-                if k.endswith("_m") or k == "world_from_camera":
-                    ds.attrs["units"] = "m"
-                elif k.endswith("_px"):
-                    ds.attrs["units"] = "pixel"
-                elif k.endswith("_deg"):
-                    ds.attrs["units"] = "deg"
+        for k, v in fields.items():
+            if k in group:
+                continue
+            ds = _dataset(group, k, v, self.stacked)
+            units = _field_units(k)
+            if units is not None:
+                ds.attrs["units"] = units
+            if k == "world_from_camera":
+                ds.attrs["description"] = ("4 x 4 rigid transform from the camera frame (x "
+                                           "right, y down, z forward) to the scene's world, "
+                                           "translation in m; NaN where not known")
+            if self.stacked and self.count:  # the earlier frames lacked it
+                ds.resize(self.count, axis=0)
         if not self.stacked:
             return
         for k in group:
             text = h5py.check_string_dtype(group[k].dtype) is not None
-            value = fields.get(k, "" if text else np.nan)
-            _append(group[k], self.count, value, "frames")
+            _append(group[k], self.count, fields.get(k, "" if text else np.nan), "frames")
 
     def _image_group(self, frame: Frame, name: str, value: np.ndarray) -> None:
         group = self.entry.get(name)
@@ -274,20 +291,32 @@ class _Writer:
         elif "data" not in group:
             raise AssertionError("unreachable: a single frame's group made without data")
 
+    def _check_joins(self, images: Mapping[str, np.ndarray]) -> None:
+        """Refuse, before anything is written, a frame of another form or shape than the
+        stack's: it would leave the stack's groups of unequal length."""
+        have = {k for k in self.entry if self.entry[k].attrs.get("NX_class") == "NXdata"}
+        if set(images) != have:
+            raise InvalidInputError(
+                "frames", f"a frame with the groups {sorted(images)} cannot join a stack of "
+                f"{sorted(have)}: a stack holds frames of one form (raw frames or not)")
+        for name, value in images.items():
+            want = self.entry[name]["data"].shape[1:]
+            if value.shape != want:
+                raise InvalidInputError(
+                    "frames", f"a frame's {name} is {value.shape}, the stack's {want}: a stack "
+                    "holds frames of one shape")
+
     def add(self, frame: Frame, metrics: Mapping[str, Any] | None = None) -> int:
         """Write ``frame`` (the next of a stack, or the file's one frame); returns its index."""
         if not self.stacked and self.count:
             raise InvalidInputError("frames", "a single-frame file holds one frame")
         images = frame_images(frame)
+        camera = camera_fields(frame)
         if self.stacked and self.count:
-            have = {k for k in self.entry if self.entry[k].attrs.get("NX_class") == "NXdata"}
-            if set(images) != have:
-                raise InvalidInputError(
-                    "frames", f"a frame with the groups {sorted(images)} cannot join a stack of "
-                    f"{sorted(have)}: a stack holds frames of one form (raw frames or not)")
+            self._check_joins(images)  # the camera's fields have fixed shapes
         for name, value in images.items():
             self._image_group(frame, name, value)
-        self._collection("camera", camera_fields(frame))
+        self._collection("camera", camera)
         self._collection("rig", rig_fields(frame.meta))
         self._collection("metadata", metadata_fields(frame))
         if metrics is not None or "metrics" in self.entry:
@@ -320,13 +349,14 @@ class NexusFrameStack:
     The file is created at ``path`` (an existing file is replaced). Frames go into the NXentry
     ``entry`` (the default), or into several entries of one file (a campaign's ``measured``
     and ``simulated`` frames, pose by pose); the first entry written is the file's default.
-    Every :meth:`append` is flushed before it returns, so the frames it announced can be read
-    while the stack grows.
+    Every :meth:`append` is flushed before it returns (a crash keeps the frames appended so
+    far); HDF5 locks a file while it is written, so readers open it once the stack is closed.
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self._h5 = h5py.File(self.path, "w", libver="latest")
+        # HDF5 1.14's format (h5py 3.11, the floor, reads it; 2.0's default it cannot)
+        self._h5 = h5py.File(self.path, "w", libver=("earliest", "v114"))
         self._writers: dict[str, _Writer] = {}
 
     def append(self, frame: Frame, metrics: Mapping[str, Any] | None = None,

@@ -10,6 +10,9 @@ given.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import tempfile
 from pathlib import Path
 from typing import Annotated
 
@@ -38,7 +41,6 @@ def export_frame(
     force: Annotated[bool, typer.Option("--force", help="Replace an existing --out.")] = False,
 ) -> None:
     """Write frame folders as NeXus HDF5 or a frame as a PLY point cloud."""
-    from sim_core.frame_io import read_frame
     from sim_core.frame_points import POINT_FRAMES, write_points_ply
     from sim_core.nexus import NexusFrameStack, write_frame_nexus
 
@@ -51,27 +53,55 @@ def export_frame(
         if to == "ply" and len(folders) != 1:
             raise InvalidInputError("folders", f"{len(folders)} given; a PLY holds one frame")
         for folder in folders:
-            if not folder.is_dir():
-                raise InvalidInputError("folders", f"'{folder}' is not a frame folder")
+            _check_folder(folder)
         check_out_file(out, [], force, FRAME_FORMS[to])
-        frames = [read_frame(f) for f in folders]
         out.parent.mkdir(parents=True, exist_ok=True)
         if to == "ply":
-            n = write_points_ply(out, frames[0], point_frame)  # type: ignore[arg-type]
+            n = write_points_ply(out, _read(folders[0]), point_frame)  # type: ignore[arg-type]
             console.print(f"{n} points ({point_frame} frame) written to {out}")
             return
-        if len(frames) == 1:
-            write_frame_nexus(out, frames[0])
-        else:
-            tmp = out.with_name(f".{out.name}.tmp")  # renamed into place when whole
+        if len(folders) == 1:
+            write_frame_nexus(out, _read(folders[0]))
+        else:  # into a temporary file beside --out, renamed when every frame is in
+            fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+            os.close(fd)
             try:
                 with NexusFrameStack(tmp) as stack:
-                    for frame in frames:
-                        stack.append(frame)
-                tmp.replace(out)
+                    for folder in folders:  # one frame in memory at a time
+                        stack.append(_read(folder))
+                os.replace(tmp, out)
             finally:
-                tmp.unlink(missing_ok=True)
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(tmp)
     except InvalidInputError as exc:
         fail_invalid(exc)
     console.print(f"{len(folders)} frame{'s' if len(folders) > 1 else ''} written to {out} "
                   "(NeXus HDF5)")
+
+
+def _check_folder(folder: Path) -> None:
+    """Refuse what is no frame folder: not a folder, or one with none of a frame's arrays."""
+    from sim_core.frame_io import DEPTH_POINTS_NPZ, FRAME_NPZ, RAW_NPZ
+
+    if not folder.is_dir():
+        raise InvalidInputError("folders", f"'{folder}' is not a frame folder")
+    if not any((folder / n).is_file() for n in (FRAME_NPZ, RAW_NPZ, DEPTH_POINTS_NPZ)):
+        raise InvalidInputError("folders", f"'{folder}' is not a frame folder: it holds none "
+                                f"of {FRAME_NPZ}, {RAW_NPZ}, {DEPTH_POINTS_NPZ}")
+
+
+def _read(folder: Path):
+    """The frame of ``folder``; a file of it that cannot be read is an input error naming the
+    folder and the reason (a truncated or corrupt archive, a frame.json out of its form)."""
+    import zipfile
+    import zlib
+
+    from sim_core.frame_io import read_frame
+
+    try:
+        return read_frame(folder)
+    except InvalidInputError as exc:
+        raise InvalidInputError("folders", f"'{folder}': {exc.field}: {exc.message}") from None
+    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise InvalidInputError("folders", f"'{folder}' cannot be read: {type(exc).__name__}: "
+                                f"{exc} (a truncated or corrupt file?)") from None

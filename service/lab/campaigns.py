@@ -22,6 +22,7 @@ from sqlalchemy.orm import sessionmaker
 
 from drivers.rig import Rig
 from service.errors import ConflictError, InsufficientStorageError, NotFoundError
+from service.export.frame_forms import delete_campaign_frames_file
 from service.lab.calibration import Twin, active_twin, effective_twin
 from service.lab.poses import check_angle, check_spp
 from service.lab.requests import CampaignCreate, MaskSpec
@@ -312,6 +313,7 @@ def delete_campaign(
             queries.delete_campaign(s, campaign_id)
 
     _delete_rows_and_files(store, rows, frame_ids, f"deleting campaign {campaign_id}")
+    delete_campaign_frames_file(store, campaign_id)
     return len(frame_ids)
 
 

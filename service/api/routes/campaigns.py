@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import AsyncIterator
 from contextlib import aclosing
 from functools import partial
@@ -13,7 +11,6 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Depends, Path, Query, Response
 from fastapi.responses import FileResponse, HTMLResponse, StreamingResponse
 from fastapi.sse import EventSourceResponse, ServerSentEvent
-from starlette.background import BackgroundTask
 
 from service.api.deps import (
     LeaseDep,
@@ -33,8 +30,8 @@ from service.api.events import status_events
 from service.api.schemas import CampaignCreated, CampaignPublic, ResultPublic
 from service.api.security_headers import self_contained_document
 from service.errors import ConflictError, NotFoundError
-from service.export.bluesky import iter_campaign_documents
-from service.export.frame_forms import write_campaign_nexus
+from service.export.bluesky import CampaignFrames, iter_campaign_documents
+from service.export.frame_forms import campaign_frames_file, campaign_frames_path
 from service.export.plots import PLOTS, plot_svg
 from service.export.report import campaign_report
 from service.export.results_table import result_dict, result_rows, results_csv
@@ -42,6 +39,7 @@ from service.lab import campaigns as lab_campaigns
 from service.lab.campaigns import campaign_status, status_key
 from service.lab.requests import CampaignCreate
 from service.store import queries
+from service.store.disk_space import require_free, writing
 from sim_core.json_safe import json_safe
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
@@ -226,22 +224,27 @@ def get_campaign_recording(campaign_id: CampaignId, sessions: SessionsDep,
 @router.get("/{campaign_id}/frames.h5", response_class=FileResponse, responses={
     200: {"content": {"application/x-hdf5": {}},
           "description": "The campaign's frames as NeXus HDF5 (docs/export-hdf5.md)"},
-    **errors(404)})
-def get_campaign_frames(campaign_id: CampaignId, sessions: SessionsDep,
-                        store: StoreDep) -> FileResponse:
-    """Every pose result's measured and simulated frames (and the fitted twin's, where each
-    result has one) in one NeXus HDF5 file, pose by pose, with each result's metrics; a
-    result whose frame folders are gone is left out (the file's ``skipped_pose_indices``)."""
-    fd, tmp = tempfile.mkstemp(prefix=f"toftwin-{campaign_id}-", suffix=".h5")
-    os.close(fd)
-    try:
-        write_campaign_nexus(sessions, store, campaign_id, tmp)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-    return FileResponse(tmp, media_type="application/x-hdf5",
-                        filename=f"campaign-{campaign_id}.h5",
-                        background=BackgroundTask(os.unlink, tmp))
+    **errors(404, 507)})
+def get_campaign_frames(campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep,
+                        settings: SettingsDep) -> FileResponse:
+    """Every result's measured and simulated frames (and the fitted twin's, where each result
+    has one) in one NeXus HDF5 file, result by result, with each result's metrics; a result
+    whose frame folders are gone is left out (the file's ``skipped_results``). The file is
+    kept in the data directory and made again only when the results have changed; the
+    documents' StreamResources (``documents?frames=hdf5``) point into this same file."""
+    return FileResponse(_frames_file(sessions, store, settings, campaign_id),
+                        media_type="application/x-hdf5", filename=f"campaign-{campaign_id}.h5")
+
+
+def _frames_file(sessions, store, settings, campaign_id: str):
+    """The campaign's kept frames file (507 below the free space kept, before writing)."""
+    with sessions() as s:
+        queries.require_campaign(s, campaign_id)  # 404 before anything is written
+    path = campaign_frames_path(store, campaign_id)
+    if not path.is_file():
+        require_free(store.root, settings.min_free_bytes)
+    with writing("the campaign's frames file", store.root, settings.min_free_bytes):
+        return campaign_frames_file(sessions, store, campaign_id)
 
 
 @router.get("/{campaign_id}/plots/{name}.svg", response_class=Response, responses={
@@ -260,14 +263,24 @@ def get_campaign_plot(
                     headers={"Cache-Control": "no-store"})
 
 
-@router.get("/{campaign_id}/documents", responses=errors(404))
-def get_campaign_documents(campaign_id: CampaignId, sessions: SessionsDep) -> StreamingResponse:
+@router.get("/{campaign_id}/documents", responses=errors(404, 507))
+def get_campaign_documents(
+    campaign_id: CampaignId, sessions: SessionsDep, store: StoreDep, settings: SettingsDep,
+    frames: Annotated[Literal["ids", "hdf5"], Query(
+        description="ids: events name their frames by id (arrays at /api/v1/frames/{id}); "
+                    "hdf5: StreamResource/StreamDatum documents point into the campaign's "
+                    "frames file (frames.h5, kept in the data directory) by its "
+                    "file://localhost URI, as a Bluesky detector's do")] = "ids",
+) -> StreamingResponse:
     """The campaign as Bluesky event-model documents: ``[{"name": ..., "doc": ...}, ...]``.
 
     Streamed as it is read (the results in batches), so a campaign of any size costs the
     service bounded memory.
     """
-    docs = iter_campaign_documents(sessions, campaign_id)  # 404 here, before the stream
+    stream = None
+    if frames == "hdf5":
+        stream = CampaignFrames.from_file(_frames_file(sessions, store, settings, campaign_id))
+    docs = iter_campaign_documents(sessions, campaign_id, stream)  # 404 here, before the stream
 
     def json_array():
         yield "["

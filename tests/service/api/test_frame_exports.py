@@ -13,7 +13,7 @@ import pytest
 import trimesh
 from nexusformat.nexus import nxload
 
-from tests.service.api.conftest import problem, start_campaign, wait_campaign
+from tests.service.api.conftest import AUTH, problem, start_campaign, wait_campaign
 
 
 @pytest.fixture
@@ -88,8 +88,8 @@ def test_a_campaign_s_frames_are_one_nexus_file_pose_by_pose(client, campaign, t
     path = tmp_path / "campaign.h5"
     path.write_bytes(res.content)
     root = nxload(str(path))
-    assert str(root.attrs["campaign_id"]) == cid
-    assert list(root.attrs["skipped_pose_indices"]) == []
+    with h5py.File(path, "r") as h5:
+        assert h5.attrs["campaign_id"] == cid and h5.attrs["skipped_results"].shape == (0, 2)
     for entry, key in (("measured", "measured_frame_id"), ("simulated", "simulated_frame_id")):
         depth = root[entry].depth.nxsignal
         assert depth.shape[0] == len(rows)
@@ -99,6 +99,33 @@ def test_a_campaign_s_frames_are_one_nexus_file_pose_by_pose(client, campaign, t
         np.testing.assert_array_equal(root[entry].metrics.turntable_deg.nxvalue,
                                       [r["turntable_deg"] for r in rows])
     assert "fitted" not in root
+    # kept in the data directory, made again only when the results change
+    kept = tmp_path / "exports" / f"{cid}.h5"
+    stamp = kept.stat().st_mtime_ns
+    assert client.get(f"/api/v1/campaigns/{cid}/frames.h5").content == res.content
+    assert kept.stat().st_mtime_ns == stamp
+
+
+def test_the_documents_point_into_the_kept_frames_file(client, campaign, tmp_path):
+    cid, rows = campaign
+    docs = client.get(f"/api/v1/campaigns/{cid}/documents", params={"frames": "hdf5"}).json()
+    resources = [d["doc"] for d in docs if d["name"] == "stream_resource"]
+    kept = tmp_path / "exports" / f"{cid}.h5"
+    assert resources and {r["uri"] for r in resources} == {f"file://localhost{kept}"}
+    depth = next(r for r in resources if r["data_key"] == "simulator-depth")
+    datums = [d["doc"] for d in docs if d["name"] == "stream_datum"
+              and d["doc"]["stream_resource"] == depth["uid"]]
+    assert len(datums) == len(rows)
+    with h5py.File(kept, "r") as h5:
+        for datum, row in zip(datums, rows, strict=True):
+            i = datum["indices"]["start"]
+            np.testing.assert_array_equal(h5[depth["parameters"]["dataset"]][i],
+                                          _npz(client, row["simulated_frame_id"])["depth_z_m"])
+    # the default stays the ids-only form; deleting the campaign deletes its file
+    plain = client.get(f"/api/v1/campaigns/{cid}/documents").json()
+    assert not any(d["name"] == "stream_resource" for d in plain)
+    assert client.delete(f"/api/v1/campaigns/{cid}", headers=AUTH).status_code == 204
+    assert not kept.exists()
 
 
 def test_a_campaign_file_leaves_out_a_pose_whose_frames_are_gone(client, campaign, tmp_path):
@@ -107,7 +134,8 @@ def test_a_campaign_file_leaves_out_a_pose_whose_frames_are_gone(client, campaig
     res = client.get(f"/api/v1/campaigns/{cid}/frames.h5")
     assert res.status_code == 200
     with h5py.File(io.BytesIO(res.content), "r") as h5:
-        assert list(h5.attrs["skipped_pose_indices"]) == [rows[0]["pose_index"]]
+        assert h5.attrs["skipped_results"].tolist() == [[rows[0]["pose_index"],
+                                                         rows[0]["repeat"]]]
         assert h5["measured/depth/data"].shape[0] == h5["simulated/depth/data"].shape[0] == 1
         assert h5["measured/metrics/pose_index"][0] == rows[1]["pose_index"]
     assert problem(client.get(f"/api/v1/campaigns/{'0' * 32}/frames.h5"), 404)

@@ -93,3 +93,21 @@ def test_what_it_refuses_leaves_an_existing_file_as_it_was(folders, tmp_path):
     res = runner.invoke(app, ["export", "frame", str(folders[0]), "--to", "ply", "--out",
                               str(out), "--force"])
     assert res.exit_code == 0 and out.read_bytes().startswith(b"ply\n")
+
+
+def test_a_damaged_or_empty_folder_is_refused_naming_it(folders, tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    for f in folders[0].iterdir():
+        (cut / f.name).write_bytes(f.read_bytes())
+    data = (cut / "frame.npz").read_bytes()
+    (cut / "frame.npz").write_bytes(data[: len(data) // 2])
+    for folder, says in ((empty, "holds none of frame.npz, raw.npz, depth_points.npz"),
+                         (cut, "cannot be read: BadZipFile")):
+        res = runner.invoke(app, ["export", "frame", str(folder), "--to", "hdf5", "--out",
+                                  str(tmp_path / "x.h5")])
+        assert res.exit_code == 2 and f"folders: '{folder}'" in _flat(res.stderr), res.stderr
+        assert says in _flat(res.stderr), res.stderr
+    assert not (tmp_path / "x.h5").exists()
