@@ -49,6 +49,7 @@ def run_scan(out: Path, *, scene: Path | None = SCENE, spp: int = 4, suns: float
     import bluesky.plans as bp
     from bluesky import RunEngine
     from bluesky.callbacks.json_writer import JSONLinesWriter
+    from bluesky.simulators import check_limits
     from ophyd_async.core import StaticFilenameProvider, StaticPathProvider
     from ophyd_async.plan_stubs import ensure_connected
 
@@ -56,7 +57,10 @@ def run_scan(out: Path, *, scene: Path | None = SCENE, spp: int = 4, suns: float
 
     out = out.resolve()  # ophyd-async's path providers take absolute paths only
     out.mkdir(parents=True, exist_ok=True)
-    (out / DOCUMENTS).unlink(missing_ok=True)  # the writer appends to a file it finds
+    # the example's own output of an earlier run goes: the JSON writer appends to a file it
+    # finds, and the camera refuses to write over an existing frames file
+    (out / DOCUMENTS).unlink(missing_ok=True)
+    (out / f"{FRAMES}.h5").unlink(missing_ok=True)
     counts: collections.Counter[str] = collections.Counter()
     frames: list[tuple[int, float, int]] = []
 
@@ -78,6 +82,9 @@ def run_scan(out: Path, *, scene: Path | None = SCENE, spp: int = 4, suns: float
         RE(ensure_connected(*rig))
         RE(bps.mv(rig.solar, suns, rig.solar.shutter, True))
         start, stop, num = SCAN
+        # every point within the turntable's limits before anything moves (a plan's own run
+        # would stop at the first point beyond them, the table already moved)
+        check_limits(bp.scan([rig.camera], rig.turntable, start, stop, num))
         (uid,) = RE(bp.scan([rig.camera], rig.turntable, start, stop, num))
     return {"uid": uid, "documents": dict(counts), "frames": frames,
             "files": [out / DOCUMENTS, out / f"{FRAMES}.h5"],

@@ -65,6 +65,9 @@ METADATA_KEYS = ("kind", "frame_id", "scene_name", "scene_hash", "calibration_ha
                  "use_case", "package_version")
 #: gzip level of every image dataset (h5py's and every HDF5 reader's built-in filter)
 GZIP_LEVEL = 4
+#: the mimetype of these files in Bluesky's StreamResource documents (Tiled's HDF5
+#: consolidator takes it)
+HDF5_MIMETYPE = "application/x-hdf5"
 
 
 def frame_unit(frame: Frame, array: str) -> str:
@@ -346,17 +349,23 @@ class NexusFrameStack:
     """A NeXus HDF5 file of frames stacked along a leading ``frame`` axis, written frame by
     frame (a campaign's, a recording's or a Bluesky scan's). Use as a context manager.
 
-    The file is created at ``path`` (an existing file is replaced). Frames go into the NXentry
+    The file is created at ``path`` (an existing file is replaced, unless ``replace`` is False:
+    then it is refused, :class:`FileExistsError`). Frames go into the NXentry
     ``entry`` (the default), or into several entries of one file (a campaign's ``measured``
     and ``simulated`` frames, pose by pose); the first entry written is the file's default.
     Every :meth:`append` is flushed before it returns (a crash keeps the frames appended so
     far); HDF5 locks a file while it is written, so readers open it once the stack is closed.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, replace: bool = True) -> None:
         self.path = Path(path)
-        # HDF5 1.14's format (h5py 3.11, the floor, reads it; 2.0's default it cannot)
-        self._h5 = h5py.File(self.path, "w", libver=("earliest", "v114"))
+        if not replace and self.path.exists():
+            raise FileExistsError(f"{self.path} exists: a stack is not written over another "
+                                  "file (give each one a name of its own)")
+        # HDF5 1.14's format (h5py 3.11, the floor, reads it; 2.0's default it cannot); "x":
+        # created, never truncated, where an existing file must be kept
+        self._h5 = h5py.File(self.path, "w" if replace else "x",
+                             libver=("earliest", "v114"))
         self._writers: dict[str, _Writer] = {}
 
     def append(self, frame: Frame, metrics: Mapping[str, Any] | None = None,

@@ -54,16 +54,14 @@ from drivers.camera import CameraProtocol, UseCase
 from drivers.rig import RigState
 from sim_core.camera import CAMERA_PRESETS, Camera, Intrinsics
 from sim_core.frame_io import Frame, measured_frame
-from sim_core.nexus import IMAGE_GROUPS, NexusFrameStack
+from sim_core.nexus import HDF5_MIMETYPE, IMAGE_GROUPS, NexusFrameStack
 from sim_core.raw import RawFrame
 
-__all__ = ["HDF5_MIMETYPE", "FrameDataset", "NexusFrameWriter", "ToFCamera", "frame_datasets",
+__all__ = ["FrameDataset", "NexusFrameWriter", "ToFCamera", "frame_datasets",
            "preset_camera"]
 
 _log = logging.getLogger(__name__)
 
-#: the StreamResource mimetype of the frames' file (Tiled's HDF5 consolidator takes it)
-HDF5_MIMETYPE = "application/x-hdf5"
 #: while a frame is being captured (a simulated one is path traced), the frame count is
 #: re-announced this often [s], so that a watcher's wait for the next update (ophyd-async's
 #: exposure timeout, 10 s by default) does not run out during one long frame
@@ -173,11 +171,21 @@ class NexusFrameWriter:
         with self._lock:
             if self._stack is not None:
                 self._stack.close()
-            self._stack, self.path, self._count = NexusFrameStack(path), path, 0
+                self._stack = None
+            try:
+                stack = NexusFrameStack(path, replace=False)
+            except FileExistsError:
+                raise FileExistsError(
+                    f"{path} exists: the camera does not write a run's frames over an earlier "
+                    "file (whose run's documents point into it); give each run a file of its "
+                    "own (ophyd-async's UUIDFilenameProvider or AutoIncrementFilenameProvider)"
+                ) from None
+            self._stack, self.path, self._count = stack, path, 0
 
     async def open(self, path: Path) -> list[FrameDataset]:
-        """Start a new file at ``path`` (replacing one there); returns the datasets its frames
-        will have (for the use case the camera is configured with now)."""
+        """Start a new file at ``path`` (an existing one is refused: it may be an earlier
+        run's); returns the datasets its frames will have (for the use case the camera is
+        configured with now)."""
         use_case = await self.calls(lambda: self.camera.use_case)
         await asyncio.to_thread(self._open, Path(path))
         self._set_written(0)
@@ -268,6 +276,10 @@ class _Acquire(DetectorAcquireLogic):
         self.task: asyncio.Task[None] | None = None
 
     async def start_acquiring(self) -> None:
+        if self.task is not None and not self.task.done():
+            # a kickoff while the prepared frames are still being captured: they are the ones
+            # it asks for (ophyd-async refuses a kickoff beyond what was prepared)
+            return
         first = asyncio.Event()
         self.task = asyncio.create_task(self.writer.capture(self.trigger.exposures, first))
         waiter = asyncio.create_task(first.wait())

@@ -40,11 +40,10 @@ from service.store import queries
 from service.store.frame_files import FrameStore
 from sim_core.frame_io import package_version
 from sim_core.json_safe import json_safe
+from sim_core.nexus import HDF5_MIMETYPE
 
 _NAMESPACE = uuid.UUID("6c1f6c3e-3a55-4b8e-9a8e-0f7a1d9b2c11")
 _EXIT_STATUS = {"completed": "success", "cancelled": "abort", "failed": "fail"}
-#: the StreamResource mimetype of the frames' file (Tiled's HDF5 consolidator takes it)
-HDF5_MIMETYPE = "application/x-hdf5"
 #: the campaign file's entries the documents point into -> the descriptor's object (the data
 #: keys are ``<object>-<group>``, as a Bluesky ToFCamera named ``camera`` writes them)
 FRAME_OBJECTS = {"measured": "camera", "simulated": "simulator"}

@@ -161,6 +161,71 @@ def test_a_count_writes_each_frame_with_the_rig_state_it_was_captured_in(RE, dev
     assert stop["exit_status"] == "success" and stop["num_events"] == {"primary": 3}
 
 
+def test_a_second_run_never_writes_over_the_first_run_s_file(RE, devices, tmp_path):
+    """With one file name for every run, the second run is refused naming the file and the
+    first run's frames stay as they were; with a name per run, each run's documents point
+    into a file of its own."""
+    RE(bp.count([devices.camera], num=2))
+    first = (tmp_path / "frames.h5").read_bytes()
+    with pytest.raises(FailedStatus) as info:
+        RE(bp.count([devices.camera], num=1))
+    error = _cause(info)
+    assert isinstance(error, FileExistsError), error
+    assert "frames.h5 exists" in str(error) and "AutoIncrementFilenameProvider" in str(error)
+    assert (tmp_path / "frames.h5").read_bytes() == first
+
+    from ophyd_async.core import AutoIncrementFilenameProvider
+
+    with simulated_devices(StaticPathProvider(AutoIncrementFilenameProvider("run"),
+                                              tmp_path / "runs"), seed=4) as devs:
+        RE(ensure_connected(*devs))
+        uris = []
+        for n in (2, 3):
+            docs: list = []
+            RE(bp.count([devs.camera], num=n), lambda name, doc, docs=docs: docs.append(
+                (name, doc)))
+            resources = [d for name, d in docs if name == "stream_resource"]
+            uris.append({r["uri"] for r in resources})
+            datums = [d for name, d in docs if name == "stream_datum"
+                      and d["stream_resource"] == resources[0]["uid"]]
+            assert [d["indices"]["start"] for d in datums] == list(range(n))
+            path = Path(next(iter(uris[-1])).removeprefix("file://localhost"))
+            with h5py.File(path, "r") as f:
+                assert f["/entry/depth/data"].shape[0] == n
+        assert len(uris[0] | uris[1]) == 2  # two files
+
+
+def test_two_kickoffs_of_one_prepare_capture_the_prepared_frames_only(RE, devices, tmp_path):
+    """A fly scan prepared for 4 frames and kicked off twice for 2 each writes 4 frames, not
+    a new loop of 4 per kickoff."""
+    from ophyd_async.core import TriggerInfo
+
+    cam = devices.camera
+
+    def fly():
+        yield from bps.open_run()
+        yield from bps.stage(cam)
+        yield from bps.prepare(cam, TriggerInfo(number_of_events=4), wait=True)
+        yield from bps.declare_stream(cam, name="primary")
+        for _ in range(2):
+            yield from bps.mv(cam.events_to_kickoff, 2)
+            yield from bps.kickoff(cam, wait=True)
+            yield from bps.complete(cam, wait=True)
+            yield from bps.collect(cam)
+        yield from bps.unstage(cam)
+        yield from bps.close_run()
+
+    docs = []
+    RE(fly(), lambda name, doc: docs.append((name, doc)))
+    with h5py.File(tmp_path / "frames.h5", "r") as f:
+        assert f["/entry/depth/data"].shape[0] == 4
+    depth = next(d for name, d in docs if name == "stream_resource"
+                 and d["data_key"].endswith("-depth"))
+    seq = [d["seq_nums"] for name, d in docs if name == "stream_datum"
+           and d["stream_resource"] == depth["uid"]]
+    assert seq and seq[0]["start"] == 1 and seq[-1]["stop"] == 5, seq
+
+
 def test_a_capture_that_fails_fails_the_plan_with_the_drivers_error(RE, tmp_path):
     rig = simulated_rig(camera_faults=["no-data"],
                         camera_settings=UsbCameraSettings(read_timeout_s=0.2,
