@@ -99,8 +99,10 @@ def test_no_sequence_of_linked_requests_is_a_server_error(api):
         def validate_response(self, response, case, additional_checks=None, **kwargs):
             case.validate_response(response, checks=[not_a_server_error])
 
+    # 40 sequences: derandomized, the chains depend on the set of operations; with the frame
+    # exports' two routes, 15 and 25 sequences never got a campaign created (every POST a 422)
     run_state_machine_as_test(
-        Machine, settings=settings(max_examples=15, stateful_step_count=6, deadline=None,
+        Machine, settings=settings(max_examples=40, stateful_step_count=6, deadline=None,
                                    derandomize=True, database=None,
                                    suppress_health_check=list(HealthCheck)))
     # the chains reached operations on resources that earlier steps created
