@@ -25,8 +25,8 @@ class FrameIntrinsics(BaseModel):
 
     width_px: Annotated[int, Field(ge=1)]
     height_px: Annotated[int, Field(ge=1)]
-    fx_px: Annotated[float, Field(gt=0, allow_inf_nan=False)]
-    fy_px: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    fx_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+    fy_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
     cx_px: FiniteFloat
     cy_px: FiniteFloat
     distortion: Annotated[list[FiniteFloat], Field(min_length=5, max_length=5,
@@ -45,9 +45,9 @@ class FrameJson(BaseModel):
     package_version: str = Field(description="The toftwin version that wrote the frame.")
     shape: Annotated[list[Annotated[int, Field(ge=1)]], Field(min_length=2, max_length=2,
                                                                description="[H, W]")]
-    frequencies_hz: Annotated[list[Annotated[float, Field(gt=0, allow_inf_nan=False)]],
+    frequencies_hz: Annotated[list[Annotated[float, Field(gt=0.0, allow_inf_nan=False)]],
                               Field(min_length=1, description="Modulation frequencies [Hz].")]
-    grey_preview_full_scale: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
+    grey_preview_full_scale: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] = Field(
         description="Amplitude shown as grey 255; 0: an all-black grey image.")
     arrays: dict[str, str] = Field(description="The unit of each frame.npz array.")
     kind: Literal["measured", "simulated"] | None = Field(
@@ -65,6 +65,6 @@ class FrameJson(BaseModel):
     calibration_hash: str | None = Field(None, description="The calibration the frame used.")
     ideal_sensor: bool | None = Field(None, description="Simulated: no noise, SBI or ADC.")
     frame_id: Annotated[str, Field(pattern=r"^[0-9a-f]{32}$")] | None = None
-    exposure_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] | None = None
+    exposure_s: Annotated[float, Field(ge=0.0, allow_inf_nan=False)] | None = None
     timestamp_s: FiniteFloat | None = None
     rig: dict[str, Any] | None = Field(None, description="The rig state (the service's).")

@@ -77,7 +77,7 @@ def read_material_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     if not isinstance(kind, str):
         raise InvalidInputError("file", f"material file '{p}': 'kind' must be a material kind "
                                         f"name, got {kind!r}")
-    params = data.get("params") or {}
+    params = data.get("params", {})
     if not isinstance(params, dict):
         raise InvalidInputError("file", f"material file '{p}': 'params' must be a mapping")
     for name, value in params.items():
