@@ -25,7 +25,9 @@ reader never sees a half-written file and a crash leaves at most a stray ``*.tmp
 from __future__ import annotations
 
 import json
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -55,6 +57,11 @@ DEPTH_PNG = "depth.png"
 #: the files of a frame folder (simulated, or measured from raw frames; a measured frame of
 #: royale's processed depth has ``depth_points.npz`` instead of ``raw.npz``)
 FRAME_FILES = (FRAME_NPZ, FRAME_JSON, GREY_PNG, DEPTH_PNG, RAW_NPZ)
+
+#: what reading a damaged frame file (npz, JSON or PNG) raises: a truncated or corrupt archive,
+#: JSON out of its form, a PNG whose chunks do not check
+FRAME_READ_ERRORS = (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error,
+                     InvalidInputError, SyntaxError, struct.error)
 
 FrameKind = Literal["measured", "simulated"]
 FRAME_KINDS: tuple[FrameKind, ...] = ("measured", "simulated")

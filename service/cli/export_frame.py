@@ -93,15 +93,12 @@ def _check_folder(folder: Path) -> None:
 def _read(folder: Path):
     """The frame of ``folder``; a file of it that cannot be read is an input error naming the
     folder and the reason (a truncated or corrupt archive, a frame.json out of its form)."""
-    import zipfile
-    import zlib
-
-    from sim_core.frame_io import read_frame
+    from sim_core.frame_io import FRAME_READ_ERRORS, read_frame
 
     try:
         return read_frame(folder)
     except InvalidInputError as exc:
         raise InvalidInputError("folders", f"'{folder}': {exc.field}: {exc.message}") from None
-    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+    except FRAME_READ_ERRORS as exc:
         raise InvalidInputError("folders", f"'{folder}' cannot be read: {type(exc).__name__}: "
                                 f"{exc} (a truncated or corrupt file?)") from None

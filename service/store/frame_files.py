@@ -24,10 +24,7 @@ import json
 import os
 import re
 import shutil
-import struct
 import uuid
-import zipfile
-import zlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -39,7 +36,6 @@ from service.errors import DamagedFileError, GoneError
 from service.store.disk_space import SpaceReserve
 from sim_core import frame_io
 from sim_core.camera import Camera
-from sim_core.errors import InvalidInputError
 from sim_core.files import fsync_dir
 from sim_core.processed_depth import ProcessedDepthFrame
 from sim_core.raw import RawFrame
@@ -60,9 +56,7 @@ def new_frame_id() -> str:
     return uuid.uuid4().hex
 
 
-#: what reading a damaged npz, JSON or PNG file raises (besides OSError)
-_READ_ERRORS = (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error,
-                InvalidInputError, SyntaxError, struct.error)
+_READ_ERRORS = frame_io.FRAME_READ_ERRORS
 
 
 def file_damage(path: Path) -> str | None:
