@@ -25,17 +25,6 @@ T = TypeVar("T")
 Hold = Callable[[], contextlib.AbstractContextManager[Any]]
 
 
-def _lock_hold() -> Hold:
-    lock = threading.Lock()
-
-    @contextlib.contextmanager
-    def hold():
-        with lock:
-            yield
-
-    return hold
-
-
 class DriverCalls:
     """Awaitable driver calls: ``await calls(driver.position_deg)``.
 
@@ -48,7 +37,10 @@ class DriverCalls:
     """
 
     def __init__(self, hold: Hold | None = None) -> None:
-        self.hold: Hold = hold if hold is not None else _lock_hold()
+        if hold is None:
+            lock = threading.Lock()  # a lock is its own context manager
+            hold = lambda: lock  # noqa: E731
+        self.hold: Hold = hold
 
     def _locked(self, fn: Callable[..., T], args: tuple[Any, ...]) -> T:
         with self.hold():
