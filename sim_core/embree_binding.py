@@ -25,6 +25,15 @@ Rays are given exactly as embreex gives them (``tnear`` 0, ``tfar`` 1e37 for clo
 caller's ``tmax`` for occlusion, mask all ones, time 0, flags 0, no query arguments), so the
 answers are bit-identical to embreex's (tests: ``tests/sim_core/test_embree_binding.py``).
 
+Query arguments
+---------------
+Every query is given an ``RTCIntersectArguments`` / ``RTCOccludedArguments`` (the same 32-byte
+layout: flags, feature mask, then null context, filter and intersect pointers), kept in the
+packet buffer. Its flags say whether the packet's rays are coherent (camera rays from one
+centre, shadow rays converging on the camera's source: ``RTC_RAY_QUERY_FLAG_COHERENT``) or not
+(bounce rays: ``RTC_RAY_QUERY_FLAG_INCOHERENT``, Embree's default). The flag changes how Embree
+traverses a packet, never its answer.
+
 Packets
 -------
 A width-``W`` packet (Embree 4 ``RTCRayHitW``/``RTCRayW``) is structure-of-arrays: field ``k`` of
@@ -61,7 +70,15 @@ TFAR_CLOSEST = np.float32(1e37)
 WIDTHS = (1, 4, 8, 16)
 #: 32-bit words of one packet buffer: 21 fields x 16 lanes rounded up, then the valid mask
 _VALID_WORD = 384  # byte 1536: 64-byte aligned
-_BUF_WORDS = _VALID_WORD + 16
+#: the query arguments (RTCIntersectArguments = RTCOccludedArguments, 32 bytes, 8 words; 16
+#: reserved should a build add RTC_MIN_WIDTH's float): incoherent rays, then coherent ones
+_ARGS_WORD_INCOHERENT = 400  # byte 1600, 64-byte aligned
+_ARGS_WORD_COHERENT = 416  # byte 1664
+_BUF_WORDS = 432
+#: RTCRayQueryFlags and RTCFeatureFlags values (rtcore_common.h)
+_QUERY_FLAG_INCOHERENT = 0
+_QUERY_FLAG_COHERENT = 1
+_FEATURE_FLAG_ALL = 0xFFFFFFFF
 #: RTCDeviceProperty values (rtcore_device.h)
 _PROP_VERSION = 0
 _PROP_NATIVE = {4: 32, 8: 33, 16: 34}
@@ -258,11 +275,12 @@ class EmbreeScene:
         Triangles in the frame the rays will be given in (the render frame: world minus the
         tracer's origin, see :mod:`sim_core.tracing`).
     robust : bool
-        Embree's robust mode (``RTC_SCENE_FLAG_ROBUST``): watertight at shared edges; kept on by
-        the renderer (measured ~1.2x slower on the corner, issue 16).
+        Embree's robust mode (``RTC_SCENE_FLAG_ROBUST``): watertight at shared edges, 1.3-1.6x
+        the query time on the corner; off by default, as the renderer's tracer (why:
+        :class:`sim_core.tracing.RayTracer`).
     """
 
-    def __init__(self, triangles32: np.ndarray, robust: bool = True) -> None:
+    def __init__(self, triangles32: np.ndarray, robust: bool = False) -> None:
         lib = _lib()
         tris = np.ascontiguousarray(triangles32, dtype=np.float32).reshape(-1, 3, 3)
         n = tris.shape[0]
@@ -327,11 +345,17 @@ _SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 def packet_buffer() -> np.ndarray:
     """A zeroed, 64-byte aligned scratch buffer of 32-bit words for one packet (any width).
 
-    One per thread: the query kernels write rays into it.
+    One per thread: the query kernels write rays into it; it also holds the query arguments
+    (see "Query arguments" in the module docstring).
     """
     raw = np.zeros(_BUF_WORDS + 16, dtype=np.uint32)
     skip = (-raw.ctypes.data % 64) // 4
-    return raw[skip: skip + _BUF_WORDS]
+    buf = raw[skip: skip + _BUF_WORDS]
+    for word, flag in ((_ARGS_WORD_INCOHERENT, _QUERY_FLAG_INCOHERENT),
+                       (_ARGS_WORD_COHERENT, _QUERY_FLAG_COHERENT)):
+        buf[word] = flag
+        buf[word + 1] = _FEATURE_FLAG_ALL  # context, filter, intersect: null (zeroed words)
+    return buf
 
 
 @njit(cache=True, nogil=True)
@@ -367,26 +391,27 @@ OCCLUDED = 1
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _query(kind, width, scene, ptr):
-    """One Embree call on the packet at ``ptr`` (its valid mask at word ``_VALID_WORD``)."""
+def _query(kind, width, scene, ptr, aptr):
+    """One Embree call on the packet at ``ptr`` (its valid mask at word ``_VALID_WORD``) with
+    the query arguments at ``aptr``."""
     vptr = ptr + 4 * _VALID_WORD
     if kind == INTERSECT:
         if width == 1:
-            _intersect1(scene, ptr, 0)
+            _intersect1(scene, ptr, aptr)
         elif width == 4:
-            _intersect4(vptr, scene, ptr, 0)
+            _intersect4(vptr, scene, ptr, aptr)
         elif width == 8:
-            _intersect8(vptr, scene, ptr, 0)
+            _intersect8(vptr, scene, ptr, aptr)
         else:
-            _intersect16(vptr, scene, ptr, 0)
+            _intersect16(vptr, scene, ptr, aptr)
     elif width == 1:
-        _occluded1(scene, ptr, 0)
+        _occluded1(scene, ptr, aptr)
     elif width == 4:
-        _occluded4(vptr, scene, ptr, 0)
+        _occluded4(vptr, scene, ptr, aptr)
     elif width == 8:
-        _occluded8(vptr, scene, ptr, 0)
+        _occluded8(vptr, scene, ptr, aptr)
     else:
-        _occluded16(vptr, scene, ptr, 0)
+        _occluded16(vptr, scene, ptr, aptr)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -406,21 +431,23 @@ def _load_packet(buf, w, o, d, t_in, a):
 
 
 @njit(**_SERIAL)
-def intersect(scene, o, d, width, buf, tfar, prim, counters):
+def intersect(scene, o, d, width, buf, tfar, prim, counters, coherent=False):
     """Closest hits of rays ``o + t d`` (float32 (m, 3), render frame), ``width`` at a time.
 
     Writes ``tfar`` (float32 (m,); 1e37 where missed, as embreex) and ``prim`` (int32 (m,), -1
     where missed). ``width`` must be one :func:`check_width` accepted; ``buf`` is a
     :func:`packet_buffer`. ``counters[0]`` += rays, ``counters[1]`` += seconds spent.
+    ``coherent``: the rays are given to Embree as coherent (a traversal hint only).
     """
     t0 = now_s()
     m = o.shape[0]
     f = buf.view(np.float32)
     ptr = buf.ctypes.data
+    aptr = ptr + 4 * (_ARGS_WORD_COHERENT if coherent else _ARGS_WORD_INCOHERENT)
     tfar[:] = TFAR_CLOSEST
     for a in range(0, m, width):
         n = _load_packet(buf, width, o, d, tfar, a)
-        _query(INTERSECT, width, scene, ptr)
+        _query(INTERSECT, width, scene, ptr, aptr)
         for j in range(n):
             tfar[a + j] = f[8 * width + j]
             p = buf[17 * width + j]
@@ -430,20 +457,21 @@ def intersect(scene, o, d, width, buf, tfar, prim, counters):
 
 
 @njit(**_SERIAL)
-def occluded(scene, o, d, tmax, width, buf, out, counters):
+def occluded(scene, o, d, tmax, width, buf, out, counters, coherent=False):
     """Occlusion of the segments ``o + t d``, 0 < t < ``tmax`` (float32), ``width`` at a time.
 
     Writes ``out`` (int32 (m,)): 0 where something blocks the segment, -1 where it is free
     (embreex's convention; Embree 4 marks a blocked ray by ``tfar = -inf``). Same ``width``,
-    ``buf`` and ``counters`` as :func:`intersect`.
+    ``buf``, ``counters`` and ``coherent`` as :func:`intersect`.
     """
     t0 = now_s()
     m = o.shape[0]
     f = buf.view(np.float32)
     ptr = buf.ctypes.data
+    aptr = ptr + 4 * (_ARGS_WORD_COHERENT if coherent else _ARGS_WORD_INCOHERENT)
     for a in range(0, m, width):
         n = _load_packet(buf, width, o, d, tmax, a)
-        _query(OCCLUDED, width, scene, ptr)
+        _query(OCCLUDED, width, scene, ptr, aptr)
         for j in range(n):
             out[a + j] = 0 if f[8 * width + j] < 0.0 else -1
     counters[0] += m

@@ -387,6 +387,8 @@ class _Context:
         self.tracer = tracer
         #: (camera, bounce, shadow) packet widths of the tracer's binding backend
         self.widths = np.array(tracer.widths, dtype=np.int64)
+        #: (camera, bounce, shadow) Embree coherence hints of the binding backend
+        self.coherent = np.array(tracer.coherent, dtype=np.bool_)
         self.origin = np.asarray(origin, dtype=np.float64)
         self.freqs = np.asarray(scene.camera.modulation_frequencies_hz, dtype=np.float64)
         self.n_f = self.freqs.size
@@ -544,7 +546,7 @@ def _bounces_compiled(ctx: _Context, paths: Paths, out: SampleValues, clock: _St
     st, tracer = ctx.settings, ctx.tracer
     counters = np.zeros(4)
     kernels.trace_paths(
-        tracer.kernel_scene, ctx.widths, embree_binding.packet_buffer(), paths,
+        tracer.kernel_scene, ctx.widths, ctx.coherent, embree_binding.packet_buffer(), paths,
         st.effective_bounces, ctx.tables, ctx.light, ctx.ambient, ctx.origin,
         st.russian_roulette_from_bounce, ctx.turns_per_m, out, counters,
     )

@@ -557,14 +557,15 @@ def accumulate_chunk(pixels, samples, sums):
 
 
 @njit(**_SERIAL)
-def trace_paths(scene, widths, buf, paths, n_bounces, tables, light, ambient, render_origin,
-                rr_from_bounce, turns_per_m, out, counters):
+def trace_paths(scene, widths, coherent, buf, paths, n_bounces, tables, light, ambient,
+                render_origin, rr_from_bounce, turns_per_m, out, counters):
     """A chunk's whole bounce loop in one call: the steps the integrator runs from Python on the
     embreex backend, here with Embree queried through :mod:`sim_core.embree_binding`.
 
     Per bounce ``b`` = 1 .. ``n_bounces``: closest hits of ``paths`` (packets of ``widths[0]``
     rays for the camera rays of bounce 1, ``widths[1]`` for bounce rays), :func:`bounce`,
     occlusion of its shadow rays (packets of ``widths[2]``), :func:`add_shadowed` into ``out``.
+    ``coherent`` (bool (3,)) holds Embree's coherence hint for the same three kinds.
     ``scene`` is the binding's scene handle, ``buf`` a
     :func:`sim_core.embree_binding.packet_buffer`. The answers are the embreex backend's, bit
     for bit, so the result is too.
@@ -576,15 +577,16 @@ def trace_paths(scene, widths, buf, paths, n_bounces, tables, light, ambient, re
         m = paths.o.shape[0]
         tfar = np.empty(m, dtype=np.float32)
         prim = np.empty(m, dtype=np.int32)
+        # camera rays leave one centre (coherent); bounce rays scatter (incoherent)
         _embree.intersect(scene, paths.o, paths.d, widths[0] if b == 1 else widths[1], buf,
-                          tfar, prim, counters)
+                          tfar, prim, counters, coherent[0] if b == 1 else coherent[1])
         t0 = _embree.now_s()
         shadow, paths = bounce(paths, tfar, prim, tables, light, ambient, render_origin, b,
                                rr_from_bounce, b < n_bounces)
         counters[2] += _embree.now_s() - t0
         occluded = np.empty(shadow.o.shape[0], dtype=np.int32)
         _embree.occluded(scene, shadow.o, shadow.d, shadow.t_max, widths[2], buf, occluded,
-                         counters)
+                         counters, coherent[2])
         t0 = _embree.now_s()
         add_shadowed(occluded, shadow, turns_per_m, out)
         counters[3] += _embree.now_s() - t0
