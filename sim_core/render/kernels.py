@@ -508,7 +508,17 @@ def add_shadowed(occluded, shadow, turns_per_m, out):
     sh_len, sh_amb = shadow.length, shadow.is_ambient
     out_dc, out_amb, out_re, out_im = out.dc, out.ambient, out.re, out.im
     nf = turns_per_m.shape[0]
-    for j in range(sh_slot.shape[0]):
+    k_rays = sh_slot.shape[0]
+    # The phases first, in a loop of their own over every ray (blocked or not): one input and
+    # two outputs, which LLVM runs in SIMD lanes; then the additions, ray by ray.
+    sin_p = np.empty((nf, k_rays))
+    cos_p = np.empty((nf, k_rays))
+    for k in range(nf):
+        tpm = turns_per_m[k]
+        s_k, c_k = sin_p[k], cos_p[k]
+        for j in range(k_rays):
+            s_k[j], c_k[j] = sincos_turns(tpm * sh_len[j])
+    for j in range(k_rays):
         if occluded[j] == 0:
             continue
         q = sh_slot[j]
@@ -518,9 +528,8 @@ def add_shadowed(occluded, shadow, turns_per_m, out):
             continue
         out_dc[q] += c
         for k in range(nf):
-            sin_p, cos_p = sincos_turns(turns_per_m[k] * sh_len[j])
-            out_re[k, q] += c * cos_p
-            out_im[k, q] -= c * sin_p
+            out_re[k, q] += c * cos_p[k, j]
+            out_im[k, q] -= c * sin_p[k, j]
 
 
 @njit(**_SERIAL)
