@@ -575,16 +575,18 @@ def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_inde
     :class:`SceneTables`.
 
     Shading in lanes (issue 30): the rays are taken :data:`LANES` at a time, and each block
-    runs in passes over its lanes. The table lookups first (:func:`_gather_lanes`), then the
-    passes LLVM vectorises: the vertex geometry (:func:`_vertex_lanes`) and the BRDF of the
-    block's one material kind towards every source (:func:`_brdf_lanes`; a block that mixes
-    kinds or meets a tabulated material evaluates lane by lane instead, where needed only);
+    runs in passes over its lanes. The table lookups first (:func:`_gather_lanes`), then
+    loops indexed by lane, which LLVM vectorises where the model allows: the vertex geometry
+    (:func:`_vertex_lanes`) and the BRDF of the block's one material kind towards every source
+    (:func:`_brdf_lanes`: in SIMD lanes for Lambertian and Hapke materials; the microfacet
+    models call ``exp`` and ``pow``, which have no vector form here; a block that mixes kinds
+    or meets a tabulated material evaluates lane by lane instead, where needed only);
     then BRDF sampling (:func:`_scatter_lanes`, per kind too) and the source's angular
     profile (table lookups, where needed); and
     one serial pass writes the shadow rays and the continuing paths, packed. Every value is the
     same operation on the same operands as in the ray-by-ray loop this replaced, so frames are
-    bit-identical to it (measured: ``bounce`` alone 0.52x its time per ray on the corner, 0.70x
-    on the satellite ground test).
+    bit-identical to it (measured: ``bounce`` alone 0.8x its time per ray on the corner, 0.87x
+    on the satellite ground test; docs/performance.md).
 
     Returns the :class:`ShadowRays` and the continuing :class:`Paths`, each packed in ray
     order. Ray arrays are float32 in the render frame; the arithmetic is float64.

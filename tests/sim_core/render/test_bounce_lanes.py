@@ -47,12 +47,12 @@ def _by_slot(shadow, nxt):
     for k in range(shadow.slot.shape[0]):
         key = (int(shadow.slot[k]), bool(shadow.is_ambient[k]))
         assert key not in sh
-        sh[key] = tuple(np.concatenate([shadow.o[k], shadow.d[k]]).view(np.uint32)) + (
-            shadow.t_max[k].view(np.uint32), shadow.contribution[k].view(np.uint64),
-            shadow.length[k].view(np.uint64))
-    nx = {int(nxt.slot[k]): tuple(np.concatenate([nxt.o[k], nxt.d[k]]).view(np.uint32)) + (
-        nxt.key[k], nxt.length[k].view(np.uint64), nxt.throughput[k].view(np.uint64))
-        for k in range(nxt.slot.shape[0])}
+        sh[key] = (*shadow.o[k].view(np.uint32), *shadow.d[k].view(np.uint32),
+                   shadow.t_max[k].view(np.uint32), shadow.contribution[k].view(np.uint64),
+                   shadow.length[k].view(np.uint64))
+    nx = {int(nxt.slot[k]): (*nxt.o[k].view(np.uint32), *nxt.d[k].view(np.uint32), nxt.key[k],
+                             nxt.length[k].view(np.uint64), nxt.throughput[k].view(np.uint64))
+          for k in range(nxt.slot.shape[0])}
     return sh, nx
 
 
