@@ -12,8 +12,8 @@ What it binds
 - The library: the very ``libembree4`` that embreex ships and has loaded (found in the
   process's memory map after importing embreex, else beside embreex's package). embreex stays
   the dependency that carries it; no second copy of Embree is loaded.
-- Set-up calls through ctypes (:class:`EmbreeScene`): a process-wide device, a scene with the
-  robust flag, one triangle geometry filled with ``rtcSetNewGeometryBuffer`` exactly as
+- Set-up calls through ctypes (:class:`EmbreeScene`): a process-wide device, a scene (robust
+  flag on request), one triangle geometry filled with ``rtcSetNewGeometryBuffer`` exactly as
   embreex's ``TriangleMesh`` fills its own (unshared float32 vertices with a 16-byte stride,
   indices 3i, 3i+1, 3i+2), commit, and ``rtcGetDeviceError`` after every step.
 - The ray queries ``rtcIntersect1/4/8/16`` and ``rtcOccluded1/4/8/16`` declared to numba as
@@ -22,8 +22,9 @@ What it binds
   name and is linked against this process's address when loaded.
 
 Rays are given exactly as embreex gives them (``tnear`` 0, ``tfar`` 1e37 for closest hits or the
-caller's ``tmax`` for occlusion, mask all ones, time 0, flags 0, no query arguments), so the
-answers are bit-identical to embreex's (tests: ``tests/sim_core/test_embree_binding.py``).
+caller's ``tmax`` for occlusion, mask all ones, time 0, flags 0; the query arguments carry a
+coherence hint only), so the answers are bit-identical to embreex's (tests:
+``tests/sim_core/test_embree_binding.py``).
 
 Query arguments
 ---------------

@@ -155,8 +155,9 @@ class RayTracer:
         self.coherent = (False, False, False)
         self._scene = self._binding_scene = None
         if self.backend == "binding":
-            self.widths = (widths or PacketWidths()).resolved()
-            self.coherent = tuple(bool(c) for c in (widths or PacketWidths()).coherent)
+            packets = widths or PacketWidths()
+            self.widths = packets.resolved()
+            self.coherent = tuple(bool(c) for c in packets.coherent)
             self._binding_scene = embree_binding.EmbreeScene(rel, robust=robust)
         else:
             self._scene = rtcs.EmbreeScene(robust=robust)

@@ -362,8 +362,8 @@ _N_SAMPLE_ROWS = 6
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _gather_lanes(n, prim, throughput, normals, tri_mat, mat_params, g, live, mat):
-    """The table lookups of lanes ``j < n``, one by one: ``live[j]`` (the ray
-    met a surface and carries weight), its material row ``mat[j]``, the triangle's normal and
+    """The table lookups of lanes ``j < n``, one by one: ``live[j]`` (the ray met a surface
+    and carries weight), its material row ``mat[j]``, the triangle's normal and
     the material's parameter header into rows of ``g``. Apart, because a loop that reads
     through an index it loaded is one LLVM cannot run in lanes ("cannot identify array
     bounds"): the passes after this one index by lane alone. A ray that met nothing reads
@@ -414,8 +414,7 @@ def _vertex_lanes(n, o, d, tfar, throughput, length, light_pos, min_light_distan
         g[_LENGTH + j] = length[j] + t
         g[_THR + j] = throughput[j]
     for j in range(n):  # the local frame
-        t0, t1, t2, b0, b1, b2 = duff_frame(g[_NX + j], g[_NY + j],
-                                            g[_NZ + j])
+        t0, t1, t2, b0, b1, b2 = duff_frame(g[_NX + j], g[_NY + j], g[_NZ + j])
         g[_T0 + j], g[_T1 + j], g[_T2 + j] = t0, t1, t2
         g[_B0 + j], g[_B1 + j], g[_B2 + j] = b0, b1, b2
     for j in range(n):  # the way back, in the local frame
@@ -427,8 +426,7 @@ def _vertex_lanes(n, o, d, tfar, throughput, length, light_pos, min_light_distan
         g[_WO1 + j] = -(dx * b0 + dy * b1 + dz * b2)
         g[_WO2 + j] = -(dx * nx + dy * ny + dz * nz)
     for j in range(n):  # the origin offset of the rays leaving the hit point
-        g[_OFFSET + j] = _offset_scale(g[_PX + j], g[_PY + j],
-                                               g[_PZ + j])
+        g[_OFFSET + j] = _offset_scale(g[_PX + j], g[_PY + j], g[_PZ + j])
     for j in range(n):  # the camera's source: E = I(theta) cos / d^2 (seed eq. 20), L = E f
         nx, ny, nz = g[_NX + j], g[_NY + j], g[_NZ + j]
         lx = light_pos[0] - g[_PX + j]
@@ -441,13 +439,10 @@ def _vertex_lanes(n, o, d, tfar, throughput, length, light_pos, min_light_distan
         lx, ly, lz = lx * inv_true, ly * inv_true, lz * inv_true
         # A surface through the light itself would see I / 0^2: the irradiance is capped at
         # I / d_min^2 (the clamp enters 1/d^2 only).
-        g[_INV_DIST + j] = 1.0 / (dist if dist > min_light_distance_m
-                                          else min_light_distance_m)
+        g[_INV_DIST + j] = 1.0 / (dist if dist > min_light_distance_m else min_light_distance_m)
         g[_LX + j], g[_LY + j], g[_LZ + j] = lx, ly, lz
-        g[_LT0 + j] = (lx * g[_T0 + j] + ly * g[_T1 + j]
-                               + lz * g[_T2 + j])
-        g[_LT1 + j] = (lx * g[_B0 + j] + ly * g[_B1 + j]
-                               + lz * g[_B2 + j])
+        g[_LT0 + j] = lx * g[_T0 + j] + ly * g[_T1 + j] + lz * g[_T2 + j]
+        g[_LT1 + j] = lx * g[_B0 + j] + ly * g[_B1 + j] + lz * g[_B2 + j]
         g[_COS_P + j] = lx * nx + ly * ny + lz * nz
         g[_DIST + j] = dist
 
@@ -475,8 +470,8 @@ def _brdf_lanes(kind, n, g, mat, mat_data, amb_dir, f_amb):
     ``_FR`` of ``g``) and towards each ambient source ``a`` (``f_amb[a * LANES + j]``), in
     every lane, needed or not: the analytic models are total functions of unit directions, and
     their branches become selects. Called with ``kind`` a constant, so each model gets loops of
-    its own with no branch on the kind, which LLVM runs in SIMD lanes (the Lambertian's, 8
-    wide with AVX-512: checked with LLVM's loop-vectorize remarks)."""
+    its own with no branch on the kind, which LLVM runs in SIMD lanes where the model has no
+    calls (Lambertian and Hapke, 8 wide with AVX-512: LLVM's loop-vectorize remarks)."""
     for j in range(n):
         g[_FR + j] = _brdf_to_source(kind, j, g, mat, mat_data)
     for a in range(amb_dir.shape[0]):
@@ -539,6 +534,15 @@ def _scatter_guarded(n, g, live, mat, mat_kind, mat_data, keys, bounce_index, sm
     for j in range(n):
         if live[j]:
             _scatter_lane(mat_kind[mat[j]], j, g, mat, mat_data, keys, bounce_index, smp)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _shade_lanes(kind, n, g, mat, mat_data, amb_dir, f_amb, scatter, keys, bounce_index, smp):
+    """:func:`_brdf_lanes`, then (if ``scatter``) :func:`_scatter_lanes`, for a block of the
+    one material kind ``kind`` (a constant at each call)."""
+    _brdf_lanes(kind, n, g, mat, mat_data, amb_dir, f_amb)
+    if scatter:
+        _scatter_lanes(kind, n, g, mat, mat_data, keys, bounce_index, smp)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -636,27 +640,22 @@ def bounce(paths, tfar, prim, tables, light, ambient, render_origin, bounce_inde
         if kind == -2:
             continue
         # Loops of their own per kind, each compiled for its model alone.
+        kb = keys[a:end]
         if kind == KIND_LAMBERTIAN:
-            _brdf_lanes(KIND_LAMBERTIAN, n, g, mat, mat_data, amb_dir, f_amb)
+            _shade_lanes(KIND_LAMBERTIAN, n, g, mat, mat_data, amb_dir, f_amb, scatter, kb,
+                         bounce_index, smp)
         elif kind == KIND_SEED_MICROFACET:
-            _brdf_lanes(KIND_SEED_MICROFACET, n, g, mat, mat_data, amb_dir, f_amb)
+            _shade_lanes(KIND_SEED_MICROFACET, n, g, mat, mat_data, amb_dir, f_amb, scatter,
+                         kb, bounce_index, smp)
         elif kind == KIND_COOK_TORRANCE:
-            _brdf_lanes(KIND_COOK_TORRANCE, n, g, mat, mat_data, amb_dir, f_amb)
+            _shade_lanes(KIND_COOK_TORRANCE, n, g, mat, mat_data, amb_dir, f_amb, scatter, kb,
+                         bounce_index, smp)
         elif kind == KIND_HAPKE:
-            _brdf_lanes(KIND_HAPKE, n, g, mat, mat_data, amb_dir, f_amb)
+            _shade_lanes(KIND_HAPKE, n, g, mat, mat_data, amb_dir, f_amb, scatter, kb,
+                         bounce_index, smp)
         else:
             _brdf_guarded(n, g, live, mat, mat_kind, mat_data, amb_dir, f_amb)
-        if scatter:
-            kb = keys[a:end]
-            if kind == KIND_LAMBERTIAN:
-                _scatter_lanes(KIND_LAMBERTIAN, n, g, mat, mat_data, kb, bounce_index, smp)
-            elif kind == KIND_SEED_MICROFACET:
-                _scatter_lanes(KIND_SEED_MICROFACET, n, g, mat, mat_data, kb, bounce_index, smp)
-            elif kind == KIND_COOK_TORRANCE:
-                _scatter_lanes(KIND_COOK_TORRANCE, n, g, mat, mat_data, kb, bounce_index, smp)
-            elif kind == KIND_HAPKE:
-                _scatter_lanes(KIND_HAPKE, n, g, mat, mat_data, kb, bounce_index, smp)
-            else:
+            if scatter:
                 _scatter_guarded(n, g, live, mat, mat_kind, mat_data, kb, bounce_index, smp)
         if isotropic:
             for j in range(n):
