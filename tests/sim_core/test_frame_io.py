@@ -138,3 +138,30 @@ def test_a_measured_frames_illumination_temperature_is_stored_and_read_back(tmp_
     none = frame_io.read_frame(tmp_path / "n")
     assert frame_io.TEMPERATURE_KEY not in none.meta
     assert none.raw.illumination_temperature_c is None
+
+
+def test_an_incompressible_member_is_stored_and_every_member_reads_back_bit_exact(tmp_path):
+    """write_npz deflates what shrinks and stores what would not (a render's noise)."""
+    import zipfile
+
+    rng = np.random.default_rng(3)
+    arrays = {
+        "noise": rng.normal(size=(171, 224)),               # every mantissa random
+        "zeros": np.zeros((171, 224)),
+        "ids": np.repeat(np.arange(171, dtype=np.int32), 224).reshape(171, 224),
+        "nan_rows": np.where(np.arange(171)[:, None] < 80, np.nan, rng.normal(size=(171, 224))),
+        "small": rng.normal(size=10),                       # below the sample: deflated
+        "text": np.array(json.dumps({"a": 1})),
+        "empty": np.zeros((0, 3)),
+    }
+    path = tmp_path / "a.npz"
+    frame_io.write_npz(path, arrays)
+    methods = {i.filename: i.compress_type for i in zipfile.ZipFile(path).infolist()}
+    assert methods["noise.npy"] == zipfile.ZIP_STORED
+    for name in ("zeros", "ids", "small", "text", "empty"):
+        assert methods[f"{name}.npy"] == zipfile.ZIP_DEFLATED, name
+    with np.load(path) as back:
+        assert set(back.files) == set(arrays)
+        for name, a in arrays.items():
+            assert back[name].dtype == a.dtype and back[name].shape == a.shape, name
+            assert back[name].tobytes() == a.tobytes(), name
