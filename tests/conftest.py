@@ -22,13 +22,15 @@ settings.load_profile("toftwin")
 def pytest_sessionstart(session: pytest.Session) -> None:
     """Compile the renderer's kernels (or load them from numba's cache) before the first test.
 
-    In a fresh clone numba compiles them on first use, tens of seconds that would otherwise land
-    on whichever test renders first; here they are a cost of the session, once, and every test's
-    duration is its own. Under pytest-xdist each worker does it (the controller runs no test),
-    one at a time: numba writes a cache entry's index before its data, so a worker reading while
-    another writes can load the data of an older source or another numba version (a floors venv
-    on the same clone died on LLVM 22 bitcode read by LLVM 14). The first worker compiles, the
-    next loads what it wrote.
+    In a fresh clone numba compiles them on first use, a minute or more that would otherwise
+    land on whichever test renders first (a tabulated material's, ``bounce``'s second
+    compilation: 63 s on a 2-core Xeon, which once took a 60 s test past its timeout); here
+    they are a cost of the session, once, and every test's duration is its own. Under
+    pytest-xdist each worker does it (the controller runs no test), one at a time: numba writes
+    a cache entry's index before its data, so a worker reading while another writes can load
+    the data of an older source or another numba version (a floors venv on the same clone died
+    on LLVM 22 bitcode read by LLVM 14). The first worker compiles, the next loads what it
+    wrote.
     """
     config = session.config
     if config.option.collectonly:
@@ -42,7 +44,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     with open(lock_path, "a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         try:
-            warm_up()
+            warm_up(tabulated=True)
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
 

@@ -267,8 +267,20 @@ def run_job(job: SimulationJob) -> SimulationResult:
     )
 
 
-def warm_up() -> int:
-    """Import the renderer and load its compiled kernels (the first frame would otherwise pay)."""
+def warm_up(tabulated: bool = False) -> int:
+    """Import the renderer and load its compiled kernels (the first frame would otherwise pay).
+
+    ``bounce`` without code for tabulated materials (what most scenes need), and with
+    ``tabulated`` its second compilation too, with that code
+    (:attr:`sim_core.render.kernels.SceneTables.mat_data`). In a fresh install each is about a
+    minute of compiling on a 2-core machine (63 and 77 s seen), afterwards numba's cache. The
+    service warms the first only: a scene with a tabulated material pays the second once.
+    """
+    from dataclasses import replace
+
+    from sim_core.materials import material_preset
+    from sim_core.materials.idw import goniometer_measurement
+    from sim_core.materials.tabulated import Tabulated
     from sim_core.pipeline import simulate
     from sim_core.render import RenderSettings
     from sim_core.render_request import RenderRequest
@@ -292,7 +304,14 @@ def warm_up() -> int:
             ],
         }
     )
+    scene = build_scene(spec)
+    variants = [scene.materials]
+    if tabulated:
+        table = goniometer_measurement(material_preset("white-matte-tile"), 15.0,
+                                       retro_gap_deg=0.0)
+        variants.append((Tabulated(table),))
+    request = RenderRequest(RenderSettings(integrator="path", spp=1, max_bounces=2, threads=1))
     with RENDER_LOCK:
-        simulate(build_scene(spec), RenderRequest(
-            RenderSettings(integrator="path", spp=1, max_bounces=2, threads=1)))
+        for materials in variants:
+            simulate(replace(scene, materials=materials), request)
     return os.getpid()
